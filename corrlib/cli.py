@@ -1,0 +1,291 @@
+"""The ``corr`` command line.
+
+Subcommands: ``info``, ``eval``, ``match``, ``demo``, ``methods``, ``perf``.
+Bad input prints ``error: <message>`` on stderr and exits with status 2.
+"""
+
+from __future__ import annotations
+
+import argparse
+import json
+import sys
+import time
+from pathlib import Path
+
+import numpy as np
+
+from corrlib.errors import CorrError, FileFormatError
+
+EXIT_BAD_INPUT = 2
+
+
+# ----------------------------------------------------------------------------- info
+
+
+def _info_mesh(path: Path) -> dict:
+    import trimesh
+
+    from corrlib.shapes import TriMesh, inspect_mesh
+
+    try:
+        raw = trimesh.load(str(path), process=False, maintain_order=True, force="mesh")
+    except Exception as exc:  # malformed file: report, do not crash
+        raise FileFormatError(f"{path}: cannot read mesh: {exc}") from exc
+    v = np.asarray(getattr(raw, "vertices", np.zeros((0, 3))))
+    f = np.asarray(getattr(raw, "faces", np.zeros((0, 3))))
+    findings = inspect_mesh(v, f)
+    info = {"file": str(path), "kind": "mesh", "vertices": int(v.shape[0]), "faces": int(f.shape[0]),
+            "valid": not any(fd.level == "error" for fd in findings)}
+    if info["valid"]:
+        mesh = TriMesh(v, f, name=path.name, validate=False)
+        info.update({
+            "area": mesh.area, "bbox_diagonal": mesh.bbox_diagonal, "closed": mesh.is_closed,
+            "boundary_loops": len(mesh.boundary_loops), "mean_edge_length": float(mesh.edge_lengths.mean()),
+            "enclosed_volume": mesh.enclosed_volume(),
+        })
+    info["findings"] = [{"level": fd.level, "code": fd.code, "message": fd.message} for fd in findings]
+    return info
+
+
+def _info_contour(path: Path) -> dict:
+    from corrlib.io import load_contour
+
+    contour = load_contour(path)
+    return {"file": str(path), "kind": "contour", "points": contour.n_points, "length": contour.length,
+            "area": contour.area, "orientation": "counter-clockwise (after loading)", "valid": True,
+            "findings": []}
+
+
+def cmd_info(args) -> int:
+    from corrlib.io import MESH_SUFFIXES
+
+    path = Path(args.file)
+    if not path.exists():
+        raise FileFormatError(f"{path}: file not found")
+    info = _info_mesh(path) if path.suffix.lower() in MESH_SUFFIXES else _info_contour(path)
+    if args.json:
+        print(json.dumps(info, indent=2))
+    else:
+        for key, value in info.items():
+            if key == "findings":
+                continue
+            print(f"{key:>16}: {value:.6g}" if isinstance(value, float) else f"{key:>16}: {value}")
+        for fd in info["findings"]:
+            print(f"{fd['level']:>16}: [{fd['code']}] {fd['message']}")
+        if not info["findings"]:
+            print(f"{'validation':>16}: no problems found")
+    return 0 if info["valid"] else EXIT_BAD_INPUT
+
+
+# ----------------------------------------------------------------------------- eval
+
+
+def cmd_eval(args) -> int:
+    from corrlib.evaluation import cumulative_curve, geodesic_errors
+    from corrlib.io import load_map, load_mesh, load_vts
+
+    target = load_mesh(args.target)
+    map_xy = load_map(args.map, n_target=target.n_vertices)
+    gt_source = load_vts(args.gt_source, map_xy.shape[0])
+    gt_target = load_vts(args.gt_target, target.n_vertices)
+    gt_sym = load_vts(args.gt_target_sym, target.n_vertices) if args.gt_target_sym else None
+    start = time.perf_counter()
+    report = geodesic_errors(map_xy, target, gt_source, gt_target, gt_target_sym=gt_sym,
+                             normalize=args.normalize, method=args.geodesics)
+    elapsed = time.perf_counter() - start
+    summary = report.summary()
+    summary["rows"] = int(report.errors.size)
+    summary["seconds"] = elapsed
+    if args.json:
+        print(json.dumps(summary, indent=2))
+    else:
+        for key, value in summary.items():
+            print(f"{key:>18}: {value:.4f}" if isinstance(value, float) else f"{key:>18}: {value}")
+    if args.errors:
+        from corrlib.io import atomic_write
+
+        with atomic_write(args.errors) as fh:
+            np.savetxt(fh, report.errors, fmt="%.6g")
+    if args.plot:
+        from corrlib.plotting import save_error_curves
+
+        curves = {"direct": cumulative_curve(report.errors, report.thresholds)}
+        if report.errors_sym is not None:
+            curves["symmetry-aware"] = cumulative_curve(report.errors_sym, report.thresholds)
+        save_error_curves(args.plot, curves, report.thresholds)
+        print(f"wrote {args.plot}")
+    return 0
+
+
+# ----------------------------------------------------------------------------- match / demo
+
+
+def _load_shape(path: str):
+    from corrlib.io import IMAGE_SUFFIXES, MESH_SUFFIXES, load_contour, load_mesh
+
+    suffix = Path(path).suffix.lower()
+    if suffix in MESH_SUFFIXES:
+        return load_mesh(path)
+    if suffix in IMAGE_SUFFIXES or suffix in {".svg", ".txt", ".csv", ".xy", ".pts", ".dat"}:
+        return load_contour(path)
+    raise FileFormatError(f"{path}: unsupported shape format {suffix!r}")
+
+
+def _parse_overrides(pairs: list[str]) -> dict:
+    out = {}
+    for item in pairs or []:
+        if "=" not in item:
+            raise CorrError(f"parameter {item!r} must be NAME=VALUE")
+        key, value = item.split("=", 1)
+        out[key.strip()] = value.strip()
+    return out
+
+
+def _write_match_outputs(result, source, target, out: Path, *, quiet: bool = False) -> None:
+    from corrlib.io import save_map
+
+    out.parent.mkdir(parents=True, exist_ok=True)
+    npz, js = result.save(out)
+    written = [npz, js]
+    if result.map_xy is not None:
+        written.append(save_map(out.with_name(out.name + ".map_xy.txt"), result.map_xy))
+    if result.map_yx is not None:
+        written.append(save_map(out.with_name(out.name + ".map_yx.txt"), result.map_yx))
+        from corrlib.plotting import save_colour_transfer
+
+        written.append(save_colour_transfer(out.with_name(out.name + ".png"), source, target, result.map_yx,
+                                            title=f"{result.method}"))
+    if not quiet:
+        for path in written:
+            print(f"wrote {path}")
+
+
+def _progress_printer(quiet: bool):
+    def callback(report):
+        if not quiet:
+            frac = f"{100 * report.fraction:5.1f}%" if report.fraction >= 0 else "   ..."
+            print(f"  [{frac}] {report.stage} {report.message}", file=sys.stderr)
+
+    return callback
+
+
+def cmd_match(args) -> int:
+    from corrlib.methods import solve
+
+    source, target = _load_shape(args.source), _load_shape(args.target)
+    result = solve(args.method, source, target, callback=_progress_printer(args.quiet),
+                   **_parse_overrides(args.param))
+    print(f"method {result.method}: energy {result.energy}, {result.timings.get('total', 0):.2f} s")
+    _write_match_outputs(result, source, target, Path(args.output), quiet=args.quiet)
+    return 0
+
+
+def cmd_demo(args) -> int:
+    from corrlib.evaluation import geodesic_errors
+    from corrlib.io import load_mesh
+    from corrlib.methods import methods_for, solve
+    from corrlib.resources import DEMO_PAIR, resource
+
+    source = load_mesh(resource(DEMO_PAIR[0]))
+    target = load_mesh(resource(DEMO_PAIR[1]))
+    spec = methods_for(source, target)[0]
+    print(f"demo: {source.name} -> {target.name} with {spec.label} ({spec.name})")
+    result = solve(spec, source, target, callback=_progress_printer(args.quiet))
+    print(f"  finished in {result.timings.get('total', 0):.2f} s")
+    # the demo pair shares its vertex order: the ground truth is the identity
+    ident = np.arange(source.n_vertices)
+    report = geodesic_errors(result.map_xy, target, ident, ident)
+    for key, value in report.summary().items():
+        print(f"  {key:>14}: {value:.4f}")
+    out = Path(args.output) / "demo"
+    _write_match_outputs(result, source, target, out, quiet=args.quiet)
+    return 0
+
+
+def cmd_methods(args) -> int:
+    from corrlib.methods import all_methods
+    from corrlib.methods.base import param_fields
+
+    for spec in all_methods():
+        print(f"{spec.name}  ({spec.inputs[0]} -> {spec.inputs[1]}): {spec.label}")
+        print(f"    {spec.description}")
+        for f in param_fields(spec.params):
+            m = f.metadata
+            rng = f" choices {m['choices']}" if m.get("choices") else (
+                f" [{m.get('low')}, {m.get('high')}]" if m.get("low") is not None else "")
+            print(f"    --param {f.name}={f.default}{rng}: {m.get('help', '')}")
+    return 0
+
+
+def cmd_perf(args) -> int:
+    from corrlib import perf
+
+    perf.run_suite(args.suite, repeat=args.repeat, quick=args.quick)
+    return 0
+
+
+# ----------------------------------------------------------------------------- parser
+
+
+def build_parser() -> argparse.ArgumentParser:
+    parser = argparse.ArgumentParser(prog="corr", description="Continuous non-rigid shape correspondence.")
+    sub = parser.add_subparsers(dest="command", required=True)
+
+    p = sub.add_parser("info", help="statistics and a validation report of a mesh or contour file")
+    p.add_argument("file")
+    p.add_argument("--json", action="store_true", help="print JSON")
+    p.set_defaults(func=cmd_info)
+
+    p = sub.add_parser("eval", help="Princeton-protocol geodesic error of a map against ground truth")
+    p.add_argument("map", help="map file: one 0-based target index per source vertex (or a result .npz)")
+    p.add_argument("--gt-source", required=True, help=".vts ground truth of the source (1-based)")
+    p.add_argument("--gt-target", required=True, help=".vts ground truth of the target (1-based)")
+    p.add_argument("--gt-target-sym", help="mirrored .vts of the target for the symmetry-aware error")
+    p.add_argument("--target", required=True, help="target mesh (distances are measured on it)")
+    p.add_argument("--normalize", default="sqrt_area", choices=["sqrt_area", "diameter", "none"])
+    p.add_argument("--geodesics", default="exact", choices=["exact", "heat", "graph"])
+    p.add_argument("--plot", help="write the cumulative error curve to this PNG")
+    p.add_argument("--errors", help="write the per-row errors to this text file")
+    p.add_argument("--json", action="store_true")
+    p.set_defaults(func=cmd_eval)
+
+    p = sub.add_parser("match", help="match two shapes with a registered method")
+    p.add_argument("source")
+    p.add_argument("target")
+    p.add_argument("--method", default="fmap-zoomout", help="registered method (see `corr methods`)")
+    p.add_argument("--param", action="append", metavar="NAME=VALUE", help="method parameter (repeatable)")
+    p.add_argument("-o", "--output", default="result", help="output path without suffix")
+    p.add_argument("-q", "--quiet", action="store_true")
+    p.set_defaults(func=cmd_match)
+
+    p = sub.add_parser("demo", help="match the bundled demo pair and write a result and a picture")
+    p.add_argument("-o", "--output", default="demo_output", help="output folder")
+    p.add_argument("-q", "--quiet", action="store_true")
+    p.set_defaults(func=cmd_demo)
+
+    p = sub.add_parser("methods", help="list the registered methods and their parameters")
+    p.set_defaults(func=cmd_methods)
+
+    p = sub.add_parser("perf", help="performance benchmarks (prints figures)")
+    p.add_argument("suite", nargs="?", default="foundation", help="benchmark suite (default: foundation)")
+    p.add_argument("--repeat", type=int, default=3, help="repetitions; the best time is reported")
+    p.add_argument("--quick", action="store_true", help="a short smoke run with fewer cases")
+    p.set_defaults(func=cmd_perf)
+    return parser
+
+
+def main(argv: list[str] | None = None) -> int:
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return int(args.func(args) or 0)
+    except CorrError as exc:
+        print(f"error: {exc}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except KeyboardInterrupt:
+        print("interrupted", file=sys.stderr)
+        return 130
+
+
+if __name__ == "__main__":
+    sys.exit(main())

@@ -1,0 +1,632 @@
+"""Reading and writing shapes, contours, maps and results.
+
+* Meshes: OFF/OBJ/PLY/STL through trimesh with ``process=False`` (vertex
+  order survives); saved as OFF/OBJ/PLY with optional per-vertex colours by
+  our own writers (vertex order and count exactly as given).
+* Contours: text/CSV point lists, an SVG path, or a silhouette image
+  (PNG/GIF/JPG/BMP/TIFF); always returned counter-clockwise.
+* Ground truth ``.vts`` (1-based vertex indices, one per line) and plain map
+  files (one 0-based target index per line).
+* Results: ``.npz`` (numeric arrays only, loaded without pickle) plus a
+  ``.json`` sidecar with parameters, versions and timings.
+
+Every writer is atomic: it writes a temporary file in the destination folder
+and renames it, so an interrupted export never leaves a truncated file.
+Every reader raises :class:`~corrlib.errors.FileFormatError` (or a
+:class:`~corrlib.errors.MeshError` / :class:`~corrlib.errors.ContourError`
+for invalid content) whose message names the file.
+"""
+
+from __future__ import annotations
+
+import contextlib
+import json
+import os
+import platform
+import re
+import tempfile
+import xml.etree.ElementTree as ET
+from pathlib import Path
+
+import numpy as np
+
+from corrlib.errors import ContourError, CorrError, FileFormatError, InputError
+from corrlib.shapes import Contour2D, TriMesh
+
+MESH_SUFFIXES = {".off", ".obj", ".ply", ".stl"}
+IMAGE_SUFFIXES = {".png", ".gif", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff"}
+POINT_SUFFIXES = {".txt", ".csv", ".xy", ".pts", ".dat"}
+
+
+# ----------------------------------------------------------------------------- atomic writes
+
+
+@contextlib.contextmanager
+def atomic_write(path, mode: str = "w"):
+    """Context manager yielding a file object; the file appears at ``path`` only on success."""
+    path = Path(path)
+    path.parent.mkdir(parents=True, exist_ok=True)
+    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    try:
+        with os.fdopen(fd, mode) as fh:
+            yield fh
+        os.replace(tmp, path)
+    except BaseException:
+        with contextlib.suppress(OSError):
+            os.unlink(tmp)
+        raise
+
+
+def _require_file(path) -> Path:
+    path = Path(path)
+    if not path.exists():
+        raise FileFormatError(f"{path}: file not found")
+    if not path.is_file():
+        raise FileFormatError(f"{path}: not a file")
+    return path
+
+
+# ----------------------------------------------------------------------------- meshes
+
+
+def load_mesh(path, *, largest_component: bool = False) -> TriMesh:
+    """Load a triangle mesh keeping the file's vertex order.
+
+    Parameters
+    ----------
+    path : str or Path
+        ``.off``, ``.obj``, ``.ply`` or ``.stl``.
+    largest_component : bool
+        Keep only the largest connected component instead of raising.
+
+    Returns
+    -------
+    TriMesh
+        Named after the file.
+
+    Raises
+    ------
+    FileFormatError
+        Missing, unreadable or unsupported file; no faces (a point cloud).
+    MeshError
+        Invalid mesh content (see :func:`corrlib.shapes.inspect_mesh`).
+    """
+    import trimesh
+
+    path = _require_file(path)
+    suffix = path.suffix.lower()
+    if suffix not in MESH_SUFFIXES:
+        raise FileFormatError(f"{path}: unsupported mesh format {suffix!r} "
+                              f"(supported: {', '.join(sorted(MESH_SUFFIXES))})")
+    try:
+        loaded = trimesh.load(str(path), process=False, maintain_order=True, force="mesh")
+    except Exception as exc:  # trimesh raises many exception types for malformed files
+        raise FileFormatError(f"{path}: cannot read mesh: {exc}") from exc
+    if suffix == ".stl" and hasattr(loaded, "merge_vertices"):
+        # STL is a triangle soup with no shared vertices (and so no vertex order to keep): weld it
+        loaded.merge_vertices()
+    vertices = np.asarray(getattr(loaded, "vertices", np.zeros((0, 3))))
+    faces = np.asarray(getattr(loaded, "faces", np.zeros((0, 3))))
+    if vertices.size == 0:
+        raise FileFormatError(f"{path}: the file contains no vertices")
+    if faces.size == 0:
+        raise FileFormatError(f"{path}: the file contains no faces (a point cloud, not a mesh)")
+    return TriMesh.from_arrays(vertices, faces, name=path.name, largest_component=largest_component)
+
+
+def _colors_u8(colors, n: int, path) -> np.ndarray | None:
+    if colors is None:
+        return None
+    c = np.asarray(colors)
+    if c.shape not in {(n, 3), (n, 4)}:
+        raise InputError(f"{path}: colours must have shape ({n}, 3) or ({n}, 4), got {c.shape}")
+    if np.issubdtype(c.dtype, np.floating):
+        if not np.all(np.isfinite(c)):
+            raise InputError(f"{path}: colours contain NaN or infinite values")
+        c = np.clip(np.round(c * 255.0), 0, 255)
+    return c[:, :3].astype(np.uint8)
+
+
+def save_mesh(path, vertices, faces, colors=None) -> Path:
+    """Write a triangle mesh (OFF, OBJ or PLY) with optional per-vertex colours, atomically.
+
+    Parameters
+    ----------
+    path : str or Path
+    vertices : (n, 3) float
+    faces : (f, 3) int
+    colors : (n, 3) or (n, 4), optional
+        Floats in [0, 1] or uint8. OFF writes ``COFF``, OBJ the common
+        ``v x y z r g b`` extension, PLY ``red green blue`` uchar properties.
+
+    Returns
+    -------
+    Path
+    """
+    path = Path(path)
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    c = _colors_u8(colors, v.shape[0], path)
+    suffix = path.suffix.lower()
+    if suffix not in {".off", ".obj", ".ply"}:
+        raise FileFormatError(f"{path}: cannot write mesh format {suffix!r} (use .off, .obj or .ply)")
+    fmt = "%.9g %.9g %.9g"
+    with atomic_write(path) as fh:
+        if suffix == ".off":
+            fh.write("COFF\n" if c is not None else "OFF\n")
+            fh.write(f"{v.shape[0]} {f.shape[0]} 0\n")
+            if c is None:
+                np.savetxt(fh, v, fmt=fmt)
+            else:
+                np.savetxt(fh, np.column_stack([v, c, np.full(v.shape[0], 255)]),
+                           fmt=fmt + " %d %d %d %d")
+            np.savetxt(fh, np.column_stack([np.full(f.shape[0], 3), f]), fmt="%d")
+        elif suffix == ".obj":
+            if c is None:
+                np.savetxt(fh, v, fmt="v " + fmt)
+            else:
+                np.savetxt(fh, np.column_stack([v, c / 255.0]), fmt="v " + fmt + " %.6g %.6g %.6g")
+            np.savetxt(fh, f + 1, fmt="f %d %d %d")
+        else:
+            fh.write("ply\nformat ascii 1.0\ncomment written by corrlib\n")
+            fh.write(f"element vertex {v.shape[0]}\nproperty double x\nproperty double y\nproperty double z\n")
+            if c is not None:
+                fh.write("property uchar red\nproperty uchar green\nproperty uchar blue\n")
+            fh.write(f"element face {f.shape[0]}\nproperty list uchar int vertex_indices\nend_header\n")
+            if c is None:
+                np.savetxt(fh, v, fmt=fmt)
+            else:
+                np.savetxt(fh, np.column_stack([v, c]), fmt=fmt + " %d %d %d")
+            np.savetxt(fh, np.column_stack([np.full(f.shape[0], 3), f]), fmt="%d")
+    return path
+
+
+# ----------------------------------------------------------------------------- contours
+
+
+def _points_file(path: Path) -> np.ndarray:
+    text = path.read_text(errors="replace")
+    rows = []
+    for lineno, line in enumerate(text.splitlines(), 1):
+        line = line.split("#", 1)[0].strip()
+        if not line:
+            continue
+        parts = [p for p in re.split(r"[,;\s]+", line) if p]
+        try:
+            values = [float(p) for p in parts]
+        except ValueError:
+            if not rows:  # tolerate one header line
+                continue
+            raise FileFormatError(f"{path}: line {lineno} is not a pair of numbers: {line!r}") from None
+        if len(values) != 2:
+            raise FileFormatError(f"{path}: line {lineno} has {len(values)} values, expected 2 (x y)")
+        rows.append(values)
+    if not rows:
+        raise FileFormatError(f"{path}: no points found")
+    return np.array(rows, dtype=np.float64)
+
+
+_SVG_TOKEN = re.compile(r"[MmLlHhVvCcSsQqTtZzAa]|[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?")
+
+
+def _bezier(points: np.ndarray, samples: int = 16) -> np.ndarray:
+    """Points on a Bézier curve with control points ``points`` (excluding the start)."""
+    t = np.linspace(0.0, 1.0, samples + 1)[1:, None]
+    if points.shape[0] == 3:
+        return (1 - t) ** 2 * points[0] + 2 * (1 - t) * t * points[1] + t ** 2 * points[2]
+    return ((1 - t) ** 3 * points[0] + 3 * (1 - t) ** 2 * t * points[1]
+            + 3 * (1 - t) * t ** 2 * points[2] + t ** 3 * points[3])
+
+
+def parse_svg_path(d: str, source: str = "svg") -> list[np.ndarray]:
+    """Polylines (one per subpath) of an SVG path ``d`` attribute, in SVG coordinates.
+
+    Supports M, L, H, V, C, S, Q, T, Z in absolute and relative form; curves
+    are sampled with 16 points per segment. Elliptical arcs (A) are rejected.
+    """
+    tokens = _SVG_TOKEN.findall(d)
+    subpaths: list[list[np.ndarray]] = []
+    cur = np.zeros(2)
+    start = np.zeros(2)
+    last_ctrl = None
+    cmd = None
+    i = 0
+
+    def nums(count):
+        nonlocal i
+        vals = tokens[i:i + count]
+        if len(vals) < count or any(v.isalpha() for v in vals):
+            raise FileFormatError(f"{source}: malformed SVG path data near token {i}")
+        i += count
+        return np.array([float(v) for v in vals])
+
+    while i < len(tokens):
+        tok = tokens[i]
+        if tok.isalpha():
+            cmd = tok
+            i += 1
+        elif cmd is None:
+            raise FileFormatError(f"{source}: SVG path data must start with a command")
+        if cmd in "Aa":
+            raise FileFormatError(f"{source}: SVG elliptical arc commands (A) are not supported; "
+                                  "convert arcs to Bézier curves")
+        rel = cmd.islower()
+        base = cur if rel else np.zeros(2)
+        c = cmd.upper()
+        if c == "Z":
+            if subpaths and subpaths[-1]:
+                cur = start.copy()
+            last_ctrl = None
+            continue
+        if c == "M":
+            cur = base + nums(2)
+            start = cur.copy()
+            subpaths.append([cur.copy()])
+            cmd = "l" if rel else "L"  # further pairs are implicit line-tos
+            last_ctrl = None
+            continue
+        if not subpaths:
+            subpaths.append([cur.copy()])
+        if c == "L":
+            cur = base + nums(2)
+            subpaths[-1].append(cur.copy())
+            last_ctrl = None
+        elif c == "H":
+            x = nums(1)[0]
+            cur = np.array([cur[0] + x if rel else x, cur[1]])
+            subpaths[-1].append(cur.copy())
+            last_ctrl = None
+        elif c == "V":
+            y = nums(1)[0]
+            cur = np.array([cur[0], cur[1] + y if rel else y])
+            subpaths[-1].append(cur.copy())
+            last_ctrl = None
+        elif c in "CS":
+            if c == "C":
+                ctrl = nums(6).reshape(3, 2) + base
+            else:
+                c2 = nums(4).reshape(2, 2) + base
+                c1 = 2 * cur - last_ctrl if last_ctrl is not None else cur.copy()
+                ctrl = np.vstack([c1, c2])
+            pts = np.vstack([cur, ctrl])
+            subpaths[-1].extend(_bezier(pts))
+            last_ctrl = ctrl[-2]
+            cur = ctrl[-1].copy()
+        elif c in "QT":
+            if c == "Q":
+                ctrl = nums(4).reshape(2, 2) + base
+            else:
+                c1 = 2 * cur - last_ctrl if last_ctrl is not None else cur.copy()
+                ctrl = np.vstack([c1, nums(2) + base])
+            pts = np.vstack([cur, ctrl])
+            subpaths[-1].extend(_bezier(pts))
+            last_ctrl = ctrl[0]
+            cur = ctrl[-1].copy()
+        else:
+            raise FileFormatError(f"{source}: unsupported SVG path command {cmd!r}")
+    return [np.array(sp_) for sp_ in subpaths if len(sp_) >= 3]
+
+
+def _svg_polylines(path: Path) -> list[np.ndarray]:
+    try:
+        root = ET.parse(path).getroot()
+    except (ET.ParseError, OSError) as exc:
+        raise FileFormatError(f"{path}: cannot parse SVG: {exc}") from exc
+    polylines = []
+    for elem in root.iter():
+        tag = elem.tag.rsplit("}", 1)[-1]
+        if tag == "path" and elem.get("d"):
+            polylines.extend(parse_svg_path(elem.get("d"), str(path)))
+        elif tag in {"polygon", "polyline"} and elem.get("points"):
+            vals = [float(v) for v in re.findall(r"[-+]?(?:\d+\.?\d*|\.\d+)(?:[eE][-+]?\d+)?", elem.get("points"))]
+            if len(vals) >= 6 and len(vals) % 2 == 0:
+                polylines.append(np.array(vals).reshape(-1, 2))
+    if not polylines:
+        raise FileFormatError(f"{path}: the SVG contains no path, polygon or polyline with at least 3 points")
+    return polylines
+
+
+def _polygon_area(p: np.ndarray) -> float:
+    return 0.5 * abs(float(np.sum(p[:, 0] * np.roll(p[:, 1], -1) - np.roll(p[:, 0], -1) * p[:, 1])))
+
+
+def contour_from_mask(mask: np.ndarray, *, name: str = "image") -> np.ndarray:
+    """Outer boundary of the largest foreground region of a binary mask.
+
+    Parameters
+    ----------
+    mask : (h, w) bool
+        True on the silhouette.
+
+    Returns
+    -------
+    (m, 2) float
+        Boundary points in image units with x to the right and y up
+        (``x = column``, ``y = -row``), counter-clockwise, not resampled.
+    """
+    from skimage import measure
+
+    if mask.ndim != 2 or not mask.any():
+        raise ContourError(f"{name}: the image has no foreground silhouette")
+    padded = np.pad(mask.astype(np.float64), 1)
+    curves = measure.find_contours(padded, 0.5)
+    closed = [c for c in curves if c.shape[0] >= 4 and np.allclose(c[0], c[-1])]
+    if not closed:
+        raise ContourError(f"{name}: no closed boundary found in the image")
+    best = max(closed, key=_polygon_area)
+    pts = np.column_stack([best[:, 1] - 1.0, -(best[:, 0] - 1.0)])
+    if _polygon_area(pts) < 4.0:
+        raise ContourError(f"{name}: the silhouette is too small (encloses less than 4 pixels)")
+    return pts
+
+
+def silhouette_mask(image: np.ndarray, threshold: float | None = None, *, name: str = "image") -> np.ndarray:
+    """Binary silhouette of a grey or colour image.
+
+    The threshold defaults to Otsu's. The foreground is the side of the
+    threshold that touches the image border least (so both dark-on-light and
+    light-on-dark silhouettes work); transparent pixels of RGBA images are
+    background.
+    """
+    img = np.asarray(image)
+    alpha = None
+    if img.ndim == 3:
+        if img.shape[2] == 4:
+            alpha = img[..., 3].astype(np.float64)
+            img = img[..., :3]
+        img = img.astype(np.float64).mean(axis=2)
+    elif img.ndim != 2:
+        raise FileFormatError(f"{name}: expected a 2D image, got array of shape {img.shape}")
+    img = img.astype(np.float64)
+    if img.size == 0 or not np.all(np.isfinite(img)):
+        raise FileFormatError(f"{name}: the image is empty or has invalid pixel values")
+    if alpha is not None and alpha.min() < alpha.max():
+        return alpha > (alpha.min() + alpha.max()) / 2.0
+    if img.min() == img.max():
+        raise ContourError(f"{name}: the image is uniform: no silhouette to extract")
+    if threshold is None:
+        from skimage.filters import threshold_otsu
+
+        threshold = float(threshold_otsu(img))
+    bright = img > threshold
+    border = np.concatenate([bright[0], bright[-1], bright[:, 0], bright[:, -1]])
+    return ~bright if border.mean() > 0.5 else bright
+
+
+def load_contour(path, n_points: int | None = None, *, assume_closed: bool = False,
+                 threshold: float | None = None, min_points: int = 10) -> Contour2D:
+    """Load a closed 2D contour from a point file, an SVG or a silhouette image.
+
+    Parameters
+    ----------
+    path : str or Path
+        ``.txt``/``.csv``/``.xy``/``.pts``/``.dat`` (``x y`` per line, comma,
+        semicolon or blank separated, ``#`` comments), ``.svg`` (the
+        largest closed subpath of any path/polygon/polyline; y flipped to
+        point up), or an image (largest outer silhouette boundary; x right, y up,
+        one unit per pixel).
+    n_points : int, optional
+        Resample uniformly by arc length to this many points.
+    assume_closed : bool
+        Treat point files as closed even if their ends are far apart.
+    threshold : float, optional
+        Grey-level threshold for images (default Otsu).
+    min_points : int
+        Fewest distinct points accepted.
+
+    Returns
+    -------
+    Contour2D
+        Counter-clockwise.
+    """
+    path = _require_file(path)
+    suffix = path.suffix.lower()
+    name = path.name
+    if suffix in POINT_SUFFIXES:
+        points = _points_file(path)
+        contour = Contour2D.from_open_points(points, name=name, assume_closed=assume_closed,
+                                             min_points=min_points)
+    elif suffix == ".svg":
+        polylines = _svg_polylines(path)
+        best = max(polylines, key=_polygon_area)
+        best = best * np.array([1.0, -1.0])
+        contour = Contour2D.from_open_points(best, name=name, assume_closed=True, min_points=min_points)
+    elif suffix in IMAGE_SUFFIXES:
+        from PIL import Image, UnidentifiedImageError
+
+        try:
+            with Image.open(path) as im:
+                im.seek(0)
+                arr = np.asarray(im.convert("RGBA") if im.mode in {"P", "LA", "RGBA", "PA"} else im.convert("L"))
+        except (UnidentifiedImageError, OSError, ValueError) as exc:
+            raise FileFormatError(f"{path}: cannot read image: {exc}") from exc
+        mask = silhouette_mask(arr, threshold, name=name)
+        contour = Contour2D(contour_from_mask(mask, name=name), name=name, min_points=min_points)
+    else:
+        raise FileFormatError(f"{path}: unsupported contour format {suffix!r} (use a point file, "
+                              f"an SVG or an image: {', '.join(sorted(IMAGE_SUFFIXES))})")
+    contour = contour.ccw()
+    if n_points is not None:
+        contour = contour.resample(n_points)
+    return contour
+
+
+def save_contour(path, contour: Contour2D) -> Path:
+    """Write a contour as a text file, one ``x y`` per line (atomic)."""
+    with atomic_write(path) as fh:
+        np.savetxt(fh, contour.points, fmt="%.9g")
+    return Path(path)
+
+
+# ----------------------------------------------------------------------------- maps and ground truth
+
+
+def _index_file(path: Path, what: str) -> np.ndarray:
+    text = path.read_text(errors="replace").split()
+    if not text:
+        raise FileFormatError(f"{path}: the {what} file is empty")
+    try:
+        values = np.array([float(t) for t in text])
+    except ValueError:
+        bad = next(t for t in text if not _is_number(t))
+        raise FileFormatError(f"{path}: {what} file has a non-numeric entry {bad!r}") from None
+    if not np.all(np.isfinite(values)) or np.any(values != np.round(values)):
+        raise FileFormatError(f"{path}: {what} file must contain integer vertex indices")
+    return values.astype(np.int64)
+
+
+def _is_number(t: str) -> bool:
+    try:
+        float(t)
+        return True
+    except ValueError:
+        return False
+
+
+def load_vts(path, n_vertices: int | None = None) -> np.ndarray:
+    """Ground-truth correspondence file: 1-based vertex indices, one per line.
+
+    Returns
+    -------
+    (r,) int
+        Zero-based indices (row r of two ``.vts`` files of a pair are the
+        same surface point).
+    """
+    path = _require_file(path)
+    idx = _index_file(path, ".vts") - 1
+    if idx.min() < 0:
+        raise FileFormatError(f"{path}: .vts indices are 1-based; found an index below 1")
+    if n_vertices is not None and idx.max() >= n_vertices:
+        raise FileFormatError(f"{path}: index {idx.max() + 1} exceeds the mesh's {n_vertices} vertices")
+    return idx
+
+
+def load_map(path, n_target: int | None = None, n_source: int | None = None) -> np.ndarray:
+    """Point-to-point map file: one 0-based target index per source vertex.
+
+    Returns
+    -------
+    (n_source,) int
+    """
+    path = _require_file(path)
+    if path.suffix.lower() == ".npz":
+        try:
+            with np.load(path, allow_pickle=False) as data:
+                key = "map_xy" if "map_xy" in data.files else None
+                if key is None:
+                    raise FileFormatError(f"{path}: no 'map_xy' array in the .npz file")
+                mp = np.asarray(data[key]).astype(np.int64)
+        except (OSError, ValueError) as exc:
+            raise FileFormatError(f"{path}: cannot read .npz: {exc}") from exc
+    else:
+        mp = _index_file(path, "map")
+    if mp.min() < 0:
+        raise FileFormatError(f"{path}: map indices are 0-based; found a negative index")
+    if n_target is not None and mp.max() >= n_target:
+        raise FileFormatError(f"{path}: map index {mp.max()} is out of range for a target with "
+                              f"{n_target} vertices (is the file 1-based?)")
+    if n_source is not None and mp.shape[0] != n_source:
+        raise FileFormatError(f"{path}: map has {mp.shape[0]} entries but the source has {n_source} vertices")
+    return mp
+
+
+def save_map(path, map_xy) -> Path:
+    """Write a point-to-point map: one 0-based target index per line (atomic)."""
+    mp = np.asarray(map_xy)
+    if mp.ndim != 1 or not np.issubdtype(mp.dtype, np.integer):
+        raise InputError(f"{path}: a map must be a 1-D integer array, got {mp.dtype} {mp.shape}")
+    with atomic_write(path) as fh:
+        np.savetxt(fh, mp, fmt="%d")
+    return Path(path)
+
+
+# ----------------------------------------------------------------------------- results
+
+
+def environment() -> dict:
+    """Versions of Python, the platform and the numerical packages."""
+    import numba
+    import scipy
+
+    import corrlib
+
+    return {"corrlib": corrlib.__version__, "python": platform.python_version(),
+            "platform": platform.platform(), "numpy": np.__version__, "scipy": scipy.__version__,
+            "numba": numba.__version__}
+
+
+def _jsonable(value):
+    if isinstance(value, dict):
+        return {str(k): _jsonable(v) for k, v in value.items()}
+    if isinstance(value, (list, tuple)):
+        return [_jsonable(v) for v in value]
+    if isinstance(value, np.generic):
+        return value.item()
+    if isinstance(value, np.ndarray):
+        return value.tolist()
+    if isinstance(value, Path):
+        return str(value)
+    if isinstance(value, (str, int, float, bool)) or value is None:
+        return value
+    return repr(value)
+
+
+def save_result(stem, arrays: dict[str, np.ndarray], meta: dict | None = None) -> tuple[Path, Path]:
+    """Save numeric arrays as ``stem.npz`` and metadata as ``stem.json`` (both atomic).
+
+    Parameters
+    ----------
+    stem : str or Path
+        Output path without suffix (a given ``.npz``/``.json`` suffix is dropped).
+    arrays : dict of str -> ndarray
+        Numeric arrays only (object arrays are refused so loading never needs pickle).
+    meta : dict
+        JSON-serialisable parameters, timings, ...; the environment is added.
+    """
+    stem = Path(stem)
+    if stem.suffix in {".npz", ".json"}:
+        stem = stem.with_suffix("")
+    clean = {}
+    for key, arr in arrays.items():
+        a = np.asarray(arr)
+        if a.dtype == object:
+            raise InputError(f"result array {key!r} is not numeric")
+        clean[key] = a
+    npz = stem.with_suffix(".npz")
+    with atomic_write(npz, "wb") as fh:
+        np.savez(fh, **clean)
+    info = dict(meta or {})
+    info.setdefault("environment", environment())
+    info["arrays"] = {k: {"shape": list(v.shape), "dtype": str(v.dtype)} for k, v in clean.items()}
+    js = stem.with_suffix(".json")
+    with atomic_write(js) as fh:
+        json.dump(_jsonable(info), fh, indent=2)
+    return npz, js
+
+
+def load_result(stem) -> tuple[dict[str, np.ndarray], dict]:
+    """Load what :func:`save_result` wrote: ``(arrays, meta)``."""
+    stem = Path(stem)
+    if stem.suffix in {".npz", ".json"}:
+        stem = stem.with_suffix("")
+    npz = _require_file(stem.with_suffix(".npz"))
+    try:
+        with np.load(npz, allow_pickle=False) as data:
+            arrays = {k: data[k] for k in data.files}
+    except (OSError, ValueError) as exc:
+        raise FileFormatError(f"{npz}: cannot read result: {exc}") from exc
+    meta = {}
+    js = stem.with_suffix(".json")
+    if js.exists():
+        try:
+            meta = json.loads(js.read_text())
+        except json.JSONDecodeError as exc:
+            raise FileFormatError(f"{js}: invalid JSON: {exc}") from exc
+    return arrays, meta
+
+
+__all__ = [
+    "CorrError", "atomic_write", "load_mesh", "save_mesh", "load_contour", "save_contour",
+    "contour_from_mask", "silhouette_mask", "parse_svg_path", "load_vts", "load_map", "save_map",
+    "save_result", "load_result", "environment",
+]

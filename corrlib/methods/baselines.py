@@ -1,0 +1,236 @@
+"""Baseline methods, registered like every method so comparisons mean something.
+
+* ``descriptor-nn``: each vertex is matched to the vertex with the nearest
+  descriptor (L2) on the other shape, in both directions.
+* ``fmap-zoomout``: functional maps (Ovsjanikov et al. 2012) by least squares
+  with descriptor preservation and Laplacian commutativity, refined by
+  ZoomOut (Melzi et al. 2019).
+
+Functional map convention (pyFM's): ``C_yx`` of shape (k_Y, k_X) carries the
+spectral coefficients of a function on X to those of its pull-back on Y,
+``C_yx = Ψᵀ M_Y Π_yx Φ`` with ``Π_yx[j, map_yx[j]] = 1``. The pointwise map
+``map_yx`` is recovered by nearest neighbours between ``Ψ`` (rows of Y) and
+``Φ C_yxᵀ`` (rows of X).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from corrlib.descriptors import DESCRIPTOR_KINDS, mesh_descriptors
+from corrlib.geometry.spectrum import mesh_spectrum
+from corrlib.methods.base import MatchResult, param
+from corrlib.methods.registry import MethodSpec, register
+from corrlib.progress import Progress, Stopwatch
+
+
+def _standardize(desc_x: np.ndarray, desc_y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Scale every descriptor dimension by its joint standard deviation (shapes comparable)."""
+    both = np.concatenate([desc_x, desc_y])
+    scale = both.std(axis=0)
+    scale[scale == 0] = 1.0
+    return desc_x / scale, desc_y / scale
+
+
+def nearest_rows(query: np.ndarray, data: np.ndarray, chunk: int = 2048) -> np.ndarray:
+    """(q,) int: index of the nearest row of ``data`` (L2) for every row of ``query``.
+
+    A k-d tree for up to 8 dimensions; above that (where trees degrade to
+    brute force anyway) chunked ``||d||² - 2 q·d`` products in float32, which
+    is exact up to float32 ties.
+    """
+    query = np.asarray(query, dtype=np.float64)
+    data = np.asarray(data, dtype=np.float64)
+    if data.shape[1] <= 8:
+        return cKDTree(data).query(query, k=1, workers=-1)[1].astype(np.int64)
+    data32 = data.astype(np.float32)
+    sq = np.einsum("ij,ij->i", data32, data32)
+    out = np.empty(query.shape[0], dtype=np.int64)
+    for start in range(0, query.shape[0], chunk):
+        q = query[start:start + chunk].astype(np.float32)
+        out[start:start + chunk] = np.argmin(sq[None, :] - 2.0 * (q @ data32.T), axis=1)
+    return out
+
+
+# ----------------------------------------------------------------------------- descriptor NN
+
+
+@dataclass(frozen=True, kw_only=True)
+class DescriptorNNParams:
+    descriptor: str = param("wks", label="Descriptor", choices=DESCRIPTOR_KINDS,
+                            help="Point descriptor compared in L2 (WKS/HKS spectral, SHOT extrinsic).")
+    n_eigs: int = param(100, label="Eigenpairs", low=3, high=2000,
+                        help="Laplace–Beltrami eigenpairs for the spectral descriptors.")
+    n_scales: int = param(100, label="Scales", low=1, high=1000, help="Scales (times/energies) of HKS/WKS.")
+
+
+def _spectra_and_descriptors(source, target, params, watch):
+    with watch("eigen"):
+        spec_x = mesh_spectrum(source, min(params.n_eigs, source.n_vertices - 1))
+        spec_y = mesh_spectrum(target, min(params.n_eigs, target.n_vertices - 1))
+    with watch("descriptors"):
+        desc_x = mesh_descriptors(source, params.descriptor, spectrum=spec_x, n_scales=params.n_scales)
+        desc_y = mesh_descriptors(target, params.descriptor, spectrum=spec_y, n_scales=params.n_scales)
+    return spec_x, spec_y, desc_x, desc_y
+
+
+def solve_descriptor_nn(source, target, params: DescriptorNNParams, token):
+    watch = Stopwatch()
+    yield Progress("eigenpairs", 0.0)
+    spec_x, spec_y, desc_x, desc_y = _spectra_and_descriptors(source, target, params, watch)
+    token.raise_if_cancelled()
+    yield Progress("nearest neighbours", 0.7)
+    with watch("assignment"):
+        desc_x, desc_y = _standardize(desc_x, desc_y)
+        map_xy = nearest_rows(desc_x, desc_y)
+        map_yx = nearest_rows(desc_y, desc_x)
+    energy = float(np.mean(np.linalg.norm(desc_x - desc_y[map_xy], axis=1)))
+    yield Progress("done", 1.0)
+    return MatchResult("descriptor-nn", map_xy, map_yx, energy, watch.times,
+                       extras={"energy_meaning": "mean descriptor distance"})
+
+
+register(MethodSpec(
+    name="descriptor-nn", label="Descriptor nearest neighbour", inputs=("mesh", "mesh"),
+    params=DescriptorNNParams, solve=solve_descriptor_nn, rank=0,
+    description="Match every vertex to the vertex with the most similar descriptor. A baseline."))
+
+
+# ----------------------------------------------------------------------------- functional maps + ZoomOut
+
+
+@dataclass(frozen=True, kw_only=True)
+class FmapZoomOutParams:
+    descriptor: str = param("wks", label="Descriptor", choices=DESCRIPTOR_KINDS,
+                            help="Descriptor whose preservation constrains the functional map.")
+    n_descriptors: int = param(20, label="Descriptor functions", low=1, high=200,
+                               help="How many descriptor scales (evenly picked) enter the least squares.")
+    k_init: int = param(30, label="Initial basis size", low=2, high=500,
+                        help="Size of the functional map solved by least squares.")
+    k_final: int = param(120, label="ZoomOut final size", low=2, high=1000,
+                         help="ZoomOut upsamples the map from k_init to this spectral size.")
+    step: int = param(5, label="ZoomOut step", low=1, high=100, help="Basis functions added per ZoomOut iteration.")
+    commutativity: float = param(1e-1, label="Commutativity weight", low=0.0, high=1e6,
+                                 help="Weight of the Laplacian commutativity term (eigenvalues scaled to [0,1]).")
+
+
+def fmap_least_squares(coef_x: np.ndarray, coef_y: np.ndarray, evals_x: np.ndarray, evals_y: np.ndarray,
+                       weight: float) -> np.ndarray:
+    """Functional map from descriptor coefficients and Laplacian commutativity.
+
+    Minimises ``||C A - B||² + weight ||C Λ_X - Λ_Y C||²`` row by row.
+
+    Parameters
+    ----------
+    coef_x : (k_X, d) float
+        Spectral coefficients of the descriptors on X (``A``).
+    coef_y : (k_Y, d) float
+        On Y (``B``).
+    evals_x : (k_X,) float
+    evals_y : (k_Y,) float
+    weight : float
+
+    Returns
+    -------
+    (k_Y, k_X) float
+        ``C_yx``.
+    """
+    scale = max(evals_x.max(), evals_y.max(), 1e-300)
+    lx, ly = evals_x / scale, evals_y / scale
+    gram = coef_x @ coef_x.T
+    rhs = coef_y @ coef_x.T  # (k_Y, k_X)
+    c = np.empty((coef_y.shape[0], coef_x.shape[0]))
+    for i in range(coef_y.shape[0]):
+        reg = weight * (lx - ly[i]) ** 2
+        c[i] = np.linalg.solve(gram + np.diag(reg) + 1e-12 * np.eye(gram.shape[0]), rhs[i])
+    return c
+
+
+def zoomout(evecs_x: np.ndarray, evecs_y: np.ndarray, mass_y, c_yx: np.ndarray, k_final: int, step: int,
+            token=None):
+    """ZoomOut refinement (Melzi et al. 2019).
+
+    Parameters
+    ----------
+    evecs_x : (n_x, K) float
+    evecs_y : (n_y, K) float
+    mass_y : (n_y, n_y) sparse
+    c_yx : (k, k) float
+        Initial functional map.
+    k_final : int
+    step : int
+
+    Yields
+    ------
+    int
+        The current basis size (for progress).
+
+    Returns
+    -------
+    map_yx : (n_y,) int
+    c_yx : (k_final, k_final) float
+    """
+    k = c_yx.shape[1]
+    while True:
+        if token is not None:
+            token.raise_if_cancelled()
+        map_yx = nearest_rows(evecs_y[:, :c_yx.shape[0]], evecs_x[:, :k] @ c_yx.T)
+        if k >= k_final:
+            return map_yx, c_yx
+        k = min(k + step, k_final)
+        c_yx = evecs_y[:, :k].T @ (mass_y @ evecs_x[map_yx, :k])
+        yield k
+
+
+def solve_fmap_zoomout(source, target, params: FmapZoomOutParams, token):
+    watch = Stopwatch()
+    k_final = min(params.k_final, source.n_vertices - 1, target.n_vertices - 1)
+    k_init = min(params.k_init, k_final)
+    yield Progress("eigenpairs", 0.0)
+    with watch("eigen"):
+        spec_x = mesh_spectrum(source, max(k_final, 100 if params.descriptor != "shot" else k_final))
+        spec_y = mesh_spectrum(target, max(k_final, 100 if params.descriptor != "shot" else k_final))
+    token.raise_if_cancelled()
+    yield Progress("descriptors", 0.3)
+    with watch("descriptors"):
+        desc_x = mesh_descriptors(source, params.descriptor, spectrum=spec_x)
+        desc_y = mesh_descriptors(target, params.descriptor, spectrum=spec_y)
+        pick = np.unique(np.linspace(0, desc_x.shape[1] - 1, params.n_descriptors).round().astype(int))
+        desc_x, desc_y = desc_x[:, pick], desc_y[:, pick]
+        norm = np.sqrt(np.asarray(spec_x.mass.sum(axis=0)).ravel() @ desc_x ** 2)
+        desc_x, desc_y = desc_x / norm, desc_y / norm
+    yield Progress("functional map", 0.4)
+    with watch("fmap"):
+        phi, psi = spec_x.evecs, spec_y.evecs
+        coef_x = phi[:, :k_init].T @ (spec_x.mass @ desc_x)
+        coef_y = psi[:, :k_init].T @ (spec_y.mass @ desc_y)
+        c_yx = fmap_least_squares(coef_x, coef_y, spec_x.evals[:k_init], spec_y.evals[:k_init],
+                                  params.commutativity)
+    with watch("zoomout"):
+        gen = zoomout(phi, psi, spec_y.mass, c_yx, k_final, params.step, token)
+        while True:
+            try:
+                k = next(gen)
+            except StopIteration as stop:
+                map_yx, c_yx = stop.value
+                break
+            yield Progress("ZoomOut", 0.4 + 0.6 * (k - k_init) / max(k_final - k_init, 1), f"k = {k}")
+        # the other direction with the adjoint (C_yx is near-orthogonal for near-isometries)
+        map_xy = nearest_rows(phi[:, :k_final], psi[:, :k_final] @ c_yx)
+    k = c_yx.shape[0]
+    off = c_yx - np.diag(np.diag(c_yx))
+    energy = float(np.linalg.norm(c_yx.T @ c_yx - np.eye(k)) / k)
+    yield Progress("done", 1.0)
+    return MatchResult("fmap-zoomout", map_xy, map_yx, energy, watch.times,
+                       extras={"c_yx": c_yx, "energy_meaning": "orthogonality defect of C",
+                               "off_diagonal_norm": float(np.linalg.norm(off))})
+
+
+register(MethodSpec(
+    name="fmap-zoomout", label="Functional maps + ZoomOut", inputs=("mesh", "mesh"),
+    params=FmapZoomOutParams, solve=solve_fmap_zoomout, rank=10,
+    description="Least-squares functional map from descriptors and Laplacian commutativity, "
+                "refined by ZoomOut spectral upsampling."))

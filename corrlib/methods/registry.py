@@ -1,0 +1,135 @@
+"""The one registry of correspondence methods, used by the CLI, the studio and the benchmarks.
+
+A method registers a :class:`MethodSpec`: its name, the input kinds it
+accepts, its parameter dataclass and its solver generator
+
+``solve(source, target, params, token) -> Generator[Progress, None, MatchResult]``.
+
+:func:`solve` runs one to completion; the studio iterates the generator in a
+worker thread.
+"""
+
+from __future__ import annotations
+
+import time
+from collections.abc import Callable, Generator
+from dataclasses import asdict, dataclass
+
+from corrlib.errors import InputError, ParameterError
+from corrlib.methods.base import MatchResult, make_params, validate_params
+from corrlib.progress import CancelToken, Progress, run
+from corrlib.shapes import Contour2D, TriMesh
+
+SolveFn = Callable[..., Generator[Progress, None, MatchResult]]
+
+
+@dataclass(frozen=True)
+class MethodSpec:
+    """A registered method.
+
+    Attributes
+    ----------
+    name : str
+        Registry key, e.g. ``"kernel-matching"``.
+    label : str
+        Human name.
+    inputs : tuple of str
+        Kinds of (source, target): ``"mesh"`` or ``"contour"``.
+    params : type
+        Frozen parameter dataclass.
+    solve : callable
+        The solver generator.
+    description : str
+        One paragraph for help texts.
+    rank : int
+        Preference when "the best available method" is asked for (higher first).
+    """
+
+    name: str
+    label: str
+    inputs: tuple[str, str]
+    params: type
+    solve: SolveFn
+    description: str = ""
+    rank: int = 0
+
+
+_REGISTRY: dict[str, MethodSpec] = {}
+
+
+def register(spec: MethodSpec) -> MethodSpec:
+    """Add a method to the registry (a name can be registered once)."""
+    if spec.name in _REGISTRY and _REGISTRY[spec.name] is not spec:
+        raise ValueError(f"method {spec.name!r} is already registered")
+    _REGISTRY[spec.name] = spec
+    return spec
+
+
+def _ensure_loaded() -> None:
+    import corrlib.methods  # noqa: F401  (its __init__ imports every method module)
+
+
+def all_methods() -> list[MethodSpec]:
+    """Every registered method, best-ranked first."""
+    _ensure_loaded()
+    return sorted(_REGISTRY.values(), key=lambda s: (-s.rank, s.name))
+
+
+def get_method(name: str) -> MethodSpec:
+    """The method called ``name``; :class:`ParameterError` lists the known names otherwise."""
+    _ensure_loaded()
+    if name not in _REGISTRY:
+        raise ParameterError(f"unknown method {name!r} (available: {', '.join(sorted(_REGISTRY))})")
+    return _REGISTRY[name]
+
+
+def kind_of(shape) -> str:
+    """``"mesh"`` or ``"contour"``."""
+    if isinstance(shape, TriMesh):
+        return "mesh"
+    if isinstance(shape, Contour2D):
+        return "contour"
+    raise InputError(f"unsupported input type {type(shape).__name__} (expected TriMesh or Contour2D)")
+
+
+def methods_for(source, target) -> list[MethodSpec]:
+    """Registered methods accepting this pair of inputs, best-ranked first."""
+    kinds = (kind_of(source), kind_of(target))
+    return [s for s in all_methods() if s.inputs == kinds]
+
+
+def solve(method: str | MethodSpec, source, target, params=None, *, callback=None,
+          token: CancelToken | None = None, **overrides) -> MatchResult:
+    """Run a registered method to completion.
+
+    Parameters
+    ----------
+    method : str or MethodSpec
+    source, target : TriMesh or Contour2D
+    params : parameter dataclass instance, optional
+        Defaults of the method, updated by ``overrides``.
+    callback : callable, optional
+        Receives every :class:`Progress`.
+    token : CancelToken, optional
+
+    Returns
+    -------
+    MatchResult
+        With ``timings["total"]`` and ``params`` filled in.
+    """
+    spec = method if isinstance(method, MethodSpec) else get_method(method)
+    kinds = (kind_of(source), kind_of(target))
+    if kinds != spec.inputs:
+        raise InputError(f"method {spec.name!r} takes {spec.inputs[0]} + {spec.inputs[1]}, "
+                         f"got {kinds[0]} + {kinds[1]}")
+    if params is None:
+        params = make_params(spec.params, **overrides)
+    else:
+        validate_params(params)
+    token = token or CancelToken()
+    start = time.perf_counter()
+    result = run(spec.solve(source, target, params, token), callback=callback, token=token)
+    result.timings.setdefault("total", time.perf_counter() - start)
+    result.params = asdict(params)
+    result.method = spec.name
+    return result

@@ -1,0 +1,113 @@
+"""Performance benchmarks (``corr perf SUITE``): print figures, assert nothing.
+
+Each suite measures the targets named in its issue on the bundled shapes and
+prints one line per figure: best wall-clock time over ``repeat`` runs and,
+where relevant, peak resident memory growth.
+"""
+
+from __future__ import annotations
+
+import os
+import resource as _resource
+import tempfile
+import time
+from collections.abc import Callable
+
+import numpy as np
+
+from corrlib.errors import ParameterError
+
+
+def _best_time(fn: Callable[[], object], repeat: int) -> tuple[float, object]:
+    best, out = np.inf, None
+    for _ in range(max(repeat, 1)):
+        start = time.perf_counter()
+        out = fn()
+        best = min(best, time.perf_counter() - start)
+    return best, out
+
+
+def _peak_rss_mb() -> float:
+    return _resource.getrusage(_resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def _line(name: str, seconds: float, extra: str = "") -> None:
+    print(f"{name:<58} {seconds:8.3f} s  {extra}", flush=True)
+
+
+def suite_foundation(repeat: int, quick: bool = False) -> None:
+    """Issue 2 targets: eigenpairs, SHOT, geodesic error, spectrum cache (``quick``: fewer cases)."""
+    from corrlib.descriptors.shot import shot
+    from corrlib.evaluation import geodesic_errors
+    from corrlib.geometry.laplacian import mesh_laplacian
+    from corrlib.geometry.spectrum import eigenpairs, mesh_spectrum
+    from corrlib.io import load_mesh, load_vts
+    from corrlib.methods import solve
+    from corrlib.resources import resource
+
+    cat0 = load_mesh(resource("data/tosca/cat0.off"))
+    cat1 = load_mesh(resource("data/tosca/cat1.off"))
+    print(f"machine: {os.cpu_count()} cores; shape: cat0, {cat0.n_vertices} vertices")
+    t_lap, (stiff, mass) = _best_time(lambda: mesh_laplacian(cat0), repeat)
+    _line("cotan Laplacian + lumped mass", t_lap)
+    for k in ((200,) if quick else (200, 500)):
+        reference = None
+        for method in ("eigsh", "slicing", "auto"):
+            t, (evals, evecs) = _best_time(lambda m=method: eigenpairs(stiff, mass, k, method=m), repeat)
+            if reference is None:
+                reference = evals
+                diff = 0.0
+            else:
+                diff = float(np.max(np.abs(evals - reference)) / reference[-1])
+            gram = evecs.T @ (mass @ evecs)
+            _line(f"{k} eigenpairs, method={method}", t,
+                  f"max rel. eigenvalue diff vs eigsh {diff:.1e}, M-orthonormality defect "
+                  f"{np.max(np.abs(gram - np.eye(k))):.1e}")
+    t200 = _best_time(lambda: (mesh_laplacian(cat0), eigenpairs(stiff, mass, 200)), repeat)[0]
+    _line("Laplacian + 200 eigenpairs (auto)  [target <= 3 s]", t200)
+    with tempfile.TemporaryDirectory() as tmp:
+        old = os.environ.get("CORRLIB_CACHE_DIR")
+        os.environ["CORRLIB_CACHE_DIR"] = tmp
+        try:
+            t_cold = _best_time(lambda: mesh_spectrum(cat0, 200), 1)[0]
+            t_warm = _best_time(lambda: mesh_spectrum(cat0, 200), repeat)[0]
+        finally:
+            if old is None:
+                os.environ.pop("CORRLIB_CACHE_DIR")
+            else:
+                os.environ["CORRLIB_CACHE_DIR"] = old
+    _line("mesh_spectrum k=200, empty disk cache", t_cold)
+    _line("mesh_spectrum k=200, from the disk cache", t_warm)
+
+    start = time.perf_counter()
+    shot(cat0.vertices, cat0.faces, normals=cat0.vertex_normals)
+    _line("SHOT 5k vertices, first call (incl. numba compile or cache load)  [<= 5 s]",
+          time.perf_counter() - start)
+    t_shot = _best_time(lambda: shot(cat0.vertices, cat0.faces, normals=cat0.vertex_normals), repeat)[0]
+    _line("SHOT 5k vertices, warm  [target <= 5 s]", t_shot)
+
+    gt0 = load_vts(resource("data/tosca/cat0.vts"))
+    gt1 = load_vts(resource("data/tosca/cat1.vts"))
+    result = solve("descriptor-nn", cat0, cat1)
+    t_eval, report = _best_time(lambda: geodesic_errors(result.map_xy, cat1, gt0, gt1), repeat)
+    _line(f"geodesic error, {gt0.size}-point map (descriptor NN, exact)  [<= 5 s]", t_eval,
+          f"mean error {report.summary()['mean']:.3f}")
+    if quick:
+        return
+    random_map = np.random.default_rng(0).integers(0, cat1.n_vertices, cat0.n_vertices)
+    t_rand, rep_rand = _best_time(lambda: geodesic_errors(random_map, cat1, gt0, gt1), 1)
+    _line(f"geodesic error, {gt0.size}-point random map (worst case, exact)", t_rand,
+          f"mean error {rep_rand.summary()['mean']:.3f}")
+    t_heat = _best_time(lambda: geodesic_errors(result.map_xy, cat1, gt0, gt1, method="heat"), 1)[0]
+    _line(f"geodesic error, {gt0.size}-point map (heat method)", t_heat)
+    print(f"peak resident memory: {_peak_rss_mb():.0f} MB")
+
+
+SUITES = {"foundation": suite_foundation}
+
+
+def run_suite(name: str, repeat: int = 3, quick: bool = False) -> None:
+    """Run a named benchmark suite (``quick``: a smoke run with fewer cases)."""
+    if name not in SUITES:
+        raise ParameterError(f"unknown benchmark suite {name!r} (available: {', '.join(SUITES)})")
+    SUITES[name](repeat, quick)

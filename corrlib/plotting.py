@@ -1,0 +1,124 @@
+"""Static pictures with matplotlib (Agg): colour transfer, cumulative error curves.
+
+Imported on demand only (``corrlib`` itself does not import matplotlib).
+"""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import numpy as np
+
+
+def _pyplot():
+    import matplotlib
+
+    matplotlib.use("Agg", force=False)
+    import matplotlib.pyplot as plt
+
+    return plt
+
+
+def coordinate_colors(vertices: np.ndarray) -> np.ndarray:
+    """(n, 3) float in [0, 1]: RGB from the vertex coordinates normalised to the bounding box."""
+    v = np.asarray(vertices, dtype=np.float64)
+    lo, hi = v.min(axis=0), v.max(axis=0)
+    return np.clip((v - lo) / np.where(hi > lo, hi - lo, 1.0), 0.0, 1.0)
+
+
+def _view_axes(reference: np.ndarray) -> np.ndarray:
+    """(3, 3) rows: longest principal axis as x, shortest as depth (y), the middle one up (z); proper."""
+    centred = reference - reference.mean(axis=0)
+    _, _, vt = np.linalg.svd(centred, full_matrices=False)
+    axes = np.stack([vt[0], vt[2], vt[1]])
+    # fix the sign ambiguity of principal axes by the third moment, so similar shapes face alike
+    skew = np.sum((centred @ axes.T) ** 3, axis=0)
+    axes[skew < 0] *= -1
+    if np.linalg.det(axes) < 0:
+        axes[1] *= -1
+    return axes
+
+
+def draw_mesh(ax, vertices: np.ndarray, faces: np.ndarray, colors: np.ndarray, title: str = "",
+              frame_from: np.ndarray | None = None) -> None:
+    """Draw a triangle mesh with per-vertex colours on a 3D matplotlib axis (flat face colours).
+
+    ``frame_from`` gives the vertices whose principal axes orient the view
+    (pass the source's to view two shapes alike).
+    """
+    from mpl_toolkits.mplot3d.art3d import Poly3DCollection
+
+    axes = _view_axes(vertices if frame_from is None else frame_from)
+    v = (vertices - vertices.mean(axis=0)) @ axes.T
+    tris = v[faces]
+    face_colors = np.asarray(colors)[faces].mean(axis=1)
+    # simple Lambert shading towards the viewer for depth cues
+    normals = np.cross(tris[:, 1] - tris[:, 0], tris[:, 2] - tris[:, 0])
+    normals /= np.maximum(np.linalg.norm(normals, axis=1, keepdims=True), 1e-300)
+    light = np.array([0.3, -0.8, 0.5])
+    shade = 0.55 + 0.45 * np.abs(normals @ (light / np.linalg.norm(light)))
+    coll = Poly3DCollection(tris, facecolors=np.clip(face_colors * shade[:, None], 0, 1), linewidths=0)
+    ax.add_collection3d(coll)
+    span = (v.max(axis=0) - v.min(axis=0)).max() / 2
+    mid = (v.max(axis=0) + v.min(axis=0)) / 2
+    for setter, c in zip((ax.set_xlim, ax.set_ylim, ax.set_zlim), mid):
+        setter(c - span, c + span)
+    ax.view_init(elev=10, azim=-90)
+    ax.set_axis_off()
+    ax.set_title(title)
+
+
+def save_colour_transfer(path, source, target, map_yx: np.ndarray, *, source_colors=None, title: str = "") -> Path:
+    """PNG with the source coloured by its coordinates and the target coloured through ``map_yx``.
+
+    Parameters
+    ----------
+    path : str or Path
+    source, target : TriMesh
+    map_yx : (n_y,) int
+        Source vertex of every target vertex (-1 = unmatched, drawn grey).
+    source_colors : (n_x, 3) float, optional
+    """
+    from corrlib.io import atomic_write
+
+    plt = _pyplot()
+    colors_x = coordinate_colors(source.vertices) if source_colors is None else np.asarray(source_colors)
+    map_yx = np.asarray(map_yx)
+    colors_y = np.where((map_yx >= 0)[:, None], colors_x[np.clip(map_yx, 0, None)], 0.6)
+    fig = plt.figure(figsize=(10, 5), dpi=100)
+    ax1 = fig.add_subplot(1, 2, 1, projection="3d")
+    ax2 = fig.add_subplot(1, 2, 2, projection="3d")
+    draw_mesh(ax1, source.vertices, source.faces, colors_x, f"source: {source.name}")
+    draw_mesh(ax2, target.vertices, target.faces, colors_y, f"target: {target.name} (colours through the map)",
+              frame_from=target.vertices)
+    if title:
+        fig.suptitle(title)
+    fig.tight_layout()
+    path = Path(path)
+    with atomic_write(path, "wb") as fh:
+        fig.savefig(fh, format="png")
+    plt.close(fig)
+    return path
+
+
+def save_error_curves(path, curves: dict, thresholds: np.ndarray, *, title: str = "Cumulative geodesic error") -> Path:
+    """PNG of cumulative error curves: ``curves`` maps a label to an array like ``thresholds``."""
+    from corrlib.io import atomic_write
+
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(6, 4.5), dpi=100)
+    for label, curve in curves.items():
+        ax.plot(thresholds, 100.0 * np.asarray(curve), label=label)
+    ax.set_xlabel("geodesic error (normalised)")
+    ax.set_ylabel("% correspondences")
+    ax.set_xlim(thresholds[0], thresholds[-1])
+    ax.set_ylim(0, 100)
+    ax.grid(alpha=0.3)
+    ax.legend(loc="lower right")
+    ax.set_title(title)
+    fig.tight_layout()
+    path = Path(path)
+    with atomic_write(path, "wb") as fh:
+        fig.savefig(fh, format="png")
+    plt.close(fig)
+    return path

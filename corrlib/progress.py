@@ -1,0 +1,104 @@
+"""Progress reports and cancellation, without any GUI dependency.
+
+Solvers are generators that ``yield Progress(...)`` between steps and
+``return`` their result. :func:`run` drives such a generator to completion
+(scripts, tests, CLI); the studio wraps the same generator in a worker
+thread. Compiled loops poll a :class:`CancelToken`.
+"""
+
+from __future__ import annotations
+
+import threading
+import time
+from collections.abc import Callable, Generator
+from dataclasses import dataclass
+from typing import TypeVar
+
+from corrlib.errors import Cancelled
+
+T = TypeVar("T")
+
+
+@dataclass(frozen=True)
+class Progress:
+    """One progress report.
+
+    Attributes
+    ----------
+    stage : str
+        Short name of the current stage ("eigenpairs", "iteration 3", ...).
+    fraction : float
+        Overall completion in [0, 1], or a negative number when unknown.
+    message : str
+        Free text (energies, counts).
+    """
+
+    stage: str
+    fraction: float = -1.0
+    message: str = ""
+
+
+class CancelToken:
+    """Thread-safe cancellation flag shared between a caller and a solver."""
+
+    def __init__(self):
+        self._event = threading.Event()
+
+    def cancel(self) -> None:
+        self._event.set()
+
+    @property
+    def cancelled(self) -> bool:
+        return self._event.is_set()
+
+    def raise_if_cancelled(self) -> None:
+        """Raise :class:`~corrlib.errors.Cancelled` if :meth:`cancel` was called."""
+        if self._event.is_set():
+            raise Cancelled("the computation was cancelled")
+
+
+def run(generator: Generator[Progress, None, T], callback: Callable[[Progress], None] | None = None,
+        token: CancelToken | None = None) -> T:
+    """Run a solver generator to completion and return its result.
+
+    Parameters
+    ----------
+    generator
+        Yields :class:`Progress`, returns the result.
+    callback
+        Called with every progress report.
+    token
+        Checked between steps; cancellation raises :class:`Cancelled`.
+    """
+    while True:
+        if token is not None:
+            token.raise_if_cancelled()
+        try:
+            report = next(generator)
+        except StopIteration as stop:
+            return stop.value
+        if callback is not None:
+            callback(report)
+
+
+class Stopwatch:
+    """Named wall-clock timings: ``with sw("eigen"): ...`` accumulates into ``sw.times``."""
+
+    def __init__(self):
+        self.times: dict[str, float] = {}
+
+    def __call__(self, name: str):
+        return _Lap(self, name)
+
+
+class _Lap:
+    def __init__(self, watch: Stopwatch, name: str):
+        self.watch, self.name = watch, name
+
+    def __enter__(self):
+        self.start = time.perf_counter()
+        return self
+
+    def __exit__(self, *exc):
+        self.watch.times[self.name] = self.watch.times.get(self.name, 0.0) + time.perf_counter() - self.start
+        return False

@@ -1,0 +1,617 @@
+"""Shape types: :class:`TriMesh` (triangle mesh) and :class:`Contour2D` (closed 2D polygon).
+
+Both hold read-only float64 / int64 arrays and compute derived quantities
+(areas, normals, edges, boundary, ...) lazily, once. Construction validates
+the input and raises :class:`~corrlib.errors.MeshError` or
+:class:`~corrlib.errors.ContourError` with a message that names the shape and
+the problem; :func:`inspect_mesh` and :func:`inspect_contour` return the same
+findings as a list without raising (for validation reports).
+
+Tolerances live in :data:`TOL`.
+"""
+
+from __future__ import annotations
+
+import hashlib
+from dataclasses import dataclass
+from functools import cached_property
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+from corrlib.errors import ContourError, MeshError
+
+
+@dataclass(frozen=True)
+class Tolerances:
+    """Numerical tolerances used by validation (relative to the shape's size)."""
+
+    #: a face is degenerate if its area <= zero_area * bbox_diagonal**2
+    zero_area: float = 1e-14
+    #: contour segments shorter than this fraction of the perimeter are merged
+    zero_length: float = 1e-12
+    #: a contour file is "closed" if its end-to-start gap is at most this many median spacings
+    closing_gap: float = 5.0
+
+
+TOL = Tolerances()
+
+
+@dataclass(frozen=True)
+class Finding:
+    """One validation finding.
+
+    Attributes
+    ----------
+    level : str
+        ``"error"`` (the shape cannot be used) or ``"warning"``.
+    code : str
+        Short machine-readable identifier, e.g. ``"non-manifold-edge"``.
+    message : str
+        Human-readable explanation with counts and example indices.
+    """
+
+    level: str
+    code: str
+    message: str
+
+
+def _readonly(a: np.ndarray) -> np.ndarray:
+    a = np.ascontiguousarray(a)
+    a.setflags(write=False)
+    return a
+
+
+def _examples(idx: np.ndarray, n: int = 5) -> str:
+    idx = np.asarray(idx).ravel()
+    shown = ", ".join(str(int(i)) for i in idx[:n])
+    return shown + (", ..." if idx.size > n else "")
+
+
+# ----------------------------------------------------------------------------- meshes
+
+
+def _face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    e1 = vertices[faces[:, 1]] - vertices[faces[:, 0]]
+    e2 = vertices[faces[:, 2]] - vertices[faces[:, 0]]
+    return 0.5 * np.linalg.norm(np.cross(e1, e2), axis=1)
+
+
+def _face_components(n_vertices: int, faces: np.ndarray) -> tuple[int, np.ndarray]:
+    """Connected components of the vertex graph induced by the faces."""
+    rows = np.concatenate([faces[:, 0], faces[:, 1], faces[:, 2]])
+    cols = np.concatenate([faces[:, 1], faces[:, 2], faces[:, 0]])
+    graph = sp.coo_matrix((np.ones(rows.size), (rows, cols)), shape=(n_vertices, n_vertices))
+    return connected_components(graph, directed=False)
+
+
+def _as_arrays(vertices, faces) -> tuple[np.ndarray, np.ndarray, list[Finding]]:
+    """Convert to float64 (n,3) / int64 (f,3); structural errors stop further checks."""
+    findings: list[Finding] = []
+    try:
+        v = np.asarray(vertices, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        return None, None, [Finding("error", "vertices-type", f"vertices are not numeric: {exc}")]
+    try:
+        f_raw = np.asarray(faces)
+        if f_raw.size and not np.issubdtype(f_raw.dtype, np.integer):
+            f_float = f_raw.astype(np.float64)
+            if not np.all(np.isfinite(f_float)) or np.any(f_float != np.round(f_float)):
+                return v, None, [Finding("error", "faces-type", "face indices are not integers")]
+        f = f_raw.astype(np.int64)
+    except (TypeError, ValueError) as exc:
+        return v, None, [Finding("error", "faces-type", f"faces are not integer indices: {exc}")]
+    if v.ndim != 2 or v.shape[1] != 3:
+        findings.append(Finding("error", "vertices-shape", f"vertices must have shape (n, 3), got {v.shape}"))
+    elif v.shape[0] == 0:
+        findings.append(Finding("error", "empty", "the mesh has no vertices"))
+    if f.ndim != 2 or f.shape[1] != 3:
+        if f.size == 0:
+            findings.append(Finding("error", "empty", "the mesh has no faces"))
+        else:
+            findings.append(
+                Finding("error", "faces-shape", f"faces must have shape (f, 3) (triangles only), got {f.shape}")
+            )
+    elif f.shape[0] == 0:
+        findings.append(Finding("error", "empty", "the mesh has no faces"))
+    return v, f, findings
+
+
+def inspect_mesh(vertices, faces) -> list[Finding]:
+    """Validate a triangle mesh and return every finding without raising.
+
+    Parameters
+    ----------
+    vertices : (n, 3) array_like of float
+    faces : (f, 3) array_like of int
+
+    Returns
+    -------
+    list of Finding
+        Errors first, then warnings. An empty list means a clean, closed,
+        connected, manifold mesh.
+    """
+    v, f, findings = _as_arrays(vertices, faces)
+    if findings:
+        return findings
+    n = v.shape[0]
+    bad_rows = np.flatnonzero(~np.all(np.isfinite(v), axis=1))
+    if bad_rows.size:
+        findings.append(
+            Finding("error", "non-finite", f"{bad_rows.size} vertices have NaN or infinite coordinates "
+                    f"(e.g. vertex {_examples(bad_rows)})")
+        )
+        return findings
+    out_of_range = np.flatnonzero(np.any((f < 0) | (f >= n), axis=1))
+    if out_of_range.size:
+        findings.append(
+            Finding("error", "index-range", f"{out_of_range.size} faces reference vertex indices outside "
+                    f"[0, {n - 1}] (e.g. face {_examples(out_of_range)})")
+        )
+        return findings
+    repeated = np.flatnonzero((f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 0] == f[:, 2]))
+    if repeated.size:
+        findings.append(
+            Finding("error", "degenerate-face", f"{repeated.size} faces repeat a vertex index "
+                    f"(e.g. face {_examples(repeated)})")
+        )
+    diag = float(np.linalg.norm(v.max(axis=0) - v.min(axis=0)))
+    areas = _face_areas(v, f)
+    zero = np.flatnonzero(areas <= TOL.zero_area * max(diag, 1e-300) ** 2)
+    zero = np.setdiff1d(zero, repeated)
+    if zero.size:
+        findings.append(
+            Finding("error", "zero-area-face", f"{zero.size} faces have zero area "
+                    f"(e.g. face {_examples(zero)})")
+        )
+    # edges: each directed half-edge once per face
+    half = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    und = np.sort(half, axis=1)
+    uniq, inverse, counts = np.unique(und, axis=0, return_inverse=True, return_counts=True)
+    inverse = inverse.ravel()
+    nm = np.flatnonzero(counts > 2)
+    if nm.size:
+        findings.append(
+            Finding("error", "non-manifold-edge", f"{nm.size} edges are shared by more than two faces "
+                    f"(e.g. edge {uniq[nm[0]][0]}-{uniq[nm[0]][1]})")
+        )
+    dup_faces = np.unique(np.sort(f, axis=1), axis=0).shape[0]
+    if dup_faces < f.shape[0]:
+        findings.append(Finding("error", "duplicate-face", f"{f.shape[0] - dup_faces} faces are duplicates"))
+    used = np.zeros(n, dtype=bool)
+    used[f.ravel()] = True
+    unused = np.flatnonzero(~used)
+    if unused.size:
+        findings.append(
+            Finding("error", "unreferenced-vertex", f"{unused.size} vertices belong to no face "
+                    f"(e.g. vertex {_examples(unused)})")
+        )
+    n_comp, labels = _face_components(n, f)
+    n_comp_used = np.unique(labels[used]).size
+    if n_comp_used > 1:
+        sizes = np.bincount(labels[used])
+        sizes = np.sort(sizes[sizes > 0])[::-1]
+        findings.append(
+            Finding("error", "components", f"the mesh has {n_comp_used} connected components "
+                    f"(vertex counts {', '.join(map(str, sizes[:5]))}{', ...' if sizes.size > 5 else ''}); "
+                    "load it with largest_component=True to keep the largest")
+        )
+    # warnings
+    if not nm.size:
+        # consistent orientation: each undirected interior edge must appear once in each direction
+        directed = half[:, 0] < half[:, 1]
+        fwd = np.bincount(inverse[directed], minlength=uniq.shape[0])
+        bwd = np.bincount(inverse[~directed], minlength=uniq.shape[0])
+        bad = np.flatnonzero((counts == 2) & (fwd != 1))
+        if bad.size:
+            findings.append(
+                Finding("warning", "orientation", f"{bad.size} interior edges join faces of inconsistent "
+                        "orientation (normals may flip)")
+            )
+        del bwd
+    n_boundary = int(np.sum(counts == 1))
+    if n_boundary:
+        findings.append(
+            Finding("warning", "boundary", f"the mesh has a boundary ({n_boundary} boundary edges); "
+                    "Neumann boundary conditions are used")
+        )
+    return findings
+
+
+class TriMesh:
+    """An immutable triangle mesh with lazily computed derived quantities.
+
+    Parameters
+    ----------
+    vertices : (n, 3) array_like of float
+    faces : (f, 3) array_like of int
+        Zero-based vertex indices, counter-clockwise seen from outside.
+    name : str
+        Shown in error messages (usually the file name).
+    validate : bool
+        Run :func:`inspect_mesh` and raise :class:`MeshError` on the first error.
+
+    Raises
+    ------
+    MeshError
+        Empty input, NaN/inf coordinates, face indices out of range, degenerate
+        or zero-area faces, non-manifold edges, unreferenced vertices, several
+        connected components.
+    """
+
+    def __init__(self, vertices, faces, *, name: str = "mesh", validate: bool = True):
+        self.name = str(name)
+        if validate:
+            errors = [fd for fd in inspect_mesh(vertices, faces) if fd.level == "error"]
+            if errors:
+                raise MeshError(f"{self.name}: {errors[0].message}")
+        self.vertices = _readonly(np.asarray(vertices, dtype=np.float64))
+        self.faces = _readonly(np.asarray(faces, dtype=np.int64))
+
+    @classmethod
+    def from_arrays(cls, vertices, faces, *, name: str = "mesh", largest_component: bool = False) -> "TriMesh":
+        """Build a mesh, optionally keeping only its largest connected component.
+
+        With ``largest_component=True`` vertices outside the largest component
+        (and unreferenced vertices) are removed; the kept original indices are
+        available as :attr:`original_indices`.
+        """
+        if largest_component:
+            v, f, findings = _as_arrays(vertices, faces)
+            if not findings and f.size and f.min() >= 0 and f.max() < v.shape[0]:
+                n = v.shape[0]
+                _, labels = _face_components(n, f)
+                used = np.zeros(n, dtype=bool)
+                used[f.ravel()] = True
+                sizes = np.bincount(labels[used], minlength=labels.max() + 1)
+                keep = used & (labels == np.argmax(sizes))
+                if not np.all(keep):
+                    new_index = -np.ones(n, dtype=np.int64)
+                    new_index[keep] = np.arange(int(keep.sum()))
+                    f = f[keep[f[:, 0]]]
+                    mesh = cls(v[keep], new_index[f], name=name)
+                    mesh.original_indices = _readonly(np.flatnonzero(keep))
+                    return mesh
+        return cls(vertices, faces, name=name)
+
+    #: indices of the kept vertices in the input, when a component was dropped
+    original_indices: np.ndarray | None = None
+
+    def __repr__(self) -> str:
+        return f"TriMesh({self.name!r}, n_vertices={self.n_vertices}, n_faces={self.n_faces})"
+
+    @property
+    def n_vertices(self) -> int:
+        return int(self.vertices.shape[0])
+
+    @property
+    def n_faces(self) -> int:
+        return int(self.faces.shape[0])
+
+    def report(self) -> list[Finding]:
+        """Validation findings (warnings only, for a mesh that was constructed)."""
+        return inspect_mesh(self.vertices, self.faces)
+
+    @cached_property
+    def face_areas(self) -> np.ndarray:
+        """(f,) float: triangle areas."""
+        return _readonly(_face_areas(self.vertices, self.faces))
+
+    @cached_property
+    def area(self) -> float:
+        """Total surface area."""
+        return float(self.face_areas.sum())
+
+    @cached_property
+    def face_normals(self) -> np.ndarray:
+        """(f, 3) float: unit face normals (right-hand rule on the face order)."""
+        v, f = self.vertices, self.faces
+        n = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])
+        return _readonly(n / np.linalg.norm(n, axis=1, keepdims=True))
+
+    @cached_property
+    def vertex_normals(self) -> np.ndarray:
+        """(n, 3) float: area-weighted unit vertex normals."""
+        weighted = self.face_normals * self.face_areas[:, None]
+        normals = np.zeros_like(self.vertices)
+        for c in range(3):
+            np.add.at(normals, self.faces[:, c], weighted)
+        norm = np.linalg.norm(normals, axis=1, keepdims=True)
+        return _readonly(normals / np.where(norm > 0, norm, 1.0))
+
+    @cached_property
+    def edges(self) -> np.ndarray:
+        """(e, 2) int: unique undirected edges, each sorted ``(i < j)``."""
+        f = self.faces
+        half = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+        return _readonly(np.unique(np.sort(half, axis=1), axis=0))
+
+    @cached_property
+    def edge_lengths(self) -> np.ndarray:
+        """(e,) float: Euclidean lengths of :attr:`edges`."""
+        return _readonly(np.linalg.norm(self.vertices[self.edges[:, 0]] - self.vertices[self.edges[:, 1]], axis=1))
+
+    @cached_property
+    def boundary_edges(self) -> np.ndarray:
+        """(b, 2) int: directed boundary edges in face orientation (empty for closed meshes)."""
+        f = self.faces
+        half = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+        _, inverse, counts = np.unique(np.sort(half, axis=1), axis=0, return_inverse=True, return_counts=True)
+        return _readonly(half[counts[inverse.ravel()] == 1])
+
+    @cached_property
+    def boundary_loops(self) -> tuple[np.ndarray, ...]:
+        """Boundary loops as ordered vertex index arrays (empty tuple for closed meshes)."""
+        nxt = {int(a): int(b) for a, b in self.boundary_edges}
+        loops = []
+        while nxt:
+            start = next(iter(nxt))
+            loop = [start]
+            cur = nxt.pop(start)
+            while cur != start and cur in nxt:
+                loop.append(cur)
+                cur = nxt.pop(cur)
+            loops.append(np.array(loop, dtype=np.int64))
+        return tuple(loops)
+
+    @property
+    def is_closed(self) -> bool:
+        return self.boundary_edges.shape[0] == 0
+
+    @cached_property
+    def adjacency(self) -> sp.csr_matrix:
+        """(n, n) sparse symmetric matrix of edge lengths (the mesh edge graph)."""
+        e, w = self.edges, self.edge_lengths
+        n = self.n_vertices
+        a = sp.coo_matrix((np.concatenate([w, w]), (np.concatenate([e[:, 0], e[:, 1]]),
+                                                     np.concatenate([e[:, 1], e[:, 0]]))), shape=(n, n))
+        return a.tocsr()
+
+    @cached_property
+    def bbox_diagonal(self) -> float:
+        return float(np.linalg.norm(self.vertices.max(axis=0) - self.vertices.min(axis=0)))
+
+    @cached_property
+    def content_hash(self) -> str:
+        """SHA-1 of the vertex and face arrays (keys on-disk caches by mesh content)."""
+        h = hashlib.sha1()
+        h.update(np.ascontiguousarray(self.vertices, dtype="<f8").tobytes())
+        h.update(np.ascontiguousarray(self.faces, dtype="<i8").tobytes())
+        return h.hexdigest()
+
+    def enclosed_volume(self) -> float | None:
+        """Signed enclosed volume by the divergence theorem; ``None`` if the mesh is not closed."""
+        if not self.is_closed:
+            return None
+        v, f = self.vertices, self.faces
+        return float(np.einsum("ij,ij->i", v[f[:, 0]], np.cross(v[f[:, 1]], v[f[:, 2]])).sum() / 6.0)
+
+
+# ----------------------------------------------------------------------------- contours
+
+
+def _orient(p1: np.ndarray, p2: np.ndarray, q: np.ndarray) -> np.ndarray:
+    """Sign of the turn p1 -> p2 -> q (+1 left, -1 right, 0 collinear), broadcasting over rows."""
+    return np.sign((p2[..., 0] - p1[..., 0]) * (q[..., 1] - p1[..., 1])
+                   - (p2[..., 1] - p1[..., 1]) * (q[..., 0] - p1[..., 0]))
+
+
+def _segments_intersect(p: np.ndarray) -> np.ndarray:
+    """Pairs (i, j) of non-adjacent segments of the closed polygon ``p`` that intersect.
+
+    Segment i joins p[i] and p[i+1 mod m]. Bounding-box pruning by sorting on x,
+    then exact orientation tests on the candidate pairs.
+    """
+    m = p.shape[0]
+    a = p
+    b = np.roll(p, -1, axis=0)
+    lo_x = np.minimum(a[:, 0], b[:, 0])
+    hi_x = np.maximum(a[:, 0], b[:, 0])
+    lo_y = np.minimum(a[:, 1], b[:, 1])
+    hi_y = np.maximum(a[:, 1], b[:, 1])
+    order = np.argsort(lo_x)
+    hits = []
+    # sweep: for each segment, the segments whose lo_x lies within its x-range
+    sorted_lo = lo_x[order]
+    ends = np.searchsorted(sorted_lo, hi_x[order], side="right")
+    for rank in range(m):
+        i = order[rank]
+        cand = order[rank + 1: ends[rank]]
+        if cand.size == 0:
+            continue
+        cand = cand[(lo_y[cand] <= hi_y[i]) & (hi_y[cand] >= lo_y[i])]
+        # skip adjacent segments (they share an endpoint)
+        cand = cand[(cand != (i + 1) % m) & (cand != (i - 1) % m)]
+        if cand.size == 0:
+            continue
+        o1 = _orient(a[i], b[i], a[cand])
+        o2 = _orient(a[i], b[i], b[cand])
+        o3 = _orient(a[cand], b[cand], a[i])
+        o4 = _orient(a[cand], b[cand], b[i])
+        cross = (o1 * o2 <= 0) & (o3 * o4 <= 0)
+        # collinear disjoint segments give all-zero orientations: check overlap explicitly
+        coll = (o1 == 0) & (o2 == 0)
+        if np.any(coll):
+            cross[coll] = (lo_x[cand][coll] <= hi_x[i]) & (hi_x[cand][coll] >= lo_x[i]) & \
+                          (lo_y[cand][coll] <= hi_y[i]) & (hi_y[cand][coll] >= lo_y[i])
+        for j in cand[cross]:
+            hits.append((min(i, j), max(i, j)))
+    return np.array(sorted(set(hits)), dtype=np.int64).reshape(-1, 2)
+
+
+def _clean_polygon(points: np.ndarray) -> np.ndarray:
+    """Drop the repeated closing point and consecutive duplicate points."""
+    p = points
+    if p.shape[0] > 1 and np.allclose(p[0], p[-1], rtol=0, atol=0):
+        p = p[:-1]
+    if p.shape[0] < 2:
+        return p
+    step = np.linalg.norm(np.diff(p, axis=0, append=p[:1]), axis=1)
+    perimeter = step.sum()
+    keep = step > TOL.zero_length * max(perimeter, 1e-300)
+    if not np.any(keep):
+        return p[:1]
+    return p[keep]
+
+
+def inspect_contour(points, *, min_points: int = 10) -> list[Finding]:
+    """Validate a closed polygon and return every finding without raising.
+
+    Parameters
+    ----------
+    points : (m, 2) array_like of float
+        Polygon vertices in order; a repeated closing point is allowed.
+    min_points : int
+        Fewest distinct points accepted.
+    """
+    try:
+        p = np.asarray(points, dtype=np.float64)
+    except (TypeError, ValueError) as exc:
+        return [Finding("error", "points-type", f"contour points are not numeric: {exc}")]
+    if p.ndim != 2 or p.shape[1] != 2:
+        return [Finding("error", "points-shape", f"contour points must have shape (m, 2), got {p.shape}")]
+    if p.shape[0] == 0:
+        return [Finding("error", "empty", "the contour has no points")]
+    bad = np.flatnonzero(~np.all(np.isfinite(p), axis=1))
+    if bad.size:
+        return [Finding("error", "non-finite", f"{bad.size} contour points are NaN or infinite "
+                        f"(e.g. point {_examples(bad)})")]
+    q = _clean_polygon(p)
+    if q.shape[0] < min_points:
+        return [Finding("error", "too-short", f"the contour has {q.shape[0]} distinct points; "
+                        f"at least {min_points} are needed")]
+    sing = np.linalg.svd(q - q.mean(axis=0), compute_uv=False)
+    if sing[-1] <= 1e-9 * sing[0]:
+        return [Finding("error", "zero-area", "the contour encloses no area (all points are collinear)")]
+    crossings = _segments_intersect(q)
+    if crossings.size:
+        i, j = crossings[0]
+        return [Finding("error", "self-intersection", f"the contour intersects itself "
+                        f"({crossings.shape[0]} crossing segment pairs, e.g. segments {i} and {j})")]
+    area = 0.5 * float(np.sum(q[:, 0] * np.roll(q[:, 1], -1) - np.roll(q[:, 0], -1) * q[:, 1]))
+    perimeter = float(np.linalg.norm(np.diff(q, axis=0, append=q[:1]), axis=1).sum())
+    if abs(area) <= 1e-9 * perimeter ** 2:
+        return [Finding("error", "zero-area", "the contour encloses no area (all points are collinear "
+                        "or it folds back on itself)")]
+    return []
+
+
+class Contour2D:
+    """An immutable closed 2D polygon (counter-clockwise or clockwise as given).
+
+    Parameters
+    ----------
+    points : (m, 2) array_like of float
+        Polygon vertices in order. A repeated closing point and consecutive
+        duplicates are removed. The closing segment ``points[-1] -> points[0]``
+        is implied.
+    name : str
+        Shown in error messages.
+    min_points : int
+        Fewest distinct points accepted (default 10).
+
+    Raises
+    ------
+    ContourError
+        Empty, non-finite, fewer than ``min_points`` points, zero enclosed
+        area, or self-intersecting.
+    """
+
+    def __init__(self, points, *, name: str = "contour", min_points: int = 10, validate: bool = True):
+        self.name = str(name)
+        if validate:
+            errors = [fd for fd in inspect_contour(points, min_points=min_points) if fd.level == "error"]
+            if errors:
+                raise ContourError(f"{self.name}: {errors[0].message}")
+        self.points = _readonly(_clean_polygon(np.asarray(points, dtype=np.float64)))
+
+    def __repr__(self) -> str:
+        return f"Contour2D({self.name!r}, n_points={self.n_points}, {'ccw' if self.is_ccw else 'cw'})"
+
+    @classmethod
+    def from_open_points(cls, points, *, name: str = "contour", assume_closed: bool = False,
+                         min_points: int = 10) -> "Contour2D":
+        """Build a contour from a point sequence that should describe a closed curve.
+
+        A sequence counts as closed if its last point repeats the first or the
+        end-to-start gap is at most ``TOL.closing_gap`` median spacings;
+        otherwise :class:`ContourError` ("open contour") is raised unless
+        ``assume_closed``.
+        """
+        p = np.asarray(points, dtype=np.float64)
+        if not assume_closed and p.ndim == 2 and p.shape[1] == 2 and p.shape[0] >= 3 \
+                and np.all(np.isfinite(p)):
+            steps = np.linalg.norm(np.diff(p, axis=0), axis=1)
+            steps = steps[steps > 0]
+            gap = float(np.linalg.norm(p[-1] - p[0]))
+            if steps.size and gap > TOL.closing_gap * float(np.median(steps)):
+                raise ContourError(
+                    f"{name}: open contour: the gap between the last and the first point ({gap:.4g}) is more "
+                    f"than {TOL.closing_gap:g} times the median point spacing ({np.median(steps):.4g}); "
+                    "close the curve or pass assume_closed=True")
+        return cls(p, name=name, min_points=min_points)
+
+    @property
+    def n_points(self) -> int:
+        return int(self.points.shape[0])
+
+    @cached_property
+    def segment_lengths(self) -> np.ndarray:
+        """(m,) float: length of segment i, from point i to point (i + 1) mod m."""
+        return _readonly(np.linalg.norm(np.roll(self.points, -1, axis=0) - self.points, axis=1))
+
+    @cached_property
+    def length(self) -> float:
+        """Perimeter."""
+        return float(self.segment_lengths.sum())
+
+    @cached_property
+    def arclength(self) -> np.ndarray:
+        """(m,) float: arc length from point 0 to point i."""
+        return _readonly(np.concatenate([[0.0], np.cumsum(self.segment_lengths)[:-1]]))
+
+    @cached_property
+    def signed_area(self) -> float:
+        """Shoelace area: positive for counter-clockwise orientation."""
+        x, y = self.points[:, 0], self.points[:, 1]
+        return float(0.5 * np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y))
+
+    @property
+    def area(self) -> float:
+        return abs(self.signed_area)
+
+    @property
+    def is_ccw(self) -> bool:
+        return self.signed_area > 0
+
+    def ccw(self) -> "Contour2D":
+        """The same contour oriented counter-clockwise (point 0 kept first)."""
+        if self.is_ccw:
+            return self
+        p = np.concatenate([self.points[:1], self.points[:0:-1]])
+        return Contour2D(p, name=self.name, validate=False)
+
+    def resample(self, n_points: int) -> "Contour2D":
+        """Resample uniformly by arc length to ``n_points`` points, starting at point 0.
+
+        Raises
+        ------
+        ContourError
+            If ``n_points`` < 3.
+        """
+        n_points = int(n_points)
+        if n_points < 3:
+            raise ContourError(f"{self.name}: cannot resample to {n_points} points (need at least 3)")
+        closed = np.concatenate([self.points, self.points[:1]])
+        s = np.concatenate([self.arclength, [self.length]])
+        t = np.linspace(0.0, self.length, n_points, endpoint=False)
+        p = np.column_stack([np.interp(t, s, closed[:, 0]), np.interp(t, s, closed[:, 1])])
+        return Contour2D(p, name=self.name, min_points=3, validate=False)
+
+    def transformed(self, scale: float = 1.0, rotation: float = 0.0, translation=(0.0, 0.0)) -> "Contour2D":
+        """Similarity transform ``x -> scale * R(rotation) x + translation`` (rotation in radians)."""
+        c, s = np.cos(rotation), np.sin(rotation)
+        r = np.array([[c, -s], [s, c]])
+        p = scale * self.points @ r.T + np.asarray(translation, dtype=np.float64)
+        return Contour2D(p, name=self.name, min_points=3, validate=False)

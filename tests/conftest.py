@@ -1,0 +1,51 @@
+"""Shared fixtures. Every test uses a private spectra cache so runs never depend on each other."""
+
+import numpy as np
+import pytest
+
+from _data import TOSCA
+
+
+@pytest.fixture(autouse=True, scope="session")
+def _private_cache(tmp_path_factory):
+    mp = pytest.MonkeyPatch()
+    mp.setenv("CORRLIB_CACHE_DIR", str(tmp_path_factory.mktemp("corrlib-cache")))
+    yield
+    mp.undo()
+
+
+@pytest.fixture(scope="session")
+def wolf_pair():
+    from corrlib.io import load_mesh
+
+    return load_mesh(TOSCA / "wolf0.off"), load_mesh(TOSCA / "wolf1.off")
+
+
+@pytest.fixture(scope="session")
+def cat_pair():
+    from corrlib.io import load_mesh, load_vts
+
+    cat0, cat1 = load_mesh(TOSCA / "cat0.off"), load_mesh(TOSCA / "cat1.off")
+    gt = {name: load_vts(TOSCA / f"{name}.vts") for name in ("cat0", "cat1", "cat0.sym", "cat1.sym")}
+    return cat0, cat1, gt
+
+
+def grid_mesh(nx, ny, periodic=False):
+    """Regular triangulated grid on [0,1]^2 (vertices (x, y)), optionally periodic in both directions.
+
+    Returns (uv (n, 2) in [0,1), faces (f, 3)).
+    """
+    if periodic:
+        u, v = np.meshgrid(np.arange(nx) / nx, np.arange(ny) / ny, indexing="ij")
+        idx = lambda i, j: (i % nx) * ny + (j % ny)  # noqa: E731
+        rng_i, rng_j = range(nx), range(ny)
+    else:
+        u, v = np.meshgrid(np.linspace(0, 1, nx + 1), np.linspace(0, 1, ny + 1), indexing="ij")
+        idx = lambda i, j: i * (ny + 1) + j  # noqa: E731
+        rng_i, rng_j = range(nx), range(ny)
+    faces = []
+    for i in rng_i:
+        for j in rng_j:
+            a, b, c, d = idx(i, j), idx(i + 1, j), idx(i + 1, j + 1), idx(i, j + 1)
+            faces += [(a, b, c), (a, c, d)]
+    return np.column_stack([u.ravel(), v.ravel()]), np.array(faces, dtype=np.int64)

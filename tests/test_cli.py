@@ -1,0 +1,85 @@
+"""The `corr` command: every subcommand runs, bad input exits with status 2 and a message."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+import pytest
+
+from _data import SILHOUETTES, TOSCA
+from corrlib.cli import main
+
+
+def test_info_mesh_and_contour(capsys):
+    assert main(["info", str(TOSCA / "cat0.off")]) == 0
+    out = capsys.readouterr().out
+    assert "5000" in out and "no problems found" in out
+    assert main(["info", "--json", str(SILHOUETTES / "mpeg7" / "dog-1.gif")]) == 0
+    info = json.loads(capsys.readouterr().out)
+    assert info["kind"] == "contour" and info["points"] > 100
+
+
+def test_info_reports_invalid_mesh(tmp_path, capsys):
+    p = tmp_path / "nm.off"
+    p.write_text("OFF\n5 4 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n1 1 -1\n3 0 1 2\n3 1 2 3\n3 1 2 4\n3 0 2 3\n")
+    assert main(["info", str(p)]) == 2
+    out = capsys.readouterr().out
+    assert "non-manifold-edge" in out
+
+
+def test_bad_input_exit_status(tmp_path, capsys):
+    assert main(["info", str(tmp_path / "missing.off")]) == 2
+    assert "file not found" in capsys.readouterr().err
+    (tmp_path / "junk.off").write_text("garbage")
+    assert main(["info", str(tmp_path / "junk.off")]) == 2
+    assert "junk.off" in capsys.readouterr().err
+    assert main(["match", str(TOSCA / "wolf0.off"), str(TOSCA / "wolf1.off"), "--method", "nope"]) == 2
+    assert "unknown method" in capsys.readouterr().err
+    assert main(["match", str(TOSCA / "wolf0.off"), str(TOSCA / "wolf1.off"), "--param", "k_init=-3",
+                 "-o", str(tmp_path / "r")]) == 2
+    assert "below its minimum" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as exc:
+        main(["eval"])
+    assert exc.value.code == 2
+
+
+def test_eval_identity_and_plot(tmp_path, capsys):
+    n = 4344
+    np.savetxt(tmp_path / "id.txt", np.arange(n), fmt="%d")
+    plot = tmp_path / "curve.png"
+    assert main(["eval", str(tmp_path / "id.txt"), "--gt-source", str(TOSCA / "wolf0.vts"), "--gt-target",
+                 str(TOSCA / "wolf1.vts"), "--target", str(TOSCA / "wolf1.off"), "--plot", str(plot),
+                 "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out.split("wrote")[0])
+    assert summary["mean"] == 0 and summary["rows"] > 0
+    assert plot.read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
+
+
+def test_match_writes_outputs(tmp_path, capsys):
+    out = tmp_path / "res"
+    assert main(["match", str(TOSCA / "wolf0.off"), str(TOSCA / "wolf1.off"), "--method", "descriptor-nn",
+                 "-o", str(out), "-q"]) == 0
+    mp = np.loadtxt(tmp_path / "res.map_xy.txt", dtype=int)
+    assert mp.shape == (4344,) and (tmp_path / "res.png").exists() and (tmp_path / "res.json").exists()
+
+
+def test_methods_listing(capsys):
+    assert main(["methods"]) == 0
+    out = capsys.readouterr().out
+    assert "fmap-zoomout" in out and "descriptor-nn" in out and "--param k_init=30" in out
+
+
+def test_demo_console_script(tmp_path):
+    proc = subprocess.run([sys.executable, "-m", "corrlib.cli", "demo", "-o", str(tmp_path), "-q"],
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 0, proc.stderr
+    assert (tmp_path / "demo.png").stat().st_size > 10_000
+    assert (tmp_path / "demo.npz").exists()
+    assert "mean" in proc.stdout
+
+
+def test_perf_quick_runs(capsys):
+    assert main(["perf", "foundation", "--quick", "--repeat", "1"]) == 0
+    out = capsys.readouterr().out
+    assert "200 eigenpairs, method=slicing" in out and "SHOT" in out and "geodesic error" in out

@@ -1,0 +1,60 @@
+"""Princeton-protocol errors: identity, known perturbations, curves, symmetry."""
+
+import numpy as np
+import pytest
+
+from corrlib.errors import InputError, ParameterError
+from corrlib.evaluation import cumulative_curve, curve_auc, geodesic_errors
+
+
+def test_identity_map_has_zero_error(wolf_pair):
+    wolf0, wolf1 = wolf_pair
+    ident = np.arange(wolf0.n_vertices)
+    report = geodesic_errors(ident, wolf1, ident, ident)
+    s = report.summary()
+    assert s["mean"] == 0 and s["within_0.025"] == 1 and s["auc"] == pytest.approx(1.0)
+
+
+def test_neighbour_shift_has_edge_length_error(wolf_pair):
+    wolf1 = wolf_pair[1]
+    # map every vertex to one of its neighbours: the geodesic between adjacent vertices is the edge
+    adj = wolf1.adjacency
+    neighbour = np.array([adj.indices[adj.indptr[i]] for i in range(wolf1.n_vertices)])
+    ident = np.arange(wolf1.n_vertices)
+    report = geodesic_errors(neighbour, wolf1, ident, ident)
+    expected = np.linalg.norm(wolf1.vertices[neighbour] - wolf1.vertices, axis=1) / np.sqrt(wolf1.area)
+    assert np.allclose(report.errors, expected, rtol=1e-6)
+    diam = geodesic_errors(neighbour, wolf1, ident, ident, normalize="diameter")
+    assert diam.normalization > np.sqrt(wolf1.area) * 0.5
+
+
+def test_symmetric_ground_truth(cat_pair):
+    cat0, cat1, gt = cat_pair
+    # the mirrored ground truth itself as a map: large direct error, zero symmetric error
+    rows = np.unique(gt["cat0"], return_index=True)[1]  # the .vts may list a source vertex twice
+    mirror = np.zeros(cat0.n_vertices, dtype=np.int64)
+    mirror[gt["cat0"][rows]] = gt["cat1.sym"][rows]
+    report = geodesic_errors(mirror, cat1, gt["cat0"][rows], gt["cat1"][rows], gt_target_sym=gt["cat1.sym"][rows])
+    s = report.summary()
+    assert s["mean_sym"] == 0 and s["mean"] > 0.1
+
+
+def test_curve_and_auc():
+    errors = np.array([0.0, 0.01, 0.02, 0.3])
+    thresholds = np.array([0.0, 0.01, 0.1, 0.25])
+    assert np.allclose(cumulative_curve(errors, thresholds), [0.25, 0.5, 0.75, 0.75])
+    assert curve_auc(np.ones(5), np.linspace(0, 1, 5)) == pytest.approx(1.0)
+    assert curve_auc(np.linspace(0, 1, 101), np.linspace(0, 1, 101)) == pytest.approx(0.5)
+
+
+def test_evaluation_errors(wolf_pair):
+    wolf1 = wolf_pair[1]
+    ident = np.arange(wolf1.n_vertices)
+    with pytest.raises(InputError, match="map_xy has indices outside"):
+        geodesic_errors(ident + 1, wolf1, ident, ident)
+    with pytest.raises(InputError, match="ground truth rows differ"):
+        geodesic_errors(ident, wolf1, ident[:5], ident[:4])
+    with pytest.raises(InputError, match="empty"):
+        geodesic_errors(ident, wolf1, ident[:0], ident[:0])
+    with pytest.raises(ParameterError, match="normalisation"):
+        geodesic_errors(ident, wolf1, ident, ident, normalize="bbox")

@@ -1,0 +1,94 @@
+"""Geodesic distances, farthest-point sampling and Voronoi cells."""
+
+import numpy as np
+import pytest
+import trimesh
+from scipy.sparse.csgraph import dijkstra
+
+from conftest import grid_mesh
+from corrlib.errors import InputError, ParameterError
+from corrlib.geometry.geodesics import GeodesicSolver, geodesic_diameter
+from corrlib.geometry.sampling import farthest_point_sampling, voronoi_cells
+from corrlib.shapes import TriMesh
+
+
+@pytest.fixture(scope="module")
+def plane():
+    uv, faces = grid_mesh(30, 30)
+    return TriMesh(np.column_stack([uv, np.zeros(len(uv))]), faces)
+
+
+@pytest.fixture(scope="module")
+def sphere():
+    s = trimesh.creation.icosphere(subdivisions=4)
+    return TriMesh(s.vertices / np.linalg.norm(s.vertices, axis=1, keepdims=True), s.faces)
+
+
+def test_plane_distances_are_euclidean(plane):
+    solver = GeodesicSolver(plane)
+    rng = np.random.default_rng(0)
+    a, b = rng.integers(0, plane.n_vertices, 40), rng.integers(0, plane.n_vertices, 40)
+    euclid = np.linalg.norm(plane.vertices[a] - plane.vertices[b], axis=1)
+    assert np.allclose(solver.pair_distances(a, b, "exact"), euclid, atol=1e-9)
+    graph = solver.pair_distances(a, b, "graph")
+    assert np.all(graph >= euclid - 1e-12)
+    heat = solver.pair_distances(a, b, "heat")
+    far = euclid > 0.2
+    rel = np.abs(heat[far] - euclid[far]) / euclid[far]
+    assert rel.max() < 0.12 and rel.mean() < 0.03  # the heat method is approximate (a few percent)
+
+
+def test_sphere_great_circle(sphere):
+    solver = GeodesicSolver(sphere)
+    rng = np.random.default_rng(1)
+    a, b = rng.integers(0, sphere.n_vertices, 30), rng.integers(0, sphere.n_vertices, 30)
+    exact = np.arccos(np.clip(np.einsum("ij,ij->i", sphere.vertices[a], sphere.vertices[b]), -1, 1))
+    got = solver.pair_distances(a, b, "exact")
+    ok = exact < 2.5  # avoid near-antipodal pairs where the shortest path is not unique
+    assert np.allclose(got[ok], exact[ok], rtol=0.01, atol=1e-3)
+    d0 = solver.distances(0, method="heat")
+    true0 = np.arccos(np.clip(sphere.vertices @ sphere.vertices[0], -1, 1))
+    assert np.mean(np.abs(d0 - true0)) < 0.02
+    assert geodesic_diameter(sphere) == pytest.approx(np.pi, rel=0.02)
+
+
+def test_pair_distance_bookkeeping(plane):
+    solver = GeodesicSolver(plane)
+    d = solver.pair_distances(np.array([5, 7, 5, 9]), np.array([7, 5, 5, 9]))
+    assert d[0] == pytest.approx(d[1]) and d[2] == 0 and d[3] == 0
+    with pytest.raises(InputError, match="out of range"):
+        solver.pair_distances(np.array([0]), np.array([plane.n_vertices]))
+    with pytest.raises(ParameterError, match="unknown geodesic method"):
+        solver.pair_distances(np.array([0]), np.array([1]), "magic")
+    with pytest.raises(InputError, match="integer"):
+        solver.distances(np.array([0.5]))
+
+
+def test_farthest_point_sampling(wolf_pair):
+    wolf = wolf_pair[0]
+    samples = farthest_point_sampling(wolf.vertices, 200)
+    assert np.unique(samples).size == 200 and samples[0] == 0
+    # greedy property: each new sample is the farthest from the previous ones
+    for i in (1, 50, 199):
+        dist = np.min(np.linalg.norm(wolf.vertices[:, None] - wolf.vertices[samples[:i]][None], axis=2), axis=1)
+        assert dist[samples[i]] == pytest.approx(dist.max())
+    geo = farthest_point_sampling(wolf.vertices, 100, metric="geodesic", mesh=wolf)
+    full = dijkstra(wolf.adjacency, directed=False, indices=geo[:60])
+    cover = full.min(axis=0)
+    assert cover[geo[60]] == pytest.approx(cover.max())
+    with pytest.raises(ParameterError, match="cannot draw"):
+        farthest_point_sampling(wolf.vertices, wolf.n_vertices + 1)
+    with pytest.raises(InputError, match="needs the mesh"):
+        farthest_point_sampling(wolf.vertices, 3, metric="geodesic")
+
+
+def test_voronoi_cells_match_brute_force(wolf_pair):
+    wolf = wolf_pair[0]
+    seeds = farthest_point_sampling(wolf.vertices, 30)
+    labels, dist = voronoi_cells(wolf, seeds)
+    full = dijkstra(wolf.adjacency, directed=False, indices=seeds)
+    assert np.allclose(dist, full.min(axis=0))
+    assert np.allclose(full[labels, np.arange(wolf.n_vertices)], full.min(axis=0))
+    assert np.array_equal(labels[seeds], np.arange(30))
+    with pytest.raises(InputError, match="distinct"):
+        voronoi_cells(wolf, [1, 1])

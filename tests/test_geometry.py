@@ -1,0 +1,184 @@
+"""Laplacians and spectra against analytic spectra, an independent implementation, and identities."""
+
+import numpy as np
+import potpourri3d as pp3d
+import pytest
+import scipy.sparse as sp
+import trimesh
+
+from conftest import grid_mesh
+from corrlib.errors import InputError, ParameterError
+from corrlib.geometry.laplacian import cotan_stiffness, curve_laplacian, mass_matrix, mesh_laplacian
+from corrlib.geometry.spectrum import eigenpairs, mesh_spectrum
+from corrlib.shapes import TriMesh
+
+
+def sphere_eigs(subdivisions, k=17):
+    s = trimesh.creation.icosphere(subdivisions=subdivisions)
+    v = s.vertices / np.linalg.norm(s.vertices, axis=1, keepdims=True)
+    mesh = TriMesh(v, s.faces)
+    stiff, mass = mesh_laplacian(mesh)
+    return eigenpairs(stiff, mass, k)[0], mesh.n_vertices
+
+
+def test_unit_sphere_spectrum_and_refinement():
+    exact = np.array([l * (l + 1) for l in range(5) for _ in range(2 * l + 1)])[1:17]
+    coarse, n_coarse = sphere_eigs(3)
+    fine, n_fine = sphere_eigs(4)
+    assert 2000 < n_fine < 3000
+    rel_fine = np.abs(fine[1:17] - exact) / exact
+    rel_coarse = np.abs(coarse[1:17] - exact) / exact
+    assert rel_fine.max() < 0.02, rel_fine
+    assert fine[0] == pytest.approx(0.0, abs=1e-8)
+    # multiplicities 3, 5, 7: the groups are separated by large gaps
+    assert np.all(np.diff(fine[1:4]) < 0.05) and fine[4] / fine[3] > 2.5
+    assert rel_fine.max() < 0.5 * rel_coarse.max()
+
+
+def test_flat_torus_spectrum_converges():
+    # Clifford torus (cos u, sin u, cos v, sin v) in R^4 is flat with periods 2π: eigenvalues m² + n²
+    exact = np.sort([m * m + n * n for m in range(-3, 4) for n in range(-3, 4)])[:17]
+    errors = []
+    for n in (24, 48):
+        uv, faces = grid_mesh(n, n, periodic=True)
+        u, v = 2 * np.pi * uv[:, 0], 2 * np.pi * uv[:, 1]
+        x = np.column_stack([np.cos(u), np.sin(u), np.cos(v), np.sin(v)])
+        evals, _ = eigenpairs(cotan_stiffness(x, faces), mass_matrix(x, faces), 17)
+        errors.append(np.max(np.abs(evals[1:] - exact[1:]) / exact[1:]))
+    assert errors[1] < 0.01
+    assert errors[1] < 0.35 * errors[0]  # second-order convergence: ~1/4 when h halves
+
+
+def test_unit_square_neumann_spectrum():
+    uv, faces = grid_mesh(40, 40)
+    x = np.column_stack([uv, np.zeros(len(uv))])
+    evals, _ = eigenpairs(cotan_stiffness(x, faces), mass_matrix(x, faces), 6)
+    exact = np.pi ** 2 * np.array([0, 1, 1, 2, 4, 4])
+    assert np.allclose(evals[1:], exact[1:], rtol=0.01)
+
+
+@pytest.mark.parametrize("mass", ["consistent", "lumped"])
+def test_circle_spectrum_converges(mass):
+    exact = np.array([0, 1, 1, 4, 4, 9, 9, 16, 16])
+    errs = []
+    for m in (100, 200):
+        t = np.linspace(0, 2 * np.pi, m, endpoint=False)
+        stiff, mass_mat = curve_laplacian(np.column_stack([np.cos(t), np.sin(t)]), mass=mass)
+        evals, evecs = eigenpairs(stiff, mass_mat, 9)
+        errs.append(np.max(np.abs(evals[1:] - exact[1:]) / exact[1:]))
+        assert np.allclose(evecs.T @ mass_mat @ evecs, np.eye(9), atol=1e-8)
+    assert errs[1] < 0.005
+    assert errs[1] < 0.3 * errs[0]
+    assert mass_mat.sum() == pytest.approx(2 * m * np.sin(np.pi / m))
+
+
+def test_curve_laplacian_hand_computed():
+    # unit square, segment lengths 1: S = [[2,-1,0,-1],...], consistent M = [[2/3,1/6,0,1/6],...]
+    p = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], float)
+    stiff, mass = curve_laplacian(p)
+    ring = np.array([[2, -1, 0, -1], [-1, 2, -1, 0], [0, -1, 2, -1], [-1, 0, -1, 2]], float)
+    assert np.allclose(stiff.toarray(), ring)
+    assert np.allclose(mass.toarray(), np.array([[4, 1, 0, 1], [1, 4, 1, 0], [0, 1, 4, 1], [1, 0, 1, 4]]) / 6)
+    with pytest.raises(InputError, match="zero or invalid length"):
+        curve_laplacian(np.array([[0, 0], [0, 0], [1, 1]], float))
+
+
+def test_cotan_matches_independent_implementation(cat_pair):
+    cat = cat_pair[0]
+    stiff, mass = mesh_laplacian(cat)
+    ref = pp3d.cotan_laplacian(cat.vertices, cat.faces)
+    areas = pp3d.vertex_areas(cat.vertices, cat.faces)
+    assert abs(stiff - ref).max() < 1e-10 * abs(ref).max()
+    assert np.allclose(mass.diagonal(), areas, rtol=1e-12)
+    assert np.allclose(stiff @ np.ones(cat.n_vertices), 0, atol=1e-10)
+    assert abs(stiff - stiff.T).max() < 1e-12
+    consistent = mass_matrix(cat.vertices, cat.faces, "consistent")
+    assert consistent.sum() == pytest.approx(cat.area)
+    assert np.allclose(np.asarray(consistent.sum(axis=1)).ravel(), mass.diagonal())
+
+
+def test_slicing_equals_single_shift_invert(cat_pair):
+    cat = cat_pair[0]
+    stiff, mass = mesh_laplacian(cat)
+    w1, v1 = eigenpairs(stiff, mass, 300, method="eigsh")
+    w2, v2 = eigenpairs(stiff, mass, 300, method="slicing")
+    assert np.allclose(w1, w2, rtol=1e-9, atol=1e-12)
+    assert np.allclose(v2.T @ (mass @ v2), np.eye(300), atol=1e-9)
+    # same invariant subspaces: |<v1_i, v2_i>_M| = 1 for simple eigenvalues
+    overlap = np.abs(np.einsum("ij,ij->j", v1, mass @ v2))
+    gaps = np.minimum(np.diff(w1, prepend=-1), np.diff(w1, append=1e9))
+    simple = gaps > 1e-6 * w1[-1]
+    assert np.all(overlap[simple] > 1 - 1e-6)
+
+
+def test_slicing_handles_degenerate_eigenspaces():
+    s = trimesh.creation.icosphere(subdivisions=3)
+    mesh = TriMesh(s.vertices, s.faces)
+    stiff, mass = mesh_laplacian(mesh)
+    import corrlib.geometry.spectrum as spectrum
+
+    old = spectrum.SLICE_SIZE, spectrum.DENSE_LIMIT
+    spectrum.SLICE_SIZE, spectrum.DENSE_LIMIT = 12, 10  # force many slice boundaries through multiplets
+    try:
+        w2, v2 = eigenpairs(stiff, mass, 60, method="slicing")
+    finally:
+        spectrum.SLICE_SIZE, spectrum.DENSE_LIMIT = old
+    w1 = np.linalg.eigvalsh(np.diag(mass.diagonal() ** -0.5) @ stiff.toarray() @ np.diag(mass.diagonal() ** -0.5))
+    assert np.allclose(w2, w1[:60], rtol=1e-8, atol=1e-10)
+    assert np.allclose(v2.T @ (mass @ v2), np.eye(60), atol=1e-8)
+    assert np.allclose(stiff @ v2, (mass @ v2) * w2, atol=1e-8 * w2.max())
+
+
+def test_eigenpairs_errors():
+    s = trimesh.creation.icosphere(subdivisions=1)
+    mesh = TriMesh(s.vertices, s.faces)
+    stiff, mass = mesh_laplacian(mesh)
+    with pytest.raises(ParameterError, match="only 42 vertices"):
+        eigenpairs(stiff, mass, 50)
+    with pytest.raises(ParameterError, match="positive integer"):
+        eigenpairs(stiff, mass, 0)
+    with pytest.raises(ParameterError, match="unknown eigensolver"):
+        eigenpairs(stiff, mass, 3, method="magic")
+    bad = stiff.copy().tolil()
+    bad[0, 0] = np.nan
+    with pytest.raises(InputError, match="non-finite"):
+        eigenpairs(bad.tocsr(), mass, 3)
+    # two disjoint spheres: two zero eigenvalues
+    two_s = sp.block_diag([stiff, stiff]).tocsr()
+    two_m = sp.block_diag([mass, mass]).tocsr()
+    with pytest.raises(InputError, match="disconnected"):
+        eigenpairs(two_s, two_m, 5)
+    zero_mass = mass.copy().tolil()
+    zero_mass[3, 3] = 0
+    with pytest.raises(InputError, match="zero or negative mass"):
+        eigenpairs(stiff, zero_mass.tocsr(), 3)
+
+
+def test_large_sparse_disconnected_detected():
+    a = trimesh.creation.icosphere(subdivisions=4)
+    b = a.copy()
+    b.apply_translation([5, 0, 0])
+    v = np.vstack([a.vertices, b.vertices])
+    f = np.vstack([a.faces, b.faces + len(a.vertices)])
+    with pytest.raises(InputError, match="disconnected"):
+        eigenpairs(cotan_stiffness(v, f), mass_matrix(v, f), 10)
+
+
+def test_spectrum_disk_cache(wolf_pair, tmp_path, monkeypatch):
+    monkeypatch.setenv("CORRLIB_CACHE_DIR", str(tmp_path))
+    wolf = wolf_pair[0]
+    first = mesh_spectrum(wolf, 30)
+    assert list(tmp_path.glob("spectra/*.npz"))
+    again = mesh_spectrum(wolf, 20)
+    assert np.array_equal(again.evals, first.evals[:20])
+    assert np.array_equal(again.evecs, first.evecs[:, :20])
+    # a different mesh content gets a different entry
+    moved = TriMesh(wolf.vertices * 1.01, wolf.faces)
+    other = mesh_spectrum(moved, 20)
+    assert np.allclose(other.evals, first.evals[:20] / 1.01 ** 2, rtol=1e-6)
+    assert len(list(tmp_path.glob("spectra/*.npz"))) == 2
+    # a corrupt entry is ignored and recomputed
+    for f in tmp_path.glob("spectra/*.npz"):
+        f.write_bytes(b"garbage")
+    again = mesh_spectrum(wolf, 20)
+    assert np.allclose(again.evals, first.evals[:20])

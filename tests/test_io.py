@@ -1,0 +1,210 @@
+"""Loaders and writers: round trips, vertex order, contours from every source, malformed files."""
+
+import json
+
+import numpy as np
+import pytest
+import trimesh
+from PIL import Image
+
+from _data import SILHOUETTES, SKETCH2D, TOSCA
+from corrlib.errors import ContourError, FileFormatError, InputError, MeshError
+from corrlib.io import (
+    atomic_write,
+    load_contour,
+    load_map,
+    load_mesh,
+    load_result,
+    load_vts,
+    save_contour,
+    save_map,
+    save_mesh,
+    save_result,
+)
+
+
+def test_load_keeps_vertex_order():
+    mesh = load_mesh(TOSCA / "wolf0.off")
+    # first vertex line of the file
+    lines = (TOSCA / "wolf0.off").read_text().split("\n")
+    header = 1 if lines[0].strip() == "OFF" else 0
+    first = np.array([float(x) for x in lines[header + 1].split()])
+    assert np.allclose(mesh.vertices[0], first)
+    assert mesh.name == "wolf0.off" and mesh.n_vertices == 4344
+
+
+@pytest.mark.parametrize("suffix", [".off", ".obj", ".ply"])
+def test_mesh_round_trip_with_colours(tmp_path, suffix):
+    mesh = load_mesh(TOSCA / "wolf0.off")
+    colors = np.random.default_rng(0).random((mesh.n_vertices, 3))
+    path = save_mesh(tmp_path / f"wolf{suffix}", mesh.vertices, mesh.faces, colors)
+    back = load_mesh(path)
+    assert np.allclose(back.vertices, mesh.vertices, rtol=1e-8, atol=1e-8)
+    assert np.array_equal(back.faces, mesh.faces)
+    if suffix == ".ply":
+        raw = trimesh.load(path, process=False)
+        assert np.array_equal(raw.visual.vertex_colors[:, :3], np.round(colors * 255).astype(np.uint8))
+
+
+def test_stl_loads(tmp_path):
+    box = trimesh.creation.box()
+    box.export(tmp_path / "box.stl")
+    assert load_mesh(tmp_path / "box.stl").n_faces == 12
+
+
+@pytest.mark.parametrize("content, match", [
+    ("", "no vertices|cannot read"),
+    ("OFF\n3 1 0\n0 0 0\n1 0 0\n", "cannot read|no faces"),
+    ("this is not a mesh\n", "cannot read|no vertices"),
+    ("OFF\n4 0 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n", "no faces"),
+])
+def test_malformed_mesh_files(tmp_path, content, match):
+    p = tmp_path / "bad.off"
+    p.write_text(content)
+    with pytest.raises(FileFormatError, match=match):
+        load_mesh(p)
+    with pytest.raises(FileFormatError, match="bad.off"):
+        load_mesh(p)
+
+
+def test_mesh_file_errors(tmp_path):
+    with pytest.raises(FileFormatError, match="not found"):
+        load_mesh(tmp_path / "missing.off")
+    (tmp_path / "x.xyz").write_text("1 2 3\n")
+    with pytest.raises(FileFormatError, match="unsupported mesh format"):
+        load_mesh(tmp_path / "x.xyz")
+    p = tmp_path / "nan.off"
+    p.write_text("OFF\n3 1 0\n0 0 0\nnan 0 0\n0 1 0\n3 0 1 2\n")
+    with pytest.raises(MeshError, match="nan.off.*NaN"):
+        load_mesh(p)
+    p = tmp_path / "range.off"
+    p.write_text("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 5\n")
+    with pytest.raises((MeshError, FileFormatError), match="range.off"):
+        load_mesh(p)
+
+
+def test_largest_component_option(tmp_path):
+    a = trimesh.creation.icosphere(subdivisions=2)
+    b = trimesh.creation.box()
+    b.apply_translation([5, 0, 0])
+    both = trimesh.util.concatenate([a, b])
+    save_mesh(tmp_path / "two.off", both.vertices, both.faces)
+    with pytest.raises(MeshError, match="connected components"):
+        load_mesh(tmp_path / "two.off")
+    assert load_mesh(tmp_path / "two.off", largest_component=True).n_vertices == len(a.vertices)
+
+
+def test_contour_text_files(tmp_path):
+    c = load_contour(SKETCH2D / "human_sketch_a_contour.txt")
+    assert c.is_ccw and c.n_points == 427
+    t = np.linspace(0, 2 * np.pi, 50, endpoint=False)
+    pts = np.column_stack([3 * np.cos(t), np.sin(t)])
+    np.savetxt(tmp_path / "e.csv", pts, delimiter=",", header="x,y", comments="")
+    e = load_contour(tmp_path / "e.csv", n_points=100)
+    assert e.n_points == 100 and e.area == pytest.approx(3 * np.pi, rel=0.01)
+    (tmp_path / "bad.txt").write_text("1 2\n3 4 5\n")
+    with pytest.raises(FileFormatError, match="bad.txt.*line 2"):
+        load_contour(tmp_path / "bad.txt")
+    np.savetxt(tmp_path / "arc.txt", pts[:30])
+    with pytest.raises(ContourError, match="open contour"):
+        load_contour(tmp_path / "arc.txt")
+    np.savetxt(tmp_path / "few.txt", pts[::10])
+    with pytest.raises(ContourError, match="at least 10"):
+        load_contour(tmp_path / "few.txt")
+    save_contour(tmp_path / "out.txt", e)
+    assert np.allclose(load_contour(tmp_path / "out.txt").points, e.points, atol=1e-8)
+
+
+def test_svg_path_with_curves(tmp_path):
+    # a circle of radius 10 from four cubic Béziers (kappa = 0.5523), relative and absolute commands
+    k = 10 * 0.5523
+    d = (f"M 10 0 C 10 {k} {k} 10 0 10 c {-k} 0 -10 {-10 + k} -10 -10 "
+         f"C -10 {-k} {-k} -10 0 -10 S 10 {-k} 10 0 Z")
+    (tmp_path / "c.svg").write_text(f'<svg xmlns="http://www.w3.org/2000/svg"><path d="{d}"/></svg>')
+    c = load_contour(tmp_path / "c.svg")
+    assert c.area == pytest.approx(np.pi * 100, rel=0.01) and c.is_ccw
+    (tmp_path / "p.svg").write_text('<svg><polygon points="0,0 10,0 10,10 0,10 0,5 0,2 1,1 2,0.5 5,0.2 8,0.1"/></svg>')
+    assert load_contour(tmp_path / "p.svg").area == pytest.approx(100, rel=0.1)
+    (tmp_path / "arc.svg").write_text('<svg><path d="M 0 0 A 5 5 0 0 1 10 0 Z"/></svg>')
+    with pytest.raises(FileFormatError, match="arc"):
+        load_contour(tmp_path / "arc.svg")
+    (tmp_path / "broken.svg").write_text("<svg><path d=")
+    with pytest.raises(FileFormatError, match="cannot parse SVG"):
+        load_contour(tmp_path / "broken.svg")
+
+
+@pytest.mark.parametrize("dark_on_light", [True, False])
+def test_silhouette_image_disk(tmp_path, dark_on_light):
+    yy, xx = np.mgrid[:200, :300]
+    disk = (xx - 150) ** 2 + (yy - 100) ** 2 <= 60 ** 2
+    img = np.where(disk, 0 if dark_on_light else 255, 255 if dark_on_light else 0).astype(np.uint8)
+    Image.fromarray(img).save(tmp_path / "disk.png")
+    c = load_contour(tmp_path / "disk.png", n_points=200)
+    assert c.n_points == 200 and c.is_ccw
+    assert c.area == pytest.approx(np.pi * 60 ** 2, rel=0.02)
+    centre = c.points.mean(axis=0)
+    assert np.allclose(centre, [150, -100], atol=1.0)  # x right, y up (row 100 -> y = -100)
+
+
+def test_real_silhouettes():
+    for path in sorted((SILHOUETTES / "mpeg7").glob("*.gif")) + [SILHOUETTES / "horse.png"]:
+        c = load_contour(path, n_points=300)
+        assert c.n_points == 300 and c.is_ccw and c.area > 1000, path
+
+
+def test_bad_images(tmp_path):
+    (tmp_path / "junk.png").write_bytes(b"not an image at all")
+    with pytest.raises(FileFormatError, match="cannot read image"):
+        load_contour(tmp_path / "junk.png")
+    Image.fromarray(np.full((50, 50), 128, np.uint8)).save(tmp_path / "flat.png")
+    with pytest.raises(ContourError, match="uniform"):
+        load_contour(tmp_path / "flat.png")
+    tiny = np.zeros((50, 50), np.uint8)
+    tiny[20, 20] = 255
+    Image.fromarray(tiny).save(tmp_path / "tiny.png")
+    with pytest.raises(ContourError, match="too small|at least 10"):
+        load_contour(tmp_path / "tiny.png")
+
+
+def test_vts_and_maps(tmp_path):
+    gt = load_vts(TOSCA / "cat0.vts", 5000)
+    assert gt.min() >= 0 and gt.max() < 5000 and gt.size == 5000
+    (tmp_path / "zero.vts").write_text("0\n1\n2\n")
+    with pytest.raises(FileFormatError, match="1-based"):
+        load_vts(tmp_path / "zero.vts")
+    (tmp_path / "big.vts").write_text("1\n9\n")
+    with pytest.raises(FileFormatError, match="exceeds"):
+        load_vts(tmp_path / "big.vts", 5)
+    save_map(tmp_path / "m.txt", np.array([3, 1, 2]))
+    assert np.array_equal(load_map(tmp_path / "m.txt"), [3, 1, 2])
+    with pytest.raises(FileFormatError, match="out of range"):
+        load_map(tmp_path / "m.txt", n_target=3)
+    with pytest.raises(FileFormatError, match="source has 4"):
+        load_map(tmp_path / "m.txt", n_source=4)
+    (tmp_path / "f.txt").write_text("1.5\n2\n")
+    with pytest.raises(FileFormatError, match="integer"):
+        load_map(tmp_path / "f.txt")
+    with pytest.raises(InputError, match="integer array"):
+        save_map(tmp_path / "x.txt", np.array([0.5]))
+
+
+def test_results_round_trip_without_pickle(tmp_path):
+    npz, js = save_result(tmp_path / "r", {"map_xy": np.arange(5), "energy_trace": np.ones(3)},
+                          {"method": "x", "params": {"k": 3}, "timings": {"total": np.float64(1.5)}})
+    arrays, meta = load_result(tmp_path / "r")
+    assert np.array_equal(arrays["map_xy"], np.arange(5))
+    assert meta["method"] == "x" and meta["timings"]["total"] == 1.5 and "numpy" in meta["environment"]
+    assert json.loads(js.read_text())["arrays"]["map_xy"]["shape"] == [5]
+    with pytest.raises(InputError, match="not numeric"):
+        save_result(tmp_path / "o", {"bad": np.array([object()])})
+
+
+def test_atomic_write_leaves_nothing_on_failure(tmp_path):
+    target = tmp_path / "keep.txt"
+    target.write_text("precious")
+    with pytest.raises(RuntimeError):
+        with atomic_write(target) as fh:
+            fh.write("half")
+            raise RuntimeError("crash mid-write")
+    assert target.read_text() == "precious"
+    assert list(tmp_path.iterdir()) == [target]

@@ -1,0 +1,109 @@
+"""Method registry, parameters, progress/cancellation, and the baselines on real shapes."""
+
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from corrlib.errors import Cancelled, InputError, ParameterError
+from corrlib.evaluation import geodesic_errors
+from corrlib.methods import all_methods, get_method, make_params, methods_for, param, solve
+from corrlib.methods.base import validate_params
+from corrlib.progress import CancelToken, Progress, run
+from corrlib.shapes import Contour2D
+
+
+@dataclass(frozen=True, kw_only=True)
+class P:
+    k: int = param(5, label="k", help="count", low=1, high=10)
+    w: float = param(0.5, label="w", help="weight", low=0.0)
+    mode: str = param("a", label="mode", help="mode", choices=("a", "b"))
+    flag: bool = param(False, label="flag", help="flag")
+
+
+def test_params_validation_and_conversion():
+    p = make_params(P, k="7", w="0.25", mode="b", flag="yes")
+    assert (p.k, p.w, p.mode, p.flag) == (7, 0.25, "b", True)
+    for bad, match in [({"k": 11}, "above its maximum"), ({"k": 0}, "below its minimum"),
+                       ({"k": 2.5}, "integer"), ({"mode": "c"}, "not one of"), ({"w": float("nan")}, "finite"),
+                       ({"zzz": 1}, "unknown parameter"), ({"k": "x"}, "cannot interpret"),
+                       ({"flag": "maybe"}, "cannot interpret")]:
+        with pytest.raises(ParameterError, match=match):
+            make_params(P, **bad)
+    with pytest.raises(ParameterError, match="must be a number"):
+        validate_params(P(k="3"))
+
+
+def test_registry_lookup(wolf_pair):
+    names = [m.name for m in all_methods()]
+    assert "fmap-zoomout" in names and "descriptor-nn" in names
+    assert methods_for(*wolf_pair)[0].rank >= methods_for(*wolf_pair)[-1].rank
+    with pytest.raises(ParameterError, match="unknown method"):
+        get_method("nothing")
+    t = np.linspace(0, 2 * np.pi, 30, endpoint=False)
+    contour = Contour2D(np.column_stack([np.cos(t), np.sin(t)]))
+    with pytest.raises(InputError, match="takes mesh"):
+        solve("descriptor-nn", contour, wolf_pair[1])
+
+
+def test_run_and_cancel():
+    def gen(token):
+        for i in range(5):
+            token.raise_if_cancelled()
+            yield Progress("step", i / 5)
+        return 42
+
+    seen = []
+    token = CancelToken()
+    assert run(gen(token), seen.append, token) == 42 and len(seen) == 5
+    token = CancelToken()
+
+    def cancel_at_two(report):
+        if report.fraction >= 0.4:
+            token.cancel()
+
+    with pytest.raises(Cancelled):
+        run(gen(token), cancel_at_two, token)
+
+
+@pytest.mark.parametrize("method, threshold", [("descriptor-nn", 0.6), ("fmap-zoomout", 0.45)])
+def test_baselines_on_wolf(wolf_pair, method, threshold):
+    wolf0, wolf1 = wolf_pair
+    reports = []
+    result = solve(method, wolf0, wolf1, callback=reports.append)
+    assert reports and reports[-1].fraction == 1.0
+    assert result.map_xy.shape == (wolf0.n_vertices,) and result.map_yx.shape == (wolf1.n_vertices,)
+    ident = np.arange(wolf0.n_vertices)
+    err = geodesic_errors(result.map_xy, wolf1, ident, ident).summary()
+    # baselines: intrinsic descriptors confuse left and right, so only a majority is near-exact
+    assert err["within_0.025"] > threshold, err
+    assert result.timings["total"] > 0 and result.params
+
+
+def test_baseline_is_invariant_to_vertex_permutation(wolf_pair):
+    from corrlib.shapes import TriMesh
+
+    wolf0, wolf1 = wolf_pair
+    perm = np.random.default_rng(3).permutation(wolf1.n_vertices)
+    inv = np.argsort(perm)
+    shuffled = TriMesh(wolf1.vertices[perm], inv[wolf1.faces])
+    a = solve("descriptor-nn", wolf0, wolf1).map_xy
+    b = solve("descriptor-nn", wolf0, shuffled).map_xy
+    assert np.mean(perm[b] == a) > 0.99
+
+
+def test_cancel_a_method(wolf_pair):
+    token = CancelToken()
+    token.cancel()
+    with pytest.raises(Cancelled):
+        solve("fmap-zoomout", *wolf_pair, token=token)
+
+
+def test_result_save(tmp_path, wolf_pair):
+    from corrlib.io import load_result
+
+    result = solve("descriptor-nn", *wolf_pair)
+    result.save(tmp_path / "out")
+    arrays, meta = load_result(tmp_path / "out")
+    assert np.array_equal(arrays["map_xy"], result.map_xy)
+    assert meta["method"] == "descriptor-nn" and meta["params"]["descriptor"] == "wks"

@@ -1,0 +1,173 @@
+"""TriMesh / Contour2D: derived quantities and every validation error."""
+
+import numpy as np
+import pytest
+import trimesh
+
+from corrlib.errors import ContourError, MeshError
+from corrlib.shapes import Contour2D, TriMesh, inspect_contour, inspect_mesh
+
+TETRA_V = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
+TETRA_F = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+
+
+def codes(v, f):
+    return [fd.code for fd in inspect_mesh(v, f) if fd.level == "error"]
+
+
+def test_tetrahedron_quantities():
+    m = TriMesh(TETRA_V, TETRA_F, name="tet")
+    assert m.n_vertices == 4 and m.n_faces == 4
+    assert m.area == pytest.approx(1.5 + np.sqrt(3) / 2)
+    assert m.is_closed and m.boundary_loops == ()
+    assert m.enclosed_volume() == pytest.approx(1 / 6)
+    assert m.edges.shape == (6, 2)
+    assert np.allclose(np.linalg.norm(m.vertex_normals, axis=1), 1)
+    # outward normals: the face opposite the origin points along (1,1,1)
+    assert np.allclose(m.face_normals[3], np.ones(3) / np.sqrt(3))
+    with pytest.raises(ValueError):
+        m.vertices[0, 0] = 5.0  # immutable
+
+
+def test_cube_volume_and_boundary():
+    box = trimesh.creation.box(extents=(1, 2, 3))
+    m = TriMesh(box.vertices, box.faces)
+    assert m.enclosed_volume() == pytest.approx(6.0)
+    open_box = TriMesh(box.vertices, box.faces[2:])
+    assert not open_box.is_closed and open_box.enclosed_volume() is None
+    assert len(open_box.boundary_loops) == 1 and len(open_box.boundary_loops[0]) == 4
+    assert any(fd.code == "boundary" for fd in open_box.report())
+
+
+@pytest.mark.parametrize("vertices, faces, code, match", [
+    (np.zeros((0, 3)), np.zeros((0, 3), int), "empty", "no vertices"),
+    (TETRA_V, np.zeros((0, 3), int), "empty", "no faces"),
+    (TETRA_V[:, :2], TETRA_F, "vertices-shape", r"shape \(n, 3\)"),
+    (TETRA_V, np.array([[0, 1, 2, 3]]), "faces-shape", "triangles only"),
+    (np.where(np.arange(12).reshape(4, 3) == 4, np.nan, TETRA_V), TETRA_F, "non-finite", "NaN"),
+    (TETRA_V, np.vstack([TETRA_F, [[0, 1, 7]]]), "index-range", "outside"),
+    (TETRA_V, np.vstack([TETRA_F[:3], [[1, 1, 3]]]), "degenerate-face", "repeat a vertex"),
+    (np.vstack([TETRA_V, [[1, 1, -1]]]), np.vstack([TETRA_F, [[1, 2, 4]]]), "non-manifold-edge",
+     "more than two faces"),
+    (np.vstack([TETRA_V, [[5, 5, 5]]]), TETRA_F, "unreferenced-vertex", "belong to no face"),
+    (TETRA_V, np.array([[0, 2, 1.5]]), "faces-type", "not integers"),
+])
+def test_mesh_validation_errors(vertices, faces, code, match):
+    assert code in codes(vertices, faces)
+    with pytest.raises(MeshError, match=match):
+        TriMesh(vertices, faces, name="bad.off")
+    with pytest.raises(MeshError, match="bad.off"):
+        TriMesh(vertices, faces, name="bad.off")
+
+
+def test_zero_area_face():
+    v = np.vstack([TETRA_V, [[0.5, 0.5, 0.0]]])  # on the segment 1-2: collinear with them
+    f = np.vstack([TETRA_F, [[1, 4, 2]]])
+    assert "zero-area-face" in codes(v, f)
+    with pytest.raises(MeshError, match="zero area"):
+        TriMesh(v, f)
+
+
+def test_components_error_and_largest_component():
+    a = trimesh.creation.icosphere(subdivisions=2)
+    v = np.vstack([TETRA_V + 10, a.vertices])
+    f = np.vstack([TETRA_F, a.faces + 4])
+    with pytest.raises(MeshError, match="2 connected components"):
+        TriMesh(v, f)
+    m = TriMesh.from_arrays(v, f, largest_component=True)
+    assert m.n_vertices == len(a.vertices)
+    assert np.array_equal(m.original_indices, np.arange(4, 4 + len(a.vertices)))
+    assert np.allclose(m.vertices, a.vertices)
+
+
+def test_orientation_warning():
+    f = TETRA_F.copy()
+    f[0] = f[0][::-1]
+    assert any(fd.code == "orientation" for fd in inspect_mesh(TETRA_V, f))
+
+
+def square(n=40, side=2.0):
+    t = np.linspace(0, 4, n, endpoint=False)
+    pts = []
+    for s in t:
+        k, r = int(s), s - int(s)
+        corners = np.array([[0, 0], [1, 0], [1, 1], [0, 1], [0, 0]], float)
+        pts.append(corners[k] + r * (corners[k + 1] - corners[k]))
+    return side * np.array(pts)
+
+
+def test_contour_quantities_and_resampling():
+    c = Contour2D(square())
+    assert c.is_ccw and c.area == pytest.approx(4.0) and c.length == pytest.approx(8.0)
+    cw = Contour2D(square()[::-1])
+    assert not cw.is_ccw and cw.ccw().is_ccw
+    assert np.array_equal(cw.ccw().points[0], cw.points[0])
+    r = c.resample(16)  # 16 points on a square of perimeter 8: the corners are kept exactly
+    assert r.n_points == 16
+    assert np.allclose(r.segment_lengths, 0.5) and r.length == pytest.approx(8.0)
+    t = np.linspace(0, 2 * np.pi, 400, endpoint=False)
+    circle = Contour2D(np.column_stack([np.cos(t), np.sin(t)])).resample(13)
+    assert np.allclose(circle.segment_lengths, circle.segment_lengths.mean(), rtol=1e-3)
+    assert np.allclose(circle.points[0], [1, 0])
+    t = c.transformed(scale=3.0, rotation=0.7, translation=(1, 2))
+    assert t.area == pytest.approx(36.0) and t.length == pytest.approx(24.0)
+    # a repeated closing point and consecutive duplicates are dropped
+    pts = np.vstack([square(), square()[:1]])
+    pts = np.insert(pts, 5, pts[5], axis=0)
+    assert Contour2D(pts).n_points == 40
+
+
+@pytest.mark.parametrize("points, match", [
+    (np.zeros((0, 2)), "no points"),
+    (np.zeros((12, 3)), r"shape \(m, 2\)"),
+    (np.where(np.arange(80).reshape(40, 2) == 7, np.inf, square()), "NaN or infinite"),
+    (square(8), "at least 10"),
+    (np.column_stack([np.linspace(0, 1, 20), np.linspace(0, 1, 20)]), "encloses no area"),
+])
+def test_contour_validation_errors(points, match):
+    with pytest.raises(ContourError, match=match):
+        Contour2D(points, name="sketch")
+
+
+def test_self_intersecting_contour():
+    t = np.linspace(0, 2 * np.pi, 60, endpoint=False)
+    figure_eight = np.column_stack([np.sin(t), np.sin(t) * np.cos(t)])
+    assert any(fd.code == "self-intersection" for fd in inspect_contour(figure_eight))
+    with pytest.raises(ContourError, match="intersects itself"):
+        Contour2D(figure_eight)
+    # a bow-tie with a crossing between far-apart segments
+    p = square()
+    p[[5, 25]] = p[[25, 5]]
+    with pytest.raises(ContourError, match="intersects itself"):
+        Contour2D(p)
+
+
+def test_self_intersection_matches_brute_force():
+    rng = np.random.default_rng(1)
+    for _ in range(30):
+        p = rng.normal(size=(12, 2))
+        from corrlib.shapes import _segments_intersect
+
+        fast = {tuple(x) for x in _segments_intersect(p)}
+        brute = set()
+        m = len(p)
+        for i in range(m):
+            for j in range(i + 1, m):
+                if j == i + 1 or (i == 0 and j == m - 1):
+                    continue
+                a, b, c, d = p[i], p[(i + 1) % m], p[j], p[(j + 1) % m]
+                o = lambda p1, p2, q: np.sign((p2[0] - p1[0]) * (q[1] - p1[1]) - (p2[1] - p1[1]) * (q[0] - p1[0]))  # noqa: E731
+                if o(a, b, c) * o(a, b, d) <= 0 and o(c, d, a) * o(c, d, b) <= 0:
+                    brute.add((i, j))
+        assert fast == brute
+
+
+def test_open_contour_detection():
+    t = np.linspace(0, 1.5 * np.pi, 50)
+    arc = np.column_stack([np.cos(t), np.sin(t)])
+    with pytest.raises(ContourError, match="open contour"):
+        Contour2D.from_open_points(arc)
+    assert Contour2D.from_open_points(arc, assume_closed=True).n_points == 50
+    t = np.linspace(0, 2 * np.pi, 50, endpoint=False)
+    circle = np.column_stack([np.cos(t), np.sin(t)])
+    assert Contour2D.from_open_points(circle).n_points == 50

@@ -19,6 +19,18 @@ def _pyplot():
     return plt
 
 
+def _save_figure(fig, path) -> Path:
+    """Write a figure as PNG atomically and close it."""
+    from corrlib.io import atomic_write
+
+    fig.tight_layout()
+    path = Path(path)
+    with atomic_write(path, "wb") as fh:
+        fig.savefig(fh, format="png")
+    _pyplot().close(fig)
+    return path
+
+
 def coordinate_colors(vertices: np.ndarray) -> np.ndarray:
     """(n, 3) float in [0, 1]: RGB from the vertex coordinates normalised to the bounding box."""
     v = np.asarray(vertices, dtype=np.float64)
@@ -79,8 +91,6 @@ def save_colour_transfer(path, source, target, map_yx: np.ndarray, *, source_col
         Source vertex of every target vertex (-1 = unmatched, drawn grey).
     source_colors : (n_x, 3) float, optional
     """
-    from corrlib.io import atomic_write
-
     plt = _pyplot()
     colors_x = coordinate_colors(source.vertices) if source_colors is None else np.asarray(source_colors)
     map_yx = np.asarray(map_yx)
@@ -93,18 +103,11 @@ def save_colour_transfer(path, source, target, map_yx: np.ndarray, *, source_col
               frame_from=target.vertices)
     if title:
         fig.suptitle(title)
-    fig.tight_layout()
-    path = Path(path)
-    with atomic_write(path, "wb") as fh:
-        fig.savefig(fh, format="png")
-    plt.close(fig)
-    return path
+    return _save_figure(fig, path)
 
 
 def save_error_curves(path, curves: dict, thresholds: np.ndarray, *, title: str = "Cumulative geodesic error") -> Path:
     """PNG of cumulative error curves: ``curves`` maps a label to an array like ``thresholds``."""
-    from corrlib.io import atomic_write
-
     plt = _pyplot()
     fig, ax = plt.subplots(figsize=(6, 4.5), dpi=100)
     for label, curve in curves.items():
@@ -116,9 +119,4 @@ def save_error_curves(path, curves: dict, thresholds: np.ndarray, *, title: str 
     ax.grid(alpha=0.3)
     ax.legend(loc="lower right")
     ax.set_title(title)
-    fig.tight_layout()
-    path = Path(path)
-    with atomic_write(path, "wb") as fh:
-        fig.savefig(fh, format="png")
-    plt.close(fig)
-    return path
+    return _save_figure(fig, path)

@@ -72,10 +72,23 @@ def _examples(idx: np.ndarray, n: int = 5) -> str:
 # ----------------------------------------------------------------------------- meshes
 
 
-def _face_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+def triangle_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     e1 = vertices[faces[:, 1]] - vertices[faces[:, 0]]
     e2 = vertices[faces[:, 2]] - vertices[faces[:, 0]]
     return 0.5 * np.linalg.norm(np.cross(e1, e2), axis=1)
+
+
+def area_weighted_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(n, 3) float: area-weighted unit vertex normals; zero for vertices in no non-degenerate face."""
+    v = np.asarray(vertices, dtype=np.float64)
+    f = np.asarray(faces, dtype=np.int64)
+    n = v.shape[0]
+    fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])  # 2 * area * unit normal
+    out = np.empty((n, 3))
+    for k in range(3):
+        out[:, k] = np.bincount(f.ravel(), weights=np.repeat(fn[:, k], 3), minlength=n)
+    norm = np.linalg.norm(out, axis=1, keepdims=True)
+    return np.divide(out, norm, out=np.zeros_like(out), where=norm > 0)
 
 
 def _face_components(n_vertices: int, faces: np.ndarray) -> tuple[int, np.ndarray]:
@@ -157,7 +170,7 @@ def inspect_mesh(vertices, faces) -> list[Finding]:
                     f"(e.g. face {_examples(repeated)})")
         )
     diag = float(np.linalg.norm(v.max(axis=0) - v.min(axis=0)))
-    areas = _face_areas(v, f)
+    areas = triangle_areas(v, f)
     zero = np.flatnonzero(areas <= TOL.zero_area * max(diag, 1e-300) ** 2)
     zero = np.setdiff1d(zero, repeated)
     if zero.size:
@@ -296,7 +309,7 @@ class TriMesh:
     @cached_property
     def face_areas(self) -> np.ndarray:
         """(f,) float: triangle areas."""
-        return _readonly(_face_areas(self.vertices, self.faces))
+        return _readonly(triangle_areas(self.vertices, self.faces))
 
     @cached_property
     def area(self) -> float:
@@ -313,12 +326,7 @@ class TriMesh:
     @cached_property
     def vertex_normals(self) -> np.ndarray:
         """(n, 3) float: area-weighted unit vertex normals."""
-        weighted = self.face_normals * self.face_areas[:, None]
-        normals = np.zeros_like(self.vertices)
-        for c in range(3):
-            np.add.at(normals, self.faces[:, c], weighted)
-        norm = np.linalg.norm(normals, axis=1, keepdims=True)
-        return _readonly(normals / np.where(norm > 0, norm, 1.0))
+        return _readonly(area_weighted_normals(self.vertices, self.faces))
 
     @cached_property
     def edges(self) -> np.ndarray:

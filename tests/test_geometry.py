@@ -182,3 +182,43 @@ def test_spectrum_disk_cache(wolf_pair, tmp_path, monkeypatch):
         f.write_bytes(b"garbage")
     again = mesh_spectrum(wolf, 20)
     assert np.allclose(again.evals, first.evals[:20])
+
+
+def test_consistent_mass_generalized_problem():
+    s = trimesh.creation.icosphere(subdivisions=3)  # 642 vertices: above the dense limit
+    mesh = TriMesh(s.vertices, s.faces)
+    stiff, mass = mesh_laplacian(mesh, mass="consistent")
+    dense, _ = eigenpairs(stiff, mass, 40, method="dense")
+    for method in ("eigsh", "slicing"):
+        evals, evecs = eigenpairs(stiff, mass, 40, method=method)
+        assert np.allclose(evals, dense, rtol=1e-8, atol=1e-10)
+        assert np.allclose(evecs.T @ (mass @ evecs), np.eye(40), atol=1e-8)
+
+
+def test_eigensolver_retries_with_regularised_shift(monkeypatch):
+    import scipy.sparse.linalg as spla
+
+    import corrlib.geometry.spectrum as spectrum
+
+    s = trimesh.creation.icosphere(subdivisions=3)
+    stiff, mass = mesh_laplacian(TriMesh(s.vertices, s.faces))
+    calls = []
+    original = spectrum._ShiftInvert.run
+
+    def flaky(self, k, sigma, ncv=None):
+        calls.append(sigma)
+        if len(calls) == 1:
+            raise spla.ArpackNoConvergence("no convergence", np.zeros(0), np.zeros((0, 0)))
+        return original(self, k, sigma, ncv)
+
+    monkeypatch.setattr(spectrum._ShiftInvert, "run", flaky)
+    evals, _ = eigenpairs(stiff, mass, 10, method="eigsh")
+    assert len(calls) == 2 and calls[1] < calls[0] < 0
+    assert evals[0] == pytest.approx(0, abs=1e-9) and evals[1] > 0
+
+    def broken(self, k, sigma, ncv=None):
+        raise RuntimeError("factor is exactly singular")
+
+    monkeypatch.setattr(spectrum._ShiftInvert, "run", broken)
+    with pytest.raises(spectrum.SolverError, match="eigensolver failed"):
+        eigenpairs(stiff, mass, 10, method="eigsh")

@@ -60,6 +60,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from corrlib.errors import InputError, ParameterError
+from corrlib.shapes import triangle_areas, area_weighted_normals
 
 __all__ = ["shot", "local_reference_frame", "vertex_normals"]
 
@@ -143,25 +144,7 @@ def vertex_normals(vertices, faces):
     """
     v = _as_points(vertices, "vertices")
     f = _as_faces(faces, v.shape[0])
-    n = v.shape[0]
-    fn = np.cross(v[f[:, 1]] - v[f[:, 0]], v[f[:, 2]] - v[f[:, 0]])  # 2*area*unit
-    out = np.empty((n, 3))
-    idx = f.ravel()
-    for k in range(3):
-        out[:, k] = np.bincount(idx, weights=np.repeat(fn[:, k], 3), minlength=n)
-    norm = np.linalg.norm(out, axis=1)
-    ok = norm > 0
-    out[ok] /= norm[ok, None]
-    out[~ok] = 0.0
-    return out
-
-
-def _surface_area(vertices, faces):
-    fn = np.cross(
-        vertices[faces[:, 1]] - vertices[faces[:, 0]],
-        vertices[faces[:, 2]] - vertices[faces[:, 0]],
-    )
-    return 0.5 * float(np.linalg.norm(fn, axis=1).sum())
+    return area_weighted_normals(v, f)
 
 
 def _neighbour_csr(vertices, radius):
@@ -544,7 +527,7 @@ def shot(
                 "radius is None and faces is None: the default radius "
                 "(radius_fraction * sqrt(area)) needs faces; pass radius explicitly"
             )
-        area = _surface_area(v, f)
+        area = float(triangle_areas(v, f).sum())
         if not area > 0.0:
             raise InputError(
                 "radius: the mesh has zero surface area, cannot derive the "

@@ -67,20 +67,22 @@ class DescriptorNNParams:
     n_scales: int = param(100, label="Scales", low=1, high=1000, help="Scales (times/energies) of HKS/WKS.")
 
 
-def _spectra_and_descriptors(source, target, params, watch):
+def _spectra_and_descriptors(source, target, n_eigs: int, descriptor: str, n_scales: int, watch):
+    """Laplacian spectra (``n_eigs`` pairs, capped by the vertex counts) and descriptors of both shapes."""
     with watch("eigen"):
-        spec_x = mesh_spectrum(source, min(params.n_eigs, source.n_vertices - 1))
-        spec_y = mesh_spectrum(target, min(params.n_eigs, target.n_vertices - 1))
+        spec_x = mesh_spectrum(source, min(n_eigs, source.n_vertices - 1))
+        spec_y = mesh_spectrum(target, min(n_eigs, target.n_vertices - 1))
     with watch("descriptors"):
-        desc_x = mesh_descriptors(source, params.descriptor, spectrum=spec_x, n_scales=params.n_scales)
-        desc_y = mesh_descriptors(target, params.descriptor, spectrum=spec_y, n_scales=params.n_scales)
+        desc_x = mesh_descriptors(source, descriptor, spectrum=spec_x, n_scales=n_scales)
+        desc_y = mesh_descriptors(target, descriptor, spectrum=spec_y, n_scales=n_scales)
     return spec_x, spec_y, desc_x, desc_y
 
 
 def solve_descriptor_nn(source, target, params: DescriptorNNParams, token):
     watch = Stopwatch()
     yield Progress("eigenpairs", 0.0)
-    spec_x, spec_y, desc_x, desc_y = _spectra_and_descriptors(source, target, params, watch)
+    spec_x, spec_y, desc_x, desc_y = _spectra_and_descriptors(source, target, params.n_eigs, params.descriptor,
+                                                              params.n_scales, watch)
     token.raise_if_cancelled()
     yield Progress("nearest neighbours", 0.7)
     with watch("assignment"):
@@ -189,15 +191,11 @@ def solve_fmap_zoomout(source, target, params: FmapZoomOutParams, token):
     watch = Stopwatch()
     k_final = min(params.k_final, source.n_vertices - 1, target.n_vertices - 1)
     k_init = min(params.k_init, k_final)
-    yield Progress("eigenpairs", 0.0)
-    with watch("eigen"):
-        spec_x = mesh_spectrum(source, max(k_final, 100 if params.descriptor != "shot" else k_final))
-        spec_y = mesh_spectrum(target, max(k_final, 100 if params.descriptor != "shot" else k_final))
+    yield Progress("eigenpairs and descriptors", 0.0)
+    spec_x, spec_y, desc_x, desc_y = _spectra_and_descriptors(source, target, max(k_final, 100),
+                                                              params.descriptor, 100, watch)
     token.raise_if_cancelled()
-    yield Progress("descriptors", 0.3)
     with watch("descriptors"):
-        desc_x = mesh_descriptors(source, params.descriptor, spectrum=spec_x)
-        desc_y = mesh_descriptors(target, params.descriptor, spectrum=spec_y)
         pick = np.unique(np.linspace(0, desc_x.shape[1] - 1, params.n_descriptors).round().astype(int))
         desc_x, desc_y = desc_x[:, pick], desc_y[:, pick]
         norm = np.sqrt(np.asarray(spec_x.mass.sum(axis=0)).ravel() @ desc_x ** 2)

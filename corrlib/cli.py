@@ -1,6 +1,7 @@
 """The ``corr`` command line.
 
-Subcommands: ``info``, ``eval``, ``match``, ``demo``, ``methods``, ``perf``.
+Subcommands: ``info``, ``eval``, ``match``, ``match-contour``, ``retrieve``, ``demo``,
+``methods``, ``perf``.
 Bad input prints ``error: <message>`` on stderr and exits with status 2.
 """
 
@@ -202,6 +203,93 @@ def cmd_demo(args) -> int:
     return 0
 
 
+def _query_contour(path: str, labels: str | None = None):
+    from corrlib.io import MESH_SUFFIXES, load_contour, load_mesh
+    from corrlib.shapes import Contour2D
+
+    suffix = Path(path).suffix.lower()
+    if suffix in MESH_SUFFIXES:
+        # a planar triangulated sketch: its boundary loop is the contour
+        sketch = load_mesh(path)
+        loops = sketch.boundary_loops
+        if not loops:
+            raise FileFormatError(f"{path}: the sketch mesh has no boundary to use as a contour")
+        loop = max(loops, key=len)
+        contour = Contour2D(sketch.vertices[loop, :2], name=Path(path).name)
+    else:
+        contour = load_contour(path)
+    if labels:
+        values = np.loadtxt(labels, dtype=np.int64, ndmin=1)
+        if suffix in MESH_SUFFIXES and values.shape[0] == sketch.n_vertices:
+            values = values[loop]  # per-vertex labels of the sketch mesh
+        contour = Contour2D(contour.points, name=contour.name, labels=values)
+    return contour
+
+
+def _contour3d_params(args):
+    from corrlib.methods.base import make_params
+    from corrlib.methods.contour3d import Contour3DParams
+
+    overrides = _parse_overrides(args.param)
+    for key in ("eps", "k", "n_contour"):
+        if getattr(args, key, None) is not None:
+            overrides[key] = getattr(args, key)
+    return make_params(Contour3DParams, **overrides)
+
+
+def cmd_match_contour(args) -> int:
+    from corrlib.io import load_mesh
+    from corrlib.methods import solve
+    from corrlib.plotting import save_contour_match
+
+    contour = _query_contour(args.query, args.query_labels)
+    mesh = load_mesh(args.mesh)
+    if args.mesh_labels:
+        mesh = mesh.with_labels(np.loadtxt(args.mesh_labels, dtype=np.int64, ndmin=1))
+    result = solve("contour3d", contour, mesh, _contour3d_params(args), callback=_progress_printer(args.quiet))
+    ex = result.extras
+    print(f"energy {result.energy:.6g} (lower bound {ex['lower_bound']:.6g}, "
+          f"{'optimal' if ex['optimal'] else 'within the ε bound'}), {ex['iterations']} branch-and-bound "
+          f"iterations, {ex['dijkstra_runs']} layered Dijkstra runs of {ex['seconds_per_dijkstra']:.3f} s, "
+          f"{result.timings['total']:.2f} s in total")
+    out = Path(args.output)
+    npz, js = result.save(out)
+    png = save_contour_match(out.with_name(out.name + ".png"), ex["contour_points"], mesh, ex["path_vertices"],
+                             ex["path_contour_index"], title=f"energy {result.energy:.4g}")
+    if not args.quiet:
+        for path in (npz, js, png):
+            print(f"wrote {path}")
+    return 0
+
+
+def cmd_retrieve(args) -> int:
+    from corrlib.progress import run
+    from corrlib.retrieval import class_of, mean_average_precision, mesh_files, retrieve
+
+    contour = _query_contour(args.query)
+    params = _contour3d_params(args)
+    files = mesh_files(args.folder)
+    hits = run(retrieve(contour, files, params, jobs=args.jobs), callback=_progress_printer(args.quiet))
+    print(f"{'rank':>4}  {'energy':>12}  {'seconds':>7}  mesh")
+    for rank, hit in enumerate(hits[: args.top], 1):
+        extra = f"  ({hit.error})" if hit.error else ""
+        print(f"{rank:>4}  {hit.energy:>12.6g}  {hit.seconds:>7.2f}  {hit.path.name}{extra}")
+    query_class = class_of(args.query)
+    labels = [h.label for h in hits]
+    if query_class in labels:
+        print(f"average precision for class {query_class!r}: "
+              f"{mean_average_precision([(query_class, labels)]):.4f}")
+    if args.output:
+        from corrlib.io import atomic_write
+
+        with atomic_write(args.output) as fh:
+            fh.write("rank\tenergy\tmesh\terror\n")
+            for rank, hit in enumerate(hits, 1):
+                fh.write(f"{rank}\t{hit.energy:.9g}\t{hit.path}\t{hit.error}\n")
+        print(f"wrote {args.output}")
+    return 0
+
+
 def cmd_methods(args) -> int:
     from corrlib.methods import all_methods
     from corrlib.methods.base import param_fields
@@ -257,6 +345,33 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", default="result", help="output path without suffix")
     p.add_argument("-q", "--quiet", action="store_true")
     p.set_defaults(func=cmd_match)
+
+    p = sub.add_parser("match-contour", help="2D-to-3D elastic matching of a closed contour to a mesh")
+    p.add_argument("query", help="contour: point file, SVG, silhouette image or planar sketch mesh")
+    p.add_argument("mesh")
+    p.add_argument("--eps", type=float, help="approximation factor (0 = global optimum)")
+    p.add_argument("--k", type=int, help="Laplace-Beltrami eigenpairs for the features (default 25)")
+    p.add_argument("--n-contour", dest="n_contour", type=int, help="contour resampling (default 200)")
+    p.add_argument("--query-labels", help="part label per contour point (or per sketch-mesh vertex)")
+    p.add_argument("--mesh-labels", help="part label per mesh vertex")
+    p.add_argument("--param", action="append", metavar="NAME=VALUE", help="other method parameter")
+    p.add_argument("-o", "--output", default="contour_match", help="output path without suffix")
+    p.add_argument("-q", "--quiet", action="store_true")
+    p.set_defaults(func=cmd_match_contour)
+
+    p = sub.add_parser("retrieve", help="rank the meshes of a folder by matching energy to a query contour")
+    p.add_argument("query")
+    p.add_argument("folder")
+    p.add_argument("--top", type=int, default=10, help="how many ranks to print")
+    p.add_argument("--jobs", type=int, help="worker processes (default: all cores)")
+    p.add_argument("--eps", type=float, default=0.05, help="approximation factor (default 0.05)")
+    p.add_argument("--k", type=int)
+    p.add_argument("--n-contour", dest="n_contour", type=int, default=100,
+                   help="contour resampling (default 100 for retrieval)")
+    p.add_argument("--param", action="append", metavar="NAME=VALUE")
+    p.add_argument("-o", "--output", help="write the full ranking as TSV")
+    p.add_argument("-q", "--quiet", action="store_true")
+    p.set_defaults(func=cmd_retrieve)
 
     p = sub.add_parser("demo", help="match the bundled demo pair and write a result and a picture")
     p.add_argument("-o", "--output", default="demo_output", help="output folder")

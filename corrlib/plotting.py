@@ -120,3 +120,45 @@ def save_error_curves(path, curves: dict, thresholds: np.ndarray, *, title: str 
     ax.legend(loc="lower right")
     ax.set_title(title)
     return _save_figure(fig, path)
+
+
+def save_contour_match(path, contour_points: np.ndarray, mesh, path_vertices: np.ndarray,
+                       path_contour_index: np.ndarray, *, title: str = "") -> Path:
+    """PNG: the query contour (left) and the mesh with the matched closed curve (right).
+
+    Both are coloured by contour position (hue from 0 to 1 along the contour),
+    so corresponding parts share a colour.
+
+    Parameters
+    ----------
+    contour_points : (m, 2) float
+    mesh : TriMesh
+    path_vertices : (p,) int
+        Mesh vertex of every path step.
+    path_contour_index : (p,) int
+        Contour point of every path step.
+    """
+    plt = _pyplot()
+    from matplotlib import cm
+
+    m = contour_points.shape[0]
+    hue = cm.hsv(np.arange(m) / m)[:, :3]
+    fig = plt.figure(figsize=(11, 5), dpi=100)
+    ax1 = fig.add_subplot(1, 2, 1)
+    closed = np.vstack([contour_points, contour_points[:1]])
+    ax1.fill(closed[:, 0], closed[:, 1], color="0.9")
+    ax1.scatter(contour_points[:, 0], contour_points[:, 1], c=hue, s=10)
+    ax1.set_aspect("equal")
+    ax1.set_axis_off()
+    ax1.set_title("query contour")
+    ax2 = fig.add_subplot(1, 2, 2, projection="3d")
+    axes = _view_axes(mesh.vertices)
+    draw_mesh(ax2, mesh.vertices, mesh.faces, np.full((mesh.n_vertices, 3), 0.8), f"{mesh.name}: matched curve")
+    pts = (mesh.vertices[path_vertices] - mesh.vertices.mean(axis=0)) @ axes.T
+    # lift the curve slightly towards the viewer so the surface does not hide it
+    pts[:, 1] -= 0.01 * (mesh.vertices.max() - mesh.vertices.min())
+    for a in range(len(pts) - 1):
+        ax2.plot(pts[a:a + 2, 0], pts[a:a + 2, 1], pts[a:a + 2, 2], color=hue[path_contour_index[a] % m], lw=2.5)
+    if title:
+        fig.suptitle(title)
+    return _save_figure(fig, path)

@@ -14,6 +14,8 @@ from collections.abc import Callable, Generator
 from dataclasses import dataclass
 from typing import TypeVar
 
+import numpy as np
+
 from corrlib.errors import Cancelled
 
 T = TypeVar("T")
@@ -39,12 +41,18 @@ class Progress:
 
 
 class CancelToken:
-    """Thread-safe cancellation flag shared between a caller and a solver."""
+    """Thread-safe cancellation flag shared between a caller and a solver.
+
+    :attr:`flag` is a one-element ``int8`` array set to 1 on cancellation, so
+    compiled (numba) loops can poll it without calling back into Python.
+    """
 
     def __init__(self):
         self._event = threading.Event()
+        self.flag = np.zeros(1, dtype=np.int8)
 
     def cancel(self) -> None:
+        self.flag[0] = 1
         self._event.set()
 
     @property

@@ -232,6 +232,14 @@ def inspect_mesh(vertices, faces) -> list[Finding]:
     return findings
 
 
+def _check_labels(labels, n: int, name: str, error):
+    lab = np.asarray(labels)
+    if lab.shape != (n,) or not (np.issubdtype(lab.dtype, np.integer) or
+                                 (np.issubdtype(lab.dtype, np.floating) and np.all(lab == np.round(lab)))):
+        raise error(f"{name}: labels must be {n} integers (one per point/vertex), got {lab.dtype} {lab.shape}")
+    return _readonly(lab.astype(np.int64))
+
+
 class TriMesh:
     """An immutable triangle mesh with lazily computed derived quantities.
 
@@ -244,6 +252,8 @@ class TriMesh:
         Shown in error messages (usually the file name).
     validate : bool
         Run :func:`inspect_mesh` and raise :class:`MeshError` on the first error.
+    labels : (n,) int, optional
+        Per-vertex part labels (0 = unlabelled).
 
     Raises
     ------
@@ -253,7 +263,7 @@ class TriMesh:
         connected components.
     """
 
-    def __init__(self, vertices, faces, *, name: str = "mesh", validate: bool = True):
+    def __init__(self, vertices, faces, *, name: str = "mesh", validate: bool = True, labels=None):
         self.name = str(name)
         if validate:
             errors = [fd for fd in inspect_mesh(vertices, faces) if fd.level == "error"]
@@ -261,6 +271,13 @@ class TriMesh:
                 raise MeshError(f"{self.name}: {errors[0].message}")
         self.vertices = _readonly(np.asarray(vertices, dtype=np.float64))
         self.faces = _readonly(np.asarray(faces, dtype=np.int64))
+        self.labels = None if labels is None else _check_labels(labels, self.n_vertices, self.name, MeshError)
+
+    def with_labels(self, labels) -> "TriMesh":
+        """A copy carrying per-vertex part labels (int, 0 = unlabelled)."""
+        out = TriMesh(self.vertices, self.faces, name=self.name, validate=False, labels=labels)
+        out.original_indices = self.original_indices
+        return out
 
     @classmethod
     def from_arrays(cls, vertices, faces, *, name: str = "mesh", largest_component: bool = False) -> "TriMesh":
@@ -518,6 +535,8 @@ class Contour2D:
         Shown in error messages.
     min_points : int
         Fewest distinct points accepted (default 10).
+    labels : (m,) int, optional
+        Part label of every point (0 = unlabelled).
 
     Raises
     ------
@@ -526,13 +545,20 @@ class Contour2D:
         area, or self-intersecting.
     """
 
-    def __init__(self, points, *, name: str = "contour", min_points: int = 10, validate: bool = True):
+    def __init__(self, points, *, name: str = "contour", min_points: int = 10, validate: bool = True,
+                 labels=None):
         self.name = str(name)
         if validate:
             errors = [fd for fd in inspect_contour(points, min_points=min_points) if fd.level == "error"]
             if errors:
                 raise ContourError(f"{self.name}: {errors[0].message}")
-        self.points = _readonly(_clean_polygon(np.asarray(points, dtype=np.float64)))
+        raw = np.asarray(points, dtype=np.float64)
+        self.points = _readonly(_clean_polygon(raw))
+        self.labels = None
+        if labels is not None:
+            if self.points.shape[0] != raw.shape[0]:
+                raise ContourError(f"{self.name}: labels cannot be kept: duplicate points were removed")
+            self.labels = _check_labels(labels, self.n_points, self.name, ContourError)
 
     def __repr__(self) -> str:
         return f"Contour2D({self.name!r}, n_points={self.n_points}, {'ccw' if self.is_ccw else 'cw'})"
@@ -597,8 +623,9 @@ class Contour2D:
         """The same contour oriented counter-clockwise (point 0 kept first)."""
         if self.is_ccw:
             return self
-        p = np.concatenate([self.points[:1], self.points[:0:-1]])
-        return Contour2D(p, name=self.name, validate=False)
+        order = np.concatenate([[0], np.arange(self.n_points - 1, 0, -1)])
+        labels = None if self.labels is None else self.labels[order]
+        return Contour2D(self.points[order], name=self.name, validate=False, labels=labels)
 
     def resample(self, n_points: int) -> "Contour2D":
         """Resample uniformly by arc length to ``n_points`` points, starting at point 0.
@@ -615,11 +642,15 @@ class Contour2D:
         s = np.concatenate([self.arclength, [self.length]])
         t = np.linspace(0.0, self.length, n_points, endpoint=False)
         p = np.column_stack([np.interp(t, s, closed[:, 0]), np.interp(t, s, closed[:, 1])])
-        return Contour2D(p, name=self.name, min_points=3, validate=False)
+        labels = None
+        if self.labels is not None:
+            # the label of the segment each new point falls on (its start point's label)
+            labels = self.labels[np.clip(np.searchsorted(self.arclength, t, side="right") - 1, 0, None)]
+        return Contour2D(p, name=self.name, min_points=3, validate=False, labels=labels)
 
     def transformed(self, scale: float = 1.0, rotation: float = 0.0, translation=(0.0, 0.0)) -> "Contour2D":
         """Similarity transform ``x -> scale * R(rotation) x + translation`` (rotation in radians)."""
         c, s = np.cos(rotation), np.sin(rotation)
         r = np.array([[c, -s], [s, c]])
         p = scale * self.points @ r.T + np.asarray(translation, dtype=np.float64)
-        return Contour2D(p, name=self.name, min_points=3, validate=False)
+        return Contour2D(p, name=self.name, min_points=3, validate=False, labels=self.labels)

@@ -83,3 +83,38 @@ def test_perf_quick_runs(capsys):
     assert main(["perf", "foundation", "--quick", "--repeat", "1"]) == 0
     out = capsys.readouterr().out
     assert "200 eigenpairs, method=slicing" in out and "SHOT" in out and "geodesic error" in out
+
+
+def test_match_contour_and_retrieve(tmp_path, capsys):
+    from _data import SKETCH2D
+
+    out = tmp_path / "mc"
+    assert main(["match-contour", str(SILHOUETTES / "mpeg7" / "dog-1.gif"), str(TOSCA / "wolf1.off"),
+                 "--n-contour", "60", "--eps", "0.05", "-o", str(out), "-q"]) == 0
+    text = capsys.readouterr().out
+    assert "energy" in text and "branch-and-bound" in text
+    assert (tmp_path / "mc.png").stat().st_size > 10_000
+    arrays = np.load(tmp_path / "mc.npz")
+    assert arrays["map_xy"].shape == (60,) and arrays["path_vertices"][0] == arrays["path_vertices"][-1]
+    # a planar sketch mesh with per-vertex part labels works as a query
+    assert main(["match-contour", str(SKETCH2D / "human_sketch_a.off"), str(TOSCA / "wolf0.off"), "--query-labels",
+                 str(SKETCH2D / "human_sketch_a_segmentation.txt"), "--n-contour", "40", "--eps", "0.1",
+                 "-o", str(tmp_path / "sk"), "-q"]) == 0
+    capsys.readouterr()
+    folder = tmp_path / "meshes"
+    folder.mkdir()
+    for name in ("wolf0.off", "wolf1.off", "cat0.off"):
+        (folder / name).write_bytes((TOSCA / name).read_bytes())
+    assert main(["retrieve", str(SILHOUETTES / "mpeg7" / "dog-1.gif"), str(folder), "--jobs", "1",
+                 "--n-contour", "50", "-o", str(tmp_path / "rank.tsv"), "-q"]) == 0
+    lines = (tmp_path / "rank.tsv").read_text().strip().split("\n")
+    assert len(lines) == 4 and lines[0].startswith("rank")
+
+
+def test_match_contour_bad_input(tmp_path, capsys):
+    t = np.linspace(0, 1.2 * np.pi, 30)
+    np.savetxt(tmp_path / "open.txt", np.column_stack([np.cos(t), np.sin(t)]))
+    assert main(["match-contour", str(tmp_path / "open.txt"), str(TOSCA / "wolf0.off")]) == 2
+    assert "open contour" in capsys.readouterr().err
+    assert main(["retrieve", str(SILHOUETTES / "horse.png"), str(tmp_path)]) == 2
+    assert "no mesh files" in capsys.readouterr().err

@@ -1,0 +1,382 @@
+"""Cyclic shortest paths on the product of a closed curve with a graph (thesis ch. 7, CVPR 2016).
+
+The product graph has a node ``(i, j)`` for every curve point ``i`` (a
+*layer*) and graph vertex ``j``. The curve is cut open at point 0 and closed
+by a duplicated last layer ``m`` (= point 0 again), so a closed matching is a
+path from ``(0, s)`` to ``(m, s)``. Edges (directed, layer never decreases):
+
+* ``(i, j) -> (i, k)`` for graph edges ``(j, k)`` (the curve point stays),
+* ``(i, j) -> (i+1, j)`` (the graph vertex stays),
+* ``(i, j) -> (i+1, k)`` for graph edges ``(j, k)``.
+
+The cost of an edge is the mean of its two node costs times its length in the
+stacked coordinates ``(curve point, graph vertex)`` (thesis Eq. 7.1
+discretised with the trapezoidal rule). Nothing of size ``m n × m n`` is ever
+built: :func:`_layered_dijkstra` computes edge costs on the fly from the
+graph's CSR adjacency, one Dijkstra per layer (O(m n log n) in total).
+
+:func:`branch_and_bound` finds the globally optimal *closed* path
+(Algorithm 1 of the paper): the lower bound of a region R of start vertices
+is the shortest path from any ``(0, s in R)`` to any ``(m, t in R)``; if its
+end equals its start it is closed and optimal for R, otherwise R is split
+by graph distance to s and t. Upper bounds come from closing open paths
+(single-source runs), and every search is pruned by the best closed path so
+far plus an admissible per-layer heuristic. With ``eps > 0`` it stops as
+soon as ``lower * (1 + eps) >= upper``, which guarantees a closed path
+within a factor ``1 + eps`` of the optimum.
+"""
+
+from __future__ import annotations
+
+import heapq
+import itertools
+import time
+from dataclasses import dataclass
+
+import numba
+import numpy as np
+from scipy.sparse import csr_matrix
+from scipy.sparse.csgraph import dijkstra
+
+from corrlib.errors import Cancelled, InputError, ParameterError
+from corrlib.progress import CancelToken, Progress
+
+
+@numba.njit(cache=True)
+def _layered_dijkstra(cost, step2, graph_points, indptr, indices, edge_len, source_mask, target_mask,
+                      upper, heuristic, cancel, dist, pred, origin):
+    """Multi-source shortest paths through all layers; returns (best end vertex, its cost).
+
+    ``dist``/``pred``/``origin`` (L, n) are overwritten: distance, predecessor
+    (``j`` within the layer, ``n + j`` from vertex j of the previous layer,
+    -1 for a start node) and start vertex of the best path to every node.
+    Nodes whose distance plus their ``heuristic`` (L, n; a lower bound of the
+    remaining cost to the last layer) reaches ``upper`` are pruned (A*-style). Returns (-2, inf) when cancelled, (-1, inf) when no path
+    below ``upper`` exists.
+    """
+    n_layers, n = cost.shape
+    inf = np.inf
+    for i in range(n_layers):
+        if cancel[0] != 0:
+            return -2, inf
+        d = dist[i]
+        p = pred[i]
+        o = origin[i]
+        d[:] = inf
+        p[:] = -1
+        o[:] = -1
+        h = heuristic[i]
+        heap = [(0.0, 0)]
+        heap.pop()
+        if i == 0:
+            for j in range(n):
+                if source_mask[j] and h[j] < upper:
+                    d[j] = 0.0
+                    o[j] = j
+                    heap.append((0.0, j))
+        else:
+            dprev = dist[i - 1]
+            oprev = origin[i - 1]
+            s2 = step2[i - 1]
+            step = np.sqrt(s2)
+            for j in range(n):
+                dj = dprev[j]
+                if dj == inf:
+                    continue
+                cj = cost[i - 1, j]
+                nd = dj + 0.5 * (cj + cost[i, j]) * step
+                if nd < d[j] and nd + h[j] < upper:
+                    d[j] = nd
+                    p[j] = n + j
+                    o[j] = oprev[j]
+                for e in range(indptr[j], indptr[j + 1]):
+                    k = indices[e]
+                    nd = dj + 0.5 * (cj + cost[i, k]) * np.sqrt(s2 + edge_len[e] * edge_len[e])
+                    if nd < d[k] and nd + h[k] < upper:
+                        d[k] = nd
+                        p[k] = n + j
+                        o[k] = oprev[j]
+            for j in range(n):
+                if d[j] < inf:
+                    heap.append((d[j], j))
+        heapq.heapify(heap)
+        while len(heap) > 0:
+            dj, j = heapq.heappop(heap)
+            if dj > d[j]:
+                continue
+            cj = cost[i, j]
+            for e in range(indptr[j], indptr[j + 1]):
+                k = indices[e]
+                nd = dj + 0.5 * (cj + cost[i, k]) * edge_len[e]
+                if nd < d[k] and nd + h[k] < upper:
+                    d[k] = nd
+                    p[k] = j
+                    o[k] = o[j]
+                    heapq.heappush(heap, (nd, k))
+    best = inf
+    best_t = -1
+    last = dist[n_layers - 1]
+    for j in range(n):
+        if target_mask[j] and last[j] < best:
+            best = last[j]
+            best_t = j
+    return best_t, best
+
+
+@dataclass
+class CyclicPath:
+    """A closed path on the product graph.
+
+    Attributes
+    ----------
+    vertices : (p,) int
+        Graph vertex of every step, from the start ``(0, s)`` to the end ``(m, s)``.
+    layers : (p,) int
+        Curve point of every step, ``0 .. m``; ``m`` is point 0 again.
+    energy : float
+        Sum of the edge costs.
+    """
+
+    vertices: np.ndarray
+    layers: np.ndarray
+    energy: float
+
+    @property
+    def curve_index(self) -> np.ndarray:
+        """(p,) int: curve point of every step modulo m (the closing layer m is point 0)."""
+        m = int(self.layers.max())
+        return self.layers % m
+
+    def matched_vertices(self, n_curve: int) -> np.ndarray:
+        """(m,) int: graph vertex where the path enters each curve point's layer."""
+        out = np.full(n_curve, -1, dtype=np.int64)
+        for layer, vertex in zip(self.layers[::-1], self.vertices[::-1]):
+            if layer < n_curve:
+                out[layer] = vertex
+        return out
+
+
+class ProductGraph:
+    """Implicit product of a closed curve (layers) with a graph.
+
+    Parameters
+    ----------
+    node_cost : (m, n) float
+        Cost of matching curve point i to graph vertex j (non-negative).
+    curve_points : (m, d1) float
+        Coordinates of the closed curve.
+    graph_points : (n, d2) float
+        Coordinates of the graph vertices.
+    adjacency : (n, n) sparse
+        Symmetric graph adjacency (non-zero pattern = edges).
+    """
+
+    def __init__(self, node_cost, curve_points, graph_points, adjacency):
+        cost = np.asarray(node_cost, dtype=np.float64)
+        curve = np.asarray(curve_points, dtype=np.float64)
+        pts = np.asarray(graph_points, dtype=np.float64)
+        m, n = cost.shape
+        if curve.shape[0] != m or pts.shape[0] != n:
+            raise InputError(f"node costs {cost.shape} do not match {curve.shape[0]} curve points and "
+                             f"{pts.shape[0]} graph vertices")
+        if not np.all(np.isfinite(cost)) or cost.min() < 0:
+            raise InputError("node costs must be finite and non-negative")
+        adj = csr_matrix(adjacency)
+        adj = (adj + adj.T).tocsr()
+        adj.sort_indices()
+        self.m, self.n = m, n
+        # layer m duplicates layer 0: the path closes on the curve's first point
+        self.cost = np.ascontiguousarray(np.vstack([cost, cost[:1]]))
+        curve_closed = np.vstack([curve, curve[:1]])
+        self.step2 = np.ascontiguousarray(np.sum(np.diff(curve_closed, axis=0) ** 2, axis=1))
+        self.graph_points = np.ascontiguousarray(pts)
+        self.indptr = adj.indptr.astype(np.int64)
+        self.indices = adj.indices.astype(np.int64)
+        rows = np.repeat(np.arange(n), np.diff(self.indptr))
+        self.edge_len = np.ascontiguousarray(np.linalg.norm(pts[self.indices] - pts[rows], axis=1))
+        self.adjacency = csr_matrix((self.edge_len, self.indices, self.indptr), shape=(n, n))
+        # admissible heuristic (remaining cost to the last layer); zero until compute_heuristic()
+        self.heuristic = np.zeros((m + 1, n))
+        self.dist = np.empty((m + 1, n))
+        self.pred = np.empty((m + 1, n), dtype=np.int32)
+        self.origin = np.empty((m + 1, n), dtype=np.int32)
+        self.runs = 0
+        self.run_seconds = 0.0
+
+    def compute_heuristic(self, cancel: np.ndarray | None = None) -> None:
+        """Exact cost-to-go ignoring where the path must end: one backward layered Dijkstra.
+
+        Edge costs are symmetric and the product structure is the same with
+        the layers reversed, so the backward search is the forward kernel run
+        on the reversed layers from every node of the last layer. The result
+        is the tightest admissible A* heuristic for every later search.
+        """
+        flag = np.zeros(1, dtype=np.int8) if cancel is None else cancel
+        everything = np.ones(self.n, dtype=np.bool_)
+        start = time.perf_counter()
+        t, _ = _layered_dijkstra(np.ascontiguousarray(self.cost[::-1]), np.ascontiguousarray(self.step2[::-1]),
+                                 self.graph_points, self.indptr, self.indices, self.edge_len, everything,
+                                 everything, np.inf, np.zeros((self.m + 1, self.n)), flag, self.dist, self.pred,
+                                 self.origin)
+        self.runs += 1
+        self.run_seconds += time.perf_counter() - start
+        if t == -2:
+            raise Cancelled("the computation was cancelled")
+        self.heuristic = np.ascontiguousarray(self.dist[::-1])
+
+    def shortest(self, sources: np.ndarray, targets: np.ndarray, upper: float = np.inf,
+                 cancel: np.ndarray | None = None) -> tuple[float, int, int]:
+        """Shortest path from any ``(0, s in sources)`` to any ``(m, t in targets)``.
+
+        Parameters
+        ----------
+        sources, targets : (n,) bool
+        upper : float
+            Only paths cheaper than this are searched for.
+        cancel : (1,) int8, optional
+            Polled once per layer.
+
+        Returns
+        -------
+        cost : float
+            ``inf`` if no path cheaper than ``upper`` exists.
+        start, end : int
+            Start and end vertex (-1 if none).
+        """
+        flag = np.zeros(1, dtype=np.int8) if cancel is None else cancel
+        start = time.perf_counter()
+        t, c = _layered_dijkstra(self.cost, self.step2, self.graph_points, self.indptr, self.indices,
+                                 self.edge_len, sources, targets, float(upper), self.heuristic, flag,
+                                 self.dist, self.pred, self.origin)
+        self.runs += 1
+        self.run_seconds += time.perf_counter() - start
+        if t == -2:
+            raise Cancelled("the computation was cancelled")
+        if t < 0:
+            return np.inf, -1, -1
+        return float(c), int(self.origin[self.m, t]), int(t)
+
+    def backtrack(self, end: int) -> CyclicPath:
+        """The path found by the last :meth:`shortest` run that ends at ``(m, end)``."""
+        n = self.n
+        layer, vertex = self.m, int(end)
+        layers, vertices = [layer], [vertex]
+        while True:
+            p = int(self.pred[layer, vertex])
+            if p < 0:
+                break
+            if p >= n:
+                layer, vertex = layer - 1, p - n
+            else:
+                vertex = p
+            layers.append(layer)
+            vertices.append(vertex)
+        return CyclicPath(np.array(vertices[::-1], dtype=np.int64), np.array(layers[::-1], dtype=np.int64),
+                          float(self.dist[self.m, end]))
+
+    def closed_from(self, start: int, upper: float = np.inf, cancel=None) -> tuple[float, CyclicPath | None]:
+        """The cheapest closed path through ``(0, start)`` (if cheaper than ``upper``)."""
+        mask = np.zeros(self.n, dtype=np.bool_)
+        mask[start] = True
+        cost, _, end = self.shortest(mask, mask, upper, cancel)
+        if end < 0:
+            return np.inf, None
+        return cost, self.backtrack(end)
+
+    def path_energy(self, path: CyclicPath) -> float:
+        """Recompute the energy of a path edge by edge (independent check of the search)."""
+        total = 0.0
+        for a in range(len(path.vertices) - 1):
+            i0, j0, i1, j1 = path.layers[a], path.vertices[a], path.layers[a + 1], path.vertices[a + 1]
+            d2 = np.sum((self.graph_points[j1] - self.graph_points[j0]) ** 2)
+            if i1 == i0 + 1:
+                d2 += self.step2[i0]
+            total += 0.5 * (self.cost[i0, j0] + self.cost[i1, j1]) * np.sqrt(d2)
+        return float(total)
+
+
+@dataclass
+class BranchAndBoundResult:
+    """Outcome of :func:`branch_and_bound`."""
+
+    path: CyclicPath
+    energy: float
+    lower_bound: float
+    upper_bound: float
+    iterations: int
+    dijkstra_runs: int
+    seconds_per_run: float
+
+
+def branch_and_bound(graph: ProductGraph, *, eps: float = 0.0, token: CancelToken | None = None,
+                     max_iterations: int = 100_000):
+    """Globally optimal (``eps = 0``) or ``(1 + eps)``-approximate closed path (generator).
+
+    Yields
+    ------
+    Progress
+        One per iteration, with the current lower and upper bounds.
+
+    Returns
+    -------
+    BranchAndBoundResult
+    """
+    if not (0.0 <= eps < 1.0):
+        raise ParameterError(f"eps must be in [0, 1), got {eps}")
+    token = token or CancelToken()
+    cancel = token.flag
+    n = graph.n
+    counter = itertools.count()
+    everything = np.ones(n, dtype=np.bool_)
+    upper, best = np.inf, None
+    graph.compute_heuristic(cancel)
+
+    def consider_closed(cost, path):
+        nonlocal upper, best
+        if path is not None and cost < upper:
+            upper, best = cost, path
+
+    cost, s, t = graph.shortest(everything, everything, upper, cancel)
+    if s < 0:
+        raise InputError("no path through the product graph (is the graph connected?)")
+    heap = []
+    if s == t:
+        consider_closed(cost, graph.backtrack(t))
+    else:
+        heapq.heappush(heap, (cost, next(counter), everything, s, t))
+    lower_bound = np.inf  # stays inf if every region is resolved: then the optimum is `upper`
+    iterations = 0
+    while heap:
+        token.raise_if_cancelled()
+        lower, _, region, s, t = heapq.heappop(heap)
+        if lower * (1.0 + eps) >= upper or iterations >= max_iterations:
+            lower_bound = lower  # every open region is at least this
+            break
+        iterations += 1
+        # upper bound: close the region's best open path at its start
+        consider_closed(*graph.closed_from(s, upper, cancel))
+        if lower * (1.0 + eps) >= upper:
+            lower_bound = lower
+            break
+        # split the region by graph distance to the open path's start and end
+        dist = dijkstra(graph.adjacency, directed=False, indices=[s, t])
+        near_start = dist[0] <= dist[1]
+        for child in (region & near_start, region & ~near_start):
+            if not child.any():
+                continue
+            c_cost, c_s, c_t = graph.shortest(child, child, upper, cancel)
+            if c_s < 0:
+                continue  # nothing in this region beats the best closed path
+            if c_s == c_t:
+                consider_closed(c_cost, graph.backtrack(c_t))
+            elif c_cost * (1.0 + eps) < upper:
+                heapq.heappush(heap, (c_cost, next(counter), child, c_s, c_t))
+        bound = heap[0][0] if heap else upper
+        yield Progress("branch and bound", -1.0,
+                       f"iteration {iterations}: lower {min(bound, upper):.6g}, upper {upper:.6g}, "
+                       f"{len(heap)} open regions")
+    lower_bound = min(lower_bound, upper)
+    if best is None:
+        raise InputError("branch and bound found no closed path")
+    return BranchAndBoundResult(best, upper, lower_bound, upper, iterations, graph.runs,
+                                graph.run_seconds / max(graph.runs, 1))

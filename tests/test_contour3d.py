@@ -1,0 +1,267 @@
+"""2D-to-3D elastic matching: brute force on tiny graphs, path validity, real shapes, invariance, bad input."""
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+import trimesh
+from scipy.sparse.csgraph import dijkstra
+from scipy.spatial import cKDTree
+
+from _data import SUMNER, TOSCA
+from corrlib.errors import Cancelled, ContourError, InputError, ParameterError
+from corrlib.geometry.cyclic_paths import ProductGraph, branch_and_bound
+from corrlib.geometry.geodesics import GeodesicSolver
+from corrlib.geometry.sections import plane_basis, plane_section, render_silhouette
+from corrlib.io import load_mesh
+from corrlib.methods import solve
+from corrlib.methods.contour3d import node_costs
+from corrlib.progress import CancelToken, run
+from corrlib.retrieval import average_precision, class_of, mean_average_precision, retrieve
+from corrlib.shapes import Contour2D, TriMesh
+
+
+def explicit_product_optimum(graph: ProductGraph) -> float:
+    """All-sources Dijkstra on the explicitly built product graph: min over s of d((0,s), (m,s))."""
+    m, n = graph.m, graph.n
+    node = lambda i, j: i * n + j  # noqa: E731
+    adj = graph.adjacency.tocoo()
+    rows, cols, w = [], [], []
+    for i in range(m + 1):
+        for j, k, length in zip(adj.row, adj.col, adj.data):
+            rows.append(node(i, j)), cols.append(node(i, k))
+            w.append(0.5 * (graph.cost[i, j] + graph.cost[i, k]) * length)
+            if i < m:
+                rows.append(node(i, j)), cols.append(node(i + 1, k))
+                w.append(0.5 * (graph.cost[i, j] + graph.cost[i + 1, k]) * np.sqrt(length ** 2 + graph.step2[i]))
+        if i < m:
+            for j in range(n):
+                rows.append(node(i, j)), cols.append(node(i + 1, j))
+                w.append(0.5 * (graph.cost[i, j] + graph.cost[i + 1, j]) * np.sqrt(graph.step2[i]))
+    product = sp.coo_matrix((w, (rows, cols)), shape=((m + 1) * n,) * 2).tocsr()
+    dist = dijkstra(product, directed=True, indices=np.arange(n))
+    return float(min(dist[s, node(m, s)] for s in range(n)))
+
+
+def tiny_graph(seed, m=7, subdivisions=1):
+    rng = np.random.default_rng(seed)
+    ico = trimesh.creation.icosphere(subdivisions=subdivisions)
+    t = np.sort(rng.uniform(0, 2 * np.pi, m))
+    curve = np.column_stack([np.cos(t), 0.6 * np.sin(t)])
+    adj = sp.coo_matrix((np.ones(len(ico.edges_unique)), tuple(ico.edges_unique.T)), shape=(len(ico.vertices),) * 2)
+    cost = rng.random((m, len(ico.vertices))) ** 2
+    return ProductGraph(cost, curve, ico.vertices, adj)
+
+
+@pytest.mark.parametrize("seed", range(6))
+def test_branch_and_bound_equals_brute_force(seed):
+    graph = tiny_graph(seed)
+    exact = explicit_product_optimum(graph)
+    result = run(branch_and_bound(graph))
+    assert result.energy == pytest.approx(exact, rel=1e-12)
+    assert result.lower_bound == pytest.approx(exact, rel=1e-12)
+    assert graph.path_energy(result.path) == pytest.approx(result.energy, rel=1e-12)
+    for eps in (0.05, 0.3):
+        approx = run(branch_and_bound(tiny_graph(seed), eps=eps))
+        assert exact <= approx.energy <= (1 + eps) * exact + 1e-12
+        assert approx.lower_bound <= exact + 1e-12
+
+
+def test_branch_and_bound_splits_regions():
+    # costs that make the cheapest open path end elsewhere than it starts force real branching
+    graph = tiny_graph(11, m=9, subdivisions=2)
+    graph.cost[:] = np.random.default_rng(5).random(graph.cost.shape) ** 4
+    graph.cost[-1] = graph.cost[0]
+    exact = explicit_product_optimum(graph)
+    result = run(branch_and_bound(graph))
+    assert result.energy == pytest.approx(exact, rel=1e-12)
+    assert result.dijkstra_runs >= 1
+
+
+def test_parameter_and_cancel_errors():
+    graph = tiny_graph(0)
+    with pytest.raises(ParameterError, match="eps"):
+        run(branch_and_bound(graph, eps=1.5))
+    token = CancelToken()
+    token.cancel()
+    with pytest.raises(Cancelled):
+        run(branch_and_bound(graph, token=token))
+    with pytest.raises(InputError, match="non-negative"):
+        ProductGraph(-np.ones((3, 42)), np.eye(3)[:, :2], np.zeros((42, 3)), sp.eye(42))
+
+
+def silhouette_with_ground_truth(mesh, resolution=400):
+    """Side view silhouette (projection onto the plane of the two longest principal axes).
+
+    Ground truth of an outline point: the rim vertices projecting onto it; a silhouette cannot tell the
+    near side from the far side, so both the nearest and the farthest such vertex are returned.
+    """
+    centred = mesh.vertices - mesh.vertices.mean(axis=0)
+    _, _, vt = np.linalg.svd(centred, full_matrices=False)
+    view, up = vt[2], vt[1]
+    contour = render_silhouette(mesh, view, resolution, up=up)
+    nrm, _, _ = plane_basis(view)
+    v = up - (up @ nrm) * nrm
+    v /= np.linalg.norm(v)
+    u = np.cross(v, nrm)
+    xy = np.column_stack([mesh.vertices @ u, mesh.vertices @ v])
+    lo, hi = xy.min(axis=0), xy.max(axis=0)
+    pix = (resolution - 1) / max(hi - lo)
+    proj = np.column_stack([(xy[:, 0] - lo[0]) * pix + 4, -((hi[1] - xy[:, 1]) * pix + 4)])
+    depth = mesh.vertices @ nrm
+    return contour, proj, depth
+
+
+def rim_ground_truth(points, proj, depth, radius=3.0):
+    tree = cKDTree(proj)
+    near, far = [], []
+    for p in points:
+        idx = tree.query_ball_point(p, radius)
+        if not idx:
+            idx = [tree.query(p)[1]]
+        idx = np.array(idx)
+        near.append(idx[np.argmin(depth[idx])])
+        far.append(idx[np.argmax(depth[idx])])
+    return np.array(near), np.array(far)
+
+
+@pytest.fixture(scope="module")
+def wolf_silhouette_match(wolf_pair):
+    wolf0, wolf1 = wolf_pair
+    contour, proj, depth = silhouette_with_ground_truth(wolf0)
+    result = solve("contour3d", contour, wolf1, n_contour=120)
+    return contour, proj, depth, result
+
+
+def test_path_is_a_valid_closed_matching(wolf_silhouette_match, wolf_pair):
+    _, _, _, result = wolf_silhouette_match
+    wolf1 = wolf_pair[1]
+    verts, layers = result.extras["path_vertices"], result.extras["path_layers"]
+    m = 120
+    assert verts[0] == verts[-1] and layers[0] == 0 and layers[-1] == m
+    steps = np.diff(layers)
+    assert set(np.unique(steps)) <= {0, 1}
+    assert set(layers) == set(range(m + 1))
+    adj = wolf1.adjacency
+    moved = verts[1:] != verts[:-1]
+    assert all(adj[a, b] > 0 for a, b in zip(verts[:-1][moved], verts[1:][moved]))
+    assert result.map_xy.shape == (m,) and result.map_xy.min() >= 0
+    assert result.extras["optimal"] and result.energy == pytest.approx(result.extras["lower_bound"])
+
+
+def test_silhouette_matches_its_shape_in_another_pose(wolf_silhouette_match, wolf_pair):
+    """Ground truth by projection: the silhouette of wolf0 matched to wolf1 (same vertex order).
+
+    Threshold: measured median 0.08 and 55 % of points within 0.1 (errors / sqrt(area), the nearer of
+    the near-side and far-side rim vertex). A silhouette outline carries no left/right information and
+    the paper's intrinsic features are blind to it, so the symmetric error is the meaningful one; legs
+    that overlap in the projection keep a tail of large errors.
+    """
+    contour, proj, depth, result = wolf_silhouette_match
+    wolf1 = wolf_pair[1]
+    points = contour.ccw().resample(120).points
+    near, far = rim_ground_truth(points, proj, depth)
+    solver = GeodesicSolver(wolf1)
+    err = np.minimum(solver.pair_distances(result.map_xy, near), solver.pair_distances(result.map_xy, far))
+    err /= np.sqrt(wolf1.area)
+    assert np.median(err) < 0.15, np.median(err)
+    assert np.mean(err < 0.1) > 0.4, np.mean(err < 0.1)
+    # far better than chance: random vertices are ~0.5 away
+    random_err = solver.pair_distances(np.random.default_rng(0).integers(0, wolf1.n_vertices, 120), near)
+    assert np.median(err) < 0.4 * np.median(random_err / np.sqrt(wolf1.area))
+
+
+def test_result_is_invariant_to_similarity_transforms(wolf_pair):
+    wolf0, wolf1 = wolf_pair
+    contour, _, _ = silhouette_with_ground_truth(wolf0, resolution=200)
+    base = solve("contour3d", contour, wolf1, n_contour=60, eps=0.0)
+    moved_contour = contour.transformed(scale=0.013, rotation=1.1, translation=(40.0, -7.0))
+    rot = trimesh.transformations.random_rotation_matrix(np.random.default_rng(2).random(3))[:3, :3]
+    moved_mesh = TriMesh(3.7 * wolf1.vertices @ rot.T + [1, 2, 3], wolf1.faces, name="moved")
+    other = solve("contour3d", moved_contour, moved_mesh, n_contour=60, eps=0.0)
+    assert other.energy == pytest.approx(base.energy, rel=1e-6)
+    assert np.mean(other.map_xy == base.map_xy) > 0.95
+
+
+def test_part_labels_add_tau():
+    feats_c = np.zeros((3, 2))
+    feats_m = np.array([[0.0, 0.0], [1.0, 2.0]])
+    cost = node_costs(feats_c, feats_m, np.array([0, 1, 2]), np.array([1, 2]), tau=100.0)
+    assert np.allclose(cost, [[0, 3], [0, 103], [100, 3]])
+
+
+def test_part_labels_constrain_the_match(wolf_pair):
+    wolf0, wolf1 = wolf_pair
+    contour, _, _ = silhouette_with_ground_truth(wolf0, resolution=200)
+    c = contour.ccw().resample(80)
+    # label the front and back halves on both shapes (along the longest axis)
+    axis = np.linalg.svd(wolf1.vertices - wolf1.vertices.mean(0), full_matrices=False)[2][0]
+    mesh_labels = np.where((wolf1.vertices - wolf1.vertices.mean(0)) @ axis > 0, 1, 2)
+    x = c.points[:, 0] - c.points[:, 0].mean()
+    labelled = Contour2D(c.points, labels=np.where(x > 0, 1, 2))
+    for flip in (False, True):
+        lab = mesh_labels if not flip else 3 - mesh_labels
+        result = solve("contour3d", labelled, wolf1.with_labels(lab), n_contour=80, eps=0.05)
+        agree = np.mean(lab[result.map_xy] == labelled.labels)
+        assert agree > 0.9, (flip, agree)
+
+
+def test_plane_section_loops(wolf_pair):
+    wolf0 = wolf_pair[0]
+    centre = wolf0.vertices.mean(axis=0)
+    normal = np.linalg.svd(wolf0.vertices - centre, full_matrices=False)[2][2]
+    loops = plane_section(wolf0, centre, normal)
+    assert loops
+    lp = loops[0]
+    # points lie in the plane and on their edges
+    assert np.allclose((lp.points - centre) @ (normal / np.linalg.norm(normal)), 0, atol=1e-9)
+    v = wolf0.vertices
+    assert np.allclose(lp.points, (1 - lp.weights)[:, None] * v[lp.edges[:, 0]] + lp.weights[:, None] * v[lp.edges[:, 1]])
+    assert np.all((lp.weights >= 0) & (lp.weights <= 1))
+    Contour2D(lp.points_2d)  # a valid simple closed contour
+
+
+def test_retrieval_ranks_the_class_first():
+    meshes = [TOSCA / "cat0.off", TOSCA / "cat1.off", TOSCA / "wolf0.off", TOSCA / "wolf1.off",
+              SUMNER / "lion-00.off"]
+    rankings = []
+    for query_mesh, jobs in (("wolf0", 2), ("cat0", 1)):
+        contour, _, _ = silhouette_with_ground_truth(load_mesh(TOSCA / f"{query_mesh}.off"), resolution=300)
+        progress = []
+        hits = run(retrieve(contour, meshes, jobs=jobs), callback=progress.append)
+        assert len(progress) >= len(meshes)
+        labels = [h.label for h in hits]
+        assert labels[:2] == [class_of(query_mesh)] * 2, [(h.path.name, h.energy) for h in hits]
+        assert all(h.error == "" and np.isfinite(h.energy) for h in hits)
+        rankings.append((class_of(query_mesh), labels))
+    assert mean_average_precision(rankings) == pytest.approx(1.0)
+
+
+def test_retrieval_reports_broken_meshes(tmp_path):
+    (tmp_path / "broken3.off").write_text("OFF\n3 1 0\n0 0 0\n")
+    t = np.linspace(0, 2 * np.pi, 50, endpoint=False)
+    hits = run(retrieve(Contour2D(np.column_stack([np.cos(t), np.sin(t)])),
+                        [tmp_path / "broken3.off", TOSCA / "wolf0.off"], jobs=1))
+    assert hits[0].path.name == "wolf0.off" and np.isinf(hits[1].energy) and "broken3.off" in hits[1].error
+
+
+def test_average_precision_by_hand():
+    assert class_of("cat0.off") == "cat" and class_of("lion-00.off") == "lion" and class_of("x/dog_12.ply") == "dog"
+    assert average_precision(["a", "b", "a"], "a") == pytest.approx((1 + 2 / 3) / 2)
+    assert average_precision(["b", "b"], "a") == 0.0
+
+
+def test_bad_inputs(wolf_pair):
+    wolf1 = wolf_pair[1]
+    t = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    with pytest.raises(ContourError, match="open contour"):
+        Contour2D.from_open_points(np.column_stack([np.cos(t), np.sin(t)])[:25])
+    with pytest.raises(ContourError, match="intersects itself"):
+        Contour2D(np.column_stack([np.sin(t), np.sin(t) * np.cos(t)]))
+    with pytest.raises(ContourError, match="at least 10"):
+        Contour2D(np.column_stack([np.cos(t), np.sin(t)])[::5])
+    with pytest.raises(ParameterError, match="n_contour"):
+        solve("contour3d", Contour2D(np.column_stack([np.cos(t), np.sin(t)])), wolf1, n_contour=5)
+    two = trimesh.util.concatenate([trimesh.creation.icosphere(2), trimesh.creation.box().apply_translation([4, 0, 0])])
+    broken = TriMesh(two.vertices, two.faces, validate=False, name="two-parts")
+    with pytest.raises(InputError, match="two-parts.*disconnected"):
+        solve("contour3d", Contour2D(np.column_stack([np.cos(t), np.sin(t)])), broken, n_contour=20)

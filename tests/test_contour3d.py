@@ -151,8 +151,10 @@ def test_path_is_a_valid_closed_matching(wolf_silhouette_match, wolf_pair):
 def test_silhouette_matches_its_shape_in_another_pose(wolf_silhouette_match, wolf_pair):
     """Ground truth by projection: the silhouette of wolf0 matched to wolf1 (same vertex order).
 
-    Threshold: measured median 0.08 and 55 % of points within 0.1 (errors / sqrt(area), the nearer of
-    the near-side and far-side rim vertex). A silhouette outline carries no left/right information and
+    The query is the outline of wolf0's projection onto the plane of its two longest principal axes; its
+    ground truth are the rim vertices that project onto each outline point. Thresholds: measured median
+    0.09, mean 0.11 and 58 % of points within 0.1 (errors / sqrt(area), the nearer of the near-side and
+    far-side rim vertex); random vertices are ~0.5 away. A silhouette outline carries no left/right information and
     the paper's intrinsic features are blind to it, so the symmetric error is the meaningful one; legs
     that overlap in the projection keep a tail of large errors.
     """
@@ -164,6 +166,7 @@ def test_silhouette_matches_its_shape_in_another_pose(wolf_silhouette_match, wol
     err = np.minimum(solver.pair_distances(result.map_xy, near), solver.pair_distances(result.map_xy, far))
     err /= np.sqrt(wolf1.area)
     assert np.median(err) < 0.15, np.median(err)
+    assert err.mean() < 0.2, err.mean()
     assert np.mean(err < 0.1) > 0.4, np.mean(err < 0.1)
     # far better than chance: random vertices are ~0.5 away
     random_err = solver.pair_distances(np.random.default_rng(0).integers(0, wolf1.n_vertices, 120), near)

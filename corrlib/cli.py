@@ -150,6 +150,11 @@ def _write_match_outputs(result, source, target, out: Path, *, quiet: bool = Fal
     written = [npz, js]
     if result.map_xy is not None:
         written.append(save_map(out.with_name(out.name + ".map_xy.txt"), result.map_xy))
+    if "energy_trace" in result.extras:
+        from corrlib.plotting import save_energy_trace
+
+        written.append(save_energy_trace(out.with_name(out.name + ".energy.png"), result.extras["energy_trace"],
+                                         result.extras.get("tau_trace")))
     if result.map_yx is not None:
         written.append(save_map(out.with_name(out.name + ".map_yx.txt"), result.map_yx))
         from corrlib.plotting import save_colour_transfer
@@ -170,13 +175,45 @@ def _progress_printer(quiet: bool):
     return callback
 
 
+def _initial_match(value: str, source, target):
+    """``--init``: a map file (one target index per source vertex) or a landmarks file (two columns)."""
+    from corrlib.io import load_map
+    from corrlib.methods.kernel_matching import InitialMatch
+
+    path = Path(value)
+    if not path.exists():
+        raise FileFormatError(f"{path}: --init is neither 'descriptors', 'fmap' nor an existing file")
+    rows = [line.split() for line in path.read_text().splitlines() if line.strip() and not line.startswith("#")]
+    if rows and len(rows[0]) == 2:
+        try:
+            pairs = np.array(rows, dtype=np.int64)
+        except ValueError:
+            raise FileFormatError(f"{path}: landmarks must be two integer columns (source, target)") from None
+        return InitialMatch(landmarks_x=pairs[:, 0], landmarks_y=pairs[:, 1])
+    return InitialMatch(map_xy=load_map(path, n_target=target.n_vertices, n_source=source.n_vertices))
+
+
 def cmd_match(args) -> int:
-    from corrlib.methods import solve
+    from corrlib.methods import get_method, solve
 
     source, target = _load_shape(args.source), _load_shape(args.target)
-    result = solve(args.method, source, target, callback=_progress_printer(args.quiet),
-                   **_parse_overrides(args.param))
+    overrides = _parse_overrides(args.param)
+    spec = get_method(args.method)
+    initial = None
+    if args.init:
+        if args.init in ("descriptors", "fmap"):
+            overrides["init"] = args.init
+        elif spec.refines:
+            initial = _initial_match(args.init, source, target)
+        else:
+            raise CorrError(f"method {spec.name!r} does not take an initial map (--init)")
+    if args.times:
+        overrides["times"] = args.times
+    result = solve(spec, source, target, callback=_progress_printer(args.quiet), initial=initial, **overrides)
     print(f"method {result.method}: energy {result.energy}, {result.timings.get('total', 0):.2f} s")
+    if "energy_trace" in result.extras:
+        trace = result.extras["energy_trace"]
+        print(f"energy trace ({trace.size} assignments): " + ", ".join(f"{e:.5g}" for e in trace))
     _write_match_outputs(result, source, target, Path(args.output), quiet=args.quiet)
     return 0
 
@@ -340,8 +377,11 @@ def build_parser() -> argparse.ArgumentParser:
     p = sub.add_parser("match", help="match two shapes with a registered method")
     p.add_argument("source")
     p.add_argument("target")
-    p.add_argument("--method", default="fmap-zoomout", help="registered method (see `corr methods`)")
+    p.add_argument("--method", default="kernel-matching", help="registered method (see `corr methods`)")
     p.add_argument("--param", action="append", metavar="NAME=VALUE", help="method parameter (repeatable)")
+    p.add_argument("--init", help="descriptors | fmap | a map file (one target index per source vertex) | "
+                                  "a landmarks file (source target per line), for methods that refine")
+    p.add_argument("--times", help="comma-separated diffusion times relative to the area (kernel matching)")
     p.add_argument("-o", "--output", default="result", help="output path without suffix")
     p.add_argument("-q", "--quiet", action="store_true")
     p.set_defaults(func=cmd_match)

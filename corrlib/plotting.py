@@ -162,3 +162,22 @@ def save_contour_match(path, contour_points: np.ndarray, mesh, path_vertices: np
     if title:
         fig.suptitle(title)
     return _save_figure(fig, path)
+
+
+def save_energy_trace(path, energy: np.ndarray, tau: np.ndarray | None = None) -> Path:
+    """PNG of an energy trace (one value per linear assignment), one colour per diffusion time."""
+    plt = _pyplot()
+    fig, ax = plt.subplots(figsize=(6, 4), dpi=100)
+    steps = np.arange(1, energy.size + 1)
+    if tau is None:
+        ax.plot(steps, energy, marker="o")
+    else:
+        for value in np.unique(tau)[::-1]:
+            sel = tau == value
+            ax.plot(steps[sel], energy[sel], marker="o", label=f"t/area = {value:.3g}")
+        ax.legend(fontsize=7)
+    ax.set_xlabel("linear assignment")
+    ax.set_ylabel("QAP energy")
+    ax.set_yscale("log")
+    ax.grid(alpha=0.3)
+    return _save_figure(fig, path)

@@ -36,7 +36,8 @@ def test_bad_input_exit_status(tmp_path, capsys):
     assert "junk.off" in capsys.readouterr().err
     assert main(["match", str(TOSCA / "wolf0.off"), str(TOSCA / "wolf1.off"), "--method", "nope"]) == 2
     assert "unknown method" in capsys.readouterr().err
-    assert main(["match", str(TOSCA / "wolf0.off"), str(TOSCA / "wolf1.off"), "--param", "k_init=-3",
+    assert main(["match", str(TOSCA / "wolf0.off"), str(TOSCA / "wolf1.off"), "--method", "fmap-zoomout",
+                 "--param", "k_init=-3",
                  "-o", str(tmp_path / "r")]) == 2
     assert "below its minimum" in capsys.readouterr().err
     with pytest.raises(SystemExit) as exc:
@@ -118,3 +119,27 @@ def test_match_contour_bad_input(tmp_path, capsys):
     assert "open contour" in capsys.readouterr().err
     assert main(["retrieve", str(SILHOUETTES / "horse.png"), str(tmp_path)]) == 2
     assert "no mesh files" in capsys.readouterr().err
+
+
+def test_match_kernel_with_init_file(tmp_path, capsys):
+    n = 4344
+    noisy = np.arange(n)
+    noisy[::3] = np.random.default_rng(0).integers(0, n, noisy[::3].size)
+    np.savetxt(tmp_path / "init.txt", noisy, fmt="%d")
+    out = tmp_path / "km"
+    args = ["match", str(TOSCA / "wolf0.off"), str(TOSCA / "wolf1.off"), "--method", "kernel-matching",
+            "--init", str(tmp_path / "init.txt"), "--param", "n_eigs=100", "--param", "n_seeds=600",
+            "--times", "0.01,0.003,0.001", "-o", str(out), "-q"]
+    assert main(args) == 0
+    text = capsys.readouterr().out
+    assert "energy trace" in text
+    refined = np.loadtxt(tmp_path / "km.map_xy.txt", dtype=int)
+    assert np.mean(refined == np.arange(n)) > np.mean(noisy == np.arange(n))
+    assert (tmp_path / "km.energy.png").exists() and (tmp_path / "km.png").exists()
+    np.savetxt(tmp_path / "lm.txt", np.array([[5, 5], [900, 900], [2000, 2000], [3000, 3000]]), fmt="%d")
+    assert main(args[:5] + ["--init", str(tmp_path / "lm.txt"), "--param", "n_eigs=100", "--param", "n_seeds=600",
+                            "-o", str(tmp_path / "lm"), "-q"]) == 0
+    assert main(["match", str(TOSCA / "wolf0.off"), str(TOSCA / "wolf1.off"), "--method", "descriptor-nn",
+                 "--init", str(tmp_path / "init.txt")]) == 2
+    assert "does not take an initial map" in capsys.readouterr().err
+    assert main(args[:5] + ["--init", str(tmp_path / "nothing.txt")]) == 2

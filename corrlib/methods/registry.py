@@ -52,6 +52,8 @@ class MethodSpec:
     solve: SolveFn
     description: str = ""
     rank: int = 0
+    #: the solver accepts ``initial=`` (a starting map or landmarks) and can refine another method's map
+    refines: bool = False
 
 
 _REGISTRY: dict[str, MethodSpec] = {}
@@ -99,7 +101,7 @@ def methods_for(source, target) -> list[MethodSpec]:
 
 
 def solve(method: str | MethodSpec, source, target, params=None, *, callback=None,
-          token: CancelToken | None = None, **overrides) -> MatchResult:
+          token: CancelToken | None = None, initial=None, **overrides) -> MatchResult:
     """Run a registered method to completion.
 
     Parameters
@@ -111,6 +113,9 @@ def solve(method: str | MethodSpec, source, target, params=None, *, callback=Non
     callback : callable, optional
         Receives every :class:`Progress`.
     token : CancelToken, optional
+    initial : optional
+        Starting point for methods that refine a map (``spec.refines``), e.g.
+        :class:`corrlib.methods.kernel_matching.InitialMatch`.
 
     Returns
     -------
@@ -127,8 +132,12 @@ def solve(method: str | MethodSpec, source, target, params=None, *, callback=Non
     else:
         validate_params(params)
     token = token or CancelToken()
+    if initial is not None and not spec.refines:
+        raise InputError(f"method {spec.name!r} does not take an initial map")
     start = time.perf_counter()
-    result = run(spec.solve(source, target, params, token), callback=callback, token=token)
+    gen = spec.solve(source, target, params, token, initial=initial) if initial is not None else \
+        spec.solve(source, target, params, token)
+    result = run(gen, callback=callback, token=token)
     result.timings.setdefault("total", time.perf_counter() - start)
     result.params = asdict(params)
     result.method = spec.name

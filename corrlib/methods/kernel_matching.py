@@ -1,0 +1,457 @@
+"""Kernel matching (thesis ch. 8; Vestner, Lähner, Boyarski et al., 3DV 2017).
+
+The correspondence maximises the quadratic assignment objective
+
+``f(Π) = <Π, K_Y Π K_X> + μ <Π, F_Y F_Xᵀ>``  over permutations Π,
+
+with heat kernels ``K = Φ e^{-tΛ} Φᵀ`` (spectral form, values of the heat
+kernel between vertices; Φ M-orthonormal). ``f`` is convex (both kernels are
+positive semi-definite), so the DC algorithm — maximise the linearisation
+``G = ∇f(Π_k) = K_Y Π_k K_X + μ F_Y F_Xᵀ`` (Eq. 8.13) by one linear
+assignment — never decreases it (checked and reported per iteration). The
+score is formed in spectral form only on the rows and columns of the current
+problem: ``G = (Ψ_r e^{-tΛ_Y}) C (Φ_c e^{-tΛ_X})ᵀ`` with the k×k matrix
+``C = Ψ[map]ᵀ Φ`` summed over the current matches, in float32.
+
+Diffusion times decrease over a schedule (coarse, global alignment first;
+detail last). Times are relative to the surface area (``t = τ · area``, the
+heat kernel is then scale-invariant); the default τ from 0.0259 to 5.18e-4
+equals 500 → 10 at the TOSCA area scale of 1.93e4.
+
+Multiscale (§8.3.2): farthest-point seeds (default 3000) are matched first
+with the full schedule. The sample is then grown by ``growth`` per scale
+(farthest-point prefixes) until every vertex is included. At each scale
+the source sample is split into geodesic Voronoi cells of at most
+``max_cell`` points around matched centres; the cells are transferred to the
+target through the current map (Voronoi cells around the centres' images),
+and every cell is an independent partial assignment whose score uses the
+kernel alignment with all current matches as anchors. Cells are redrawn
+around different centres at every refinement pass, so no boundary stays
+fixed; cells run in threads (the auction releases the GIL).
+
+A last pointwise step (``smooth_k``) projects the map onto the first
+eigenfunctions and gives every vertex its best-scoring partner; the maps are
+then no longer bijective, which suits independently remeshed shapes.
+
+Unequal vertex counts: rectangular assignments are padded; with
+``partial=True`` slack variables (Eq. 8.15–8.16) let low-scoring vertices
+stay unmatched (-1 in the maps, reported).
+
+Map convention: ``map_xy[i]`` = vertex of Y matched to vertex i of X.
+"""
+
+from __future__ import annotations
+
+from concurrent.futures import ThreadPoolExecutor
+from dataclasses import dataclass
+
+import numpy as np
+
+from corrlib.assignment import linear_assignment
+from corrlib.descriptors import DESCRIPTOR_KINDS, mesh_descriptors
+from corrlib.errors import InputError, ParameterError
+from corrlib.geometry.sampling import farthest_point_sampling, voronoi_cells
+from corrlib.geometry.spectrum import mesh_spectrum
+from corrlib.methods.base import MatchResult, param
+from corrlib.methods.registry import MethodSpec, register
+from corrlib.progress import Progress, Stopwatch
+
+
+@dataclass(frozen=True, kw_only=True)
+class KernelMatchingParams:
+    n_eigs: int = param(500, label="Eigenpairs", low=10, high=3000,
+                        help="Laplace–Beltrami eigenpairs of the heat kernels (spectral form).")
+    init: str = param("descriptors", label="Initialisation", choices=("descriptors", "fmap"),
+                      help="Linear assignment on descriptors, or the functional-maps baseline's map "
+                           "(a given map or landmarks can be passed to the solver instead).")
+    descriptor: str = param("shot", label="Descriptor", choices=DESCRIPTOR_KINDS,
+                            help="Descriptor of the initial assignment and of the μ term (SHOT tells left "
+                                 "from right, the spectral ones do not).")
+    mu: float = param(0.1, label="Descriptor weight μ", low=0.0, high=1e6,
+                      help="Weight of the descriptor term F_Y F_Xᵀ in the score (relative to the kernel "
+                           "term, both scaled to unit maximum).")
+    tau_max: float = param(0.0259, label="Largest time / area", low=1e-7, high=10.0,
+                           help="First diffusion time divided by the surface area (500 at TOSCA scale).")
+    tau_min: float = param(5.18e-4, label="Smallest time / area", low=1e-8, high=10.0,
+                           help="Last diffusion time divided by the surface area (10 at TOSCA scale).")
+    n_times: int = param(10, label="Times", low=1, high=100, help="Log-spaced diffusion times.")
+    times: str = param("", label="Explicit times / area",
+                       help="Comma-separated relative times (decreasing) replacing the log-spaced schedule.")
+    iters_per_time: int = param(3, label="Iterations per time", low=1, high=100,
+                                help="DC iterations (linear assignments) per time; stops early when the "
+                                     "map no longer changes.")
+    n_seeds: int = param(3000, label="Seeds", low=10, high=100_000,
+                         help="Farthest-point samples matched first with the whole schedule.")
+    growth: float = param(3.0, label="Growth factor", low=1.5, high=100.0,
+                          help="Sample growth per scale until every vertex is matched.")
+    max_cell: int = param(1000, label="Max cell size", low=50, high=20_000,
+                          help="Largest Voronoi cell solved as one assignment at the finer scales.")
+    passes: int = param(2, label="Passes per scale", low=1, high=20,
+                        help="Refinement passes per finer scale, each with cells around new centres.")
+    partial: bool = param(False, label="Partial matching",
+                          help="Slack variables: vertices whose best score is low may stay unmatched.")
+    slack_quantile: float = param(0.1, label="Slack quantile", low=0.0, high=1.0,
+                                  help="With partial matching: the slack equals this quantile of the rows' "
+                                       "best scores in each cell.")
+    smooth_k: int = param(0, label="Final smoothing basis", low=0, high=3000,
+                          help="Final pointwise step: the map is projected onto this many eigenfunctions and "
+                               "every vertex takes the best-scoring partner (one ZoomOut-style step; removes "
+                               "the jitter a bijection forces between differently sampled meshes). 0: off.")
+    backend: str = param("auction", label="Assignment backend", choices=("auction", "scipy"),
+                         help="ε-scaling auction (fast) or scipy's exact solver (slow, for checks).")
+
+
+@dataclass
+class InitialMatch:
+    """A starting point for kernel matching (refinement of another method's output).
+
+    Either a dense map (``map_xy``, -1 allowed) or sparse landmarks
+    (``landmarks_x``, ``landmarks_y``). Landmarks are kept as anchors in every
+    score, so they stay matched.
+    """
+
+    map_xy: np.ndarray | None = None
+    landmarks_x: np.ndarray | None = None
+    landmarks_y: np.ndarray | None = None
+
+    def pairs(self, n_x: int, n_y: int) -> tuple[np.ndarray, np.ndarray]:
+        if self.map_xy is not None:
+            mp = np.asarray(self.map_xy, dtype=np.int64)
+            if mp.shape != (n_x,):
+                raise InputError(f"the initial map has {mp.shape[0]} entries, the source {n_x} vertices")
+            if mp.max() >= n_y:
+                raise InputError(f"the initial map points to vertex {mp.max()} of a {n_y}-vertex target")
+            keep = np.flatnonzero(mp >= 0)
+            if keep.size == 0:
+                raise InputError("the initial map matches no vertex")
+            return keep, mp[keep]
+        lx = np.asarray(self.landmarks_x, dtype=np.int64)
+        ly = np.asarray(self.landmarks_y, dtype=np.int64)
+        if lx.size == 0 or lx.shape != ly.shape:
+            raise InputError(f"landmarks need equally many source and target indices, got {lx.size} and {ly.size}")
+        if lx.min() < 0 or lx.max() >= n_x or ly.min() < 0 or ly.max() >= n_y:
+            raise InputError("landmark index out of range")
+        return lx, ly
+
+
+def diffusion_times(params: KernelMatchingParams) -> np.ndarray:
+    """(n_times,) float: relative times τ, decreasing."""
+    if params.times.strip():
+        try:
+            taus = np.array([float(v) for v in params.times.replace(";", ",").split(",") if v.strip()])
+        except ValueError:
+            raise ParameterError(f"times must be comma-separated numbers, got {params.times!r}") from None
+        if taus.size == 0 or not np.all(np.isfinite(taus)) or np.any(taus <= 0):
+            raise ParameterError(f"times must be positive numbers, got {params.times!r}")
+        return taus
+    if params.tau_min > params.tau_max:
+        raise ParameterError(f"tau_min ({params.tau_min}) must not exceed tau_max ({params.tau_max})")
+    return np.geomspace(params.tau_max, params.tau_min, params.n_times)
+
+
+def _pointwise_from_basis(map_xy, map_yx, phi, psi, k, chunk: int = 1024):
+    """Best-scoring partners of ``Ψ_k C Φ_kᵀ`` with ``C = Ψ_k[map]ᵀ Φ_k`` (unmatched vertices stay -1)."""
+    valid = map_xy >= 0
+    c = psi[map_xy[valid], :k].T @ phi[valid, :k]
+    left = (psi[:, :k] @ c).astype(np.float32)  # (n_y, k): rows of the score, one per target vertex
+    right = phi[:, :k].astype(np.float32)
+    new_xy = map_xy.copy()
+    for start in range(0, right.shape[0], chunk):
+        best = np.argmax(left @ right[start:start + chunk].T, axis=0)
+        block = slice(start, start + chunk)
+        new_xy[block] = np.where(valid[block], best, -1)
+    new_yx = map_yx.copy()
+    for start in range(0, left.shape[0], chunk):
+        best = np.argmax(left[start:start + chunk] @ right.T, axis=1)
+        block = slice(start, start + chunk)
+        new_yx[block] = np.where(map_yx[block] >= 0, best, -1)
+    return new_xy, new_yx
+
+
+def kernel_energy(c: np.ndarray, decay_y: np.ndarray, decay_x: np.ndarray) -> float:
+    """``<Π, K_Y Π K_X> = trace(D_Y C D_X Cᵀ)`` for ``C = Ψ[map]ᵀ Φ``."""
+    return float(np.einsum("ij,i,ij,j->", c, decay_y, c, decay_x))
+
+
+def _alignment(psi_rows, phi_rows):
+    return psi_rows.T @ phi_rows
+
+
+def _score(psi_rows, phi_cols, c, decay_y, decay_x):
+    """(r, c) float32 kernel score block ``(Ψ_r D_Y) C (Φ_c D_X)ᵀ``."""
+    left = ((psi_rows * decay_y) @ c).astype(np.float32)
+    right = (phi_cols * decay_x).astype(np.float32)
+    return left @ right.T
+
+
+def _descriptor_similarity(fy: np.ndarray, fx: np.ndarray) -> np.ndarray:
+    """(r, c) float32: negative squared distances, scaled to [-1, 0]."""
+    fy32, fx32 = fy.astype(np.float32), fx.astype(np.float32)
+    d2 = (fy32 ** 2).sum(1)[:, None] + (fx32 ** 2).sum(1)[None, :] - 2.0 * fy32 @ fx32.T
+    return -d2 / max(float(d2.max()), 1e-30)
+
+
+def _descriptors(source, target, spec_x, spec_y, kind: str):
+    """Descriptors of both shapes, every dimension scaled by its joint standard deviation."""
+    desc_x = mesh_descriptors(source, kind, spectrum=spec_x) if kind != "shot" else mesh_descriptors(source, kind)
+    desc_y = mesh_descriptors(target, kind, spectrum=spec_y) if kind != "shot" else mesh_descriptors(target, kind)
+    scale = np.concatenate([desc_x, desc_y]).std(axis=0)
+    scale[scale == 0] = 1.0
+    return desc_x / scale, desc_y / scale
+
+
+def _sample_order(points: np.ndarray, n_seed: int, growth: float) -> np.ndarray:
+    """Vertex order whose prefixes are the samples of the successive scales.
+
+    Farthest-point order for the first ``n_seed × growth²`` vertices (the
+    seeds and the first finer scales); the rest follow in a fixed random order
+    (they only enter the last, dense scales).
+    """
+    n = points.shape[0]
+    n_fps = int(min(n, n_seed * growth ** 2))
+    radius = np.linalg.norm(points - points.mean(axis=0), axis=1)
+    # start at the vertex farthest from the centroid and order the rest by that distance: the samples
+    # do not depend on the vertex order of the file
+    head = farthest_point_sampling(points, n_fps, start=int(np.argmax(radius)))
+    rest = np.setdiff1d(np.arange(n), head)
+    return np.concatenate([head, rest[np.argsort(-radius[rest], kind="stable")]])
+
+
+def _nearest_in(sub_candidates: np.ndarray, points: np.ndarray, queries: np.ndarray) -> np.ndarray:
+    """For every query vertex, the nearest vertex (Euclidean) among ``sub_candidates``."""
+    from scipy.spatial import cKDTree
+
+    return sub_candidates[cKDTree(points[sub_candidates]).query(points[queries])[1]]
+
+
+def _solve_cells(x_idx, y_idx, labels_x, labels_y, n_cells, psi, phi, c, decay_y, decay_x, params, cancel):
+    """One refinement pass: every cell is a (partial) assignment; returns maps on the sample."""
+    map_xy = {}
+    map_yx = {}
+
+    def cell(cid):
+        xs = x_idx[labels_x == cid]
+        ys = y_idx[labels_y == cid]
+        if xs.size == 0 or ys.size == 0:
+            return xs, ys, None, None
+        g = _score(psi[ys], phi[xs], c, decay_y, decay_x)
+        slack = None
+        if params.partial:
+            slack = float(np.quantile(g.max(axis=0), params.slack_quantile))
+        cols = linear_assignment(g.T, slack=slack, method=params.backend, cancel=cancel)  # rows: xs
+        return xs, ys, g, cols
+
+    with ThreadPoolExecutor(max_workers=2) as pool:
+        for xs, ys, g, cols in pool.map(cell, range(n_cells)):
+            if g is None:
+                continue
+            best_y = ys[np.argmax(g, axis=0)]
+            best_x = xs[np.argmax(g, axis=1)]
+            mx = np.where(cols >= 0, ys[np.clip(cols, 0, None)], -1)
+            if not params.partial:
+                mx = np.where(mx >= 0, mx, best_y)  # smaller target cell: the rest by best score
+            for x, y in zip(xs, mx):
+                map_xy[int(x)] = int(y)
+            inv = -np.ones(ys.size, dtype=np.int64)
+            matched = cols >= 0
+            inv[cols[matched]] = xs[matched]
+            if not params.partial:
+                inv = np.where(inv >= 0, inv, best_x)
+            for y, x in zip(ys, inv):
+                map_yx[int(y)] = int(x)
+    return map_xy, map_yx
+
+
+def kernel_matching(source, target, params: KernelMatchingParams, token, initial: InitialMatch | None = None):
+    """Solver generator (see the module docstring); returns a :class:`MatchResult`."""
+    watch = Stopwatch()
+    cancel = token.flag
+    n_x, n_y = source.n_vertices, target.n_vertices
+    for mesh in (source, target):
+        if params.n_eigs >= mesh.n_vertices:
+            raise ParameterError(f"{params.n_eigs} eigenpairs requested but {mesh.name} has only "
+                                 f"{mesh.n_vertices} vertices (lower n_eigs)")
+    k = params.n_eigs
+    taus = diffusion_times(params)
+    yield Progress("eigenpairs", 0.0, f"{k} eigenpairs per shape")
+    with watch("eigen"):
+        spec_x = mesh_spectrum(source, k)
+        spec_y = mesh_spectrum(target, k)
+    phi, psi = spec_x.evecs, spec_y.evecs
+    token.raise_if_cancelled()
+
+    def decays(tau):
+        return np.exp(-tau * target.area * spec_y.evals), np.exp(-tau * source.area * spec_x.evals)
+
+    # farthest-point orders: every prefix is a well-spread sample
+    with watch("sampling"):
+        n_seed = min(params.n_seeds, n_x, n_y)
+        order_x = _sample_order(source.vertices, n_seed, params.growth)
+        order_y = _sample_order(target.vertices, n_seed, params.growth)
+    sx, sy = order_x[:n_seed], order_y[:n_seed]
+    seed_pos_y = -np.ones(n_y, dtype=np.int64)
+    seed_pos_y[sy] = np.arange(n_seed)
+
+    anchors_x = anchors_y = np.zeros(0, dtype=np.int64)
+    desc_x = desc_y = None
+    if initial is not None:
+        ix, iy = initial.pairs(n_x, n_y)
+        if initial.map_xy is None:
+            anchors_x, anchors_y = ix, iy
+        yield Progress("initial map", 0.1, f"{ix.size} given matches")
+        # each seed follows its nearest matched vertex; the partner snaps to the nearest target seed
+        partner_of = -np.ones(n_x, dtype=np.int64)
+        partner_of[ix] = iy
+        partner = partner_of[_nearest_in(ix, source.vertices, sx)]
+        seed_map = seed_pos_y[_nearest_in(sy, target.vertices, partner)]
+    elif params.init == "fmap":
+        from corrlib.methods.baselines import FmapZoomOutParams, solve_fmap_zoomout
+        from corrlib.progress import run
+
+        yield Progress("initial map", 0.05, "functional maps + ZoomOut")
+        with watch("init"):
+            fm = run(solve_fmap_zoomout(source, target, FmapZoomOutParams(), token))
+        seed_map = seed_pos_y[_nearest_in(sy, target.vertices, fm.map_xy[sx])]
+    else:
+        yield Progress("descriptors", 0.05, params.descriptor)
+        with watch("descriptors"):
+            desc_x, desc_y = _descriptors(source, target, spec_x, spec_y, params.descriptor)
+        with watch("assignment"):
+            sim = _descriptor_similarity(desc_y[sy], desc_x[sx])
+            seed_map = linear_assignment(sim.T, method=params.backend, cancel=cancel)  # seed x -> seed y
+    token.raise_if_cancelled()
+
+    # ---- coarse scale: DC iterations over the time schedule on the seeds
+    psi_s, phi_s = psi[sy], phi[sx]
+    desc_block = None
+    if params.mu > 0:
+        if desc_x is None:
+            desc_x, desc_y = _descriptors(source, target, spec_x, spec_y, params.descriptor)
+        desc_block = _descriptor_similarity(desc_y[sy], desc_x[sx])
+    anchor_c = _alignment(psi[anchors_y], phi[anchors_x]) if anchors_x.size else 0.0
+    trace, monotone = [], True
+    prices = np.zeros(n_seed)  # auction prices carried from one assignment to the next (warm start)
+    total_steps = len(taus) * params.iters_per_time
+    step = 0
+    seed_cols = np.arange(n_seed)
+
+    def objective(mapping, c_mat, scale):
+        # the function the DC steps maximise at this time: ½ kernel term (its gradient is K_Y Π K_X)
+        # plus μ × descriptor similarity, with the kernel term scaled by a constant of this time
+        value = 0.5 * kernel_energy(c_mat, decay_y, decay_x) / scale
+        if desc_block is not None:
+            value += params.mu * float(desc_block[mapping, seed_cols].sum())
+        return value
+
+    for t_index, tau in enumerate(taus):
+        decay_y, decay_x = decays(tau)
+        kernel_scale = None
+        for it in range(params.iters_per_time):
+            token.raise_if_cancelled()
+            with watch("kernels"):
+                c = _alignment(psi_s[seed_map], phi_s) + anchor_c
+                g = _score(psi_s, phi_s, c, decay_y, decay_x)
+                if kernel_scale is None:
+                    kernel_scale = max(float(np.abs(g).max()), 1e-30)
+                before = objective(seed_map, c, kernel_scale)
+                if desc_block is not None:
+                    g = g / np.float32(kernel_scale) + np.float32(params.mu) * desc_block
+            with watch("assignment"):
+                new_map = linear_assignment(g.T, method=params.backend, cancel=cancel, prices=prices)
+            changed = int(np.sum(new_map != seed_map))
+            c_new = _alignment(psi_s[new_map], phi_s) + anchor_c
+            after = objective(new_map, c_new, kernel_scale)
+            if after < before - 1e-5 * abs(before):
+                monotone = False
+            seed_map = new_map
+            trace.append({"tau": float(tau), "iteration": it, "energy": after, "changed": changed})
+            step += 1
+            yield Progress("kernel matching", 0.1 + 0.6 * step / total_steps,
+                           f"time {t_index + 1}/{len(taus)}, iteration {it + 1}: energy {after:.6g}, "
+                           f"{changed} changed")
+            if changed == 0:
+                step += params.iters_per_time - it - 1
+                break
+
+    # ---- finer scales: grow the sample, solve Voronoi cells with all current matches as anchors
+    matched_x, matched_y = sx, sy[seed_map]
+    seeds_x, seeds_matched_y = matched_x.copy(), matched_y.copy()
+    decay_y, decay_x = decays(taus[-1])
+    size = n_seed
+    full_map_xy = None
+    full_map_yx = None
+    while size < max(n_x, n_y):
+        size = int(min(max(n_x, n_y), np.ceil(size * params.growth)))
+        last = size >= max(n_x, n_y)
+        x_idx = order_x[:size]
+        y_idx = order_y[:size]
+        for p in range(params.passes):
+            token.raise_if_cancelled()
+            with watch("kernels"):
+                c = _alignment(psi[matched_y], phi[matched_x]) + anchor_c
+            n_cells = max(1, int(np.ceil(x_idx.size / (0.7 * params.max_cell))))
+            # cell centres: matched vertices, a different farthest-point set every pass
+            matched_pts = source.vertices[matched_x]
+            radius = np.linalg.norm(matched_pts - matched_pts.mean(axis=0), axis=1)
+            start = int(np.argsort(-radius, kind="stable")[min(p * 7, radius.size - 1)])
+            centres_pos = farthest_point_sampling(matched_pts, min(n_cells, matched_x.size), start=start)
+            centres_x = matched_x[centres_pos]
+            centres_y = matched_y[centres_pos]
+            centres_y, first = np.unique(centres_y, return_index=True)
+            centres_x = centres_x[first]
+            with watch("cells"):
+                lab_x, _ = voronoi_cells(source, centres_x)
+                lab_y, _ = voronoi_cells(target, centres_y)
+            with watch("assignment"):
+                mxy, myx = _solve_cells(x_idx, y_idx, lab_x[x_idx], lab_y[y_idx], centres_x.size, psi, phi, c,
+                                        decay_y, decay_x, params, cancel)
+            keys = np.fromiter(mxy.keys(), dtype=np.int64)
+            vals = np.fromiter(mxy.values(), dtype=np.int64)
+            ok = vals >= 0
+            matched_x, matched_y = keys[ok], vals[ok]
+            yield Progress("multiscale", 0.7 + 0.3 * size / max(n_x, n_y),
+                           f"{size} samples, pass {p + 1}/{params.passes}: {centres_x.size} cells")
+        if last:
+            full_map_xy = -np.ones(n_x, dtype=np.int64)
+            full_map_xy[keys] = vals
+            full_map_yx = -np.ones(n_y, dtype=np.int64)
+            ykeys = np.fromiter(myx.keys(), dtype=np.int64)
+            full_map_yx[ykeys] = np.fromiter(myx.values(), dtype=np.int64)
+    if full_map_xy is None:  # everything fit into the seeds
+        full_map_xy = -np.ones(n_x, dtype=np.int64)
+        full_map_xy[sx] = sy[seed_map]
+        full_map_yx = -np.ones(n_y, dtype=np.int64)
+        full_map_yx[sy[seed_map]] = sx
+    c = _alignment(psi[full_map_xy[full_map_xy >= 0]], phi[full_map_xy >= 0]) + anchor_c
+    energy = kernel_energy(c, decay_y, decay_x)
+    if params.smooth_k > 0:
+        yield Progress("smoothing", 0.98, f"pointwise map from a {min(params.smooth_k, k)}-dimensional basis")
+        with watch("smoothing"):
+            full_map_xy, full_map_yx = _pointwise_from_basis(full_map_xy, full_map_yx, phi, psi,
+                                                             min(params.smooth_k, k))
+    extras = {
+        "energy_trace": np.array([e["energy"] for e in trace]),
+        "changed_trace": np.array([e["changed"] for e in trace]),
+        "tau_trace": np.array([e["tau"] for e in trace]),
+        "monotone": monotone, "unmatched_x": int(np.sum(full_map_xy < 0)),
+        "unmatched_y": int(np.sum(full_map_yx < 0)), "n_eigs": k, "n_seeds": n_seed,
+        "seeds_x": seeds_x, "seeds_matched_y": seeds_matched_y,
+        "energy_meaning": "QAP kernel energy <Π, K_Y Π K_X> at the smallest time (higher is better); "
+                          "energy_trace: the objective of each time (½ scaled kernel term + μ descriptor term)",
+        "energy_sense": "max",
+    }
+    yield Progress("done", 1.0, f"energy {energy:.6g}")
+    return MatchResult("kernel-matching", full_map_xy, full_map_yx, energy, watch.times, extras=extras)
+
+
+def solve_kernel_matching(source, target, params: KernelMatchingParams, token,
+                          initial: InitialMatch | None = None):
+    """Registered solver (``initial``: optional :class:`InitialMatch` for refinement)."""
+    return (yield from kernel_matching(source, target, params, token, initial))
+
+
+register(MethodSpec(
+    name="kernel-matching", label="Kernel matching", inputs=("mesh", "mesh"), params=KernelMatchingParams,
+    solve=solve_kernel_matching, rank=20, refines=True,
+    description="Heat-kernel quadratic assignment solved as a sequence of linear assignments over decreasing "
+                "diffusion times, multiscale, with slack for partial shapes (Vestner et al. 3DV 2017)."))

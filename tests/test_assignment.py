@@ -1,0 +1,102 @@
+"""Linear assignment: the auction equals the exact optimum; slack and rectangular problems."""
+
+import itertools
+
+import numpy as np
+import pytest
+from scipy.optimize import linear_sum_assignment
+
+from corrlib.assignment import assignment_score, linear_assignment
+from corrlib.errors import Cancelled, InputError, ParameterError
+
+
+def exact_value(score):
+    r, c = linear_sum_assignment(score, maximize=True)
+    return float(score[r, c].sum())
+
+
+def test_auction_matches_exact_optimum_on_random_instances():
+    rng = np.random.default_rng(0)
+    for trial in range(200):
+        n = int(rng.integers(1, 301))
+        m = n if trial % 4 else int(rng.integers(1, 301))
+        score = rng.normal(size=(n, m)) * 10 ** rng.uniform(-3, 3)
+        if trial % 5 == 0:
+            score = np.round(score)  # many ties
+        sol = linear_assignment(score)
+        matched = sol[sol >= 0]
+        assert matched.size == min(n, m) and np.unique(matched).size == matched.size
+        span = score.max() - score.min() + 1e-300
+        assert abs(assignment_score(score, sol) - exact_value(score)) <= 1e-8 * span
+
+
+def test_auction_on_kernel_structured_scores(wolf_pair):
+    from corrlib.geometry.sampling import farthest_point_sampling
+    from corrlib.geometry.spectrum import mesh_spectrum
+
+    w0, w1 = wolf_pair
+    s0, s1 = mesh_spectrum(w0, 100), mesh_spectrum(w1, 100)
+    idx = farthest_point_sampling(w0.vertices, 400)
+    rng = np.random.default_rng(1)
+    for t in (5.0, 50.0, 500.0):  # smooth kernels are the hard case for assignment solvers
+        noisy = idx[rng.permutation(idx.size)]
+        c = s1.evecs[noisy].T @ s0.evecs[idx]
+        d0, d1 = np.exp(-t * s0.evals), np.exp(-t * s1.evals)
+        score = (s1.evecs[idx] * d1) @ c @ (s0.evecs[idx] * d0).T
+        for dtype in (np.float64, np.float32):
+            s = score.astype(dtype)
+            sol = linear_assignment(s)
+            assert abs(assignment_score(s, sol) - exact_value(s.astype(np.float64))) <= 1e-6 * np.ptp(score)
+
+
+def brute_force_partial(score, slack):
+    """Best partial matching: matched scores plus slack/2 per unmatched row and column."""
+    n, m = score.shape
+    best = -np.inf
+    for k in range(min(n, m) + 1):
+        for rows in itertools.combinations(range(n), k):
+            for cols in itertools.permutations(range(m), k):
+                value = sum(score[r, c] for r, c in zip(rows, cols)) + slack / 2 * ((n - k) + (m - k))
+                best = max(best, value)
+    return best
+
+
+def test_slack_matches_brute_force():
+    rng = np.random.default_rng(2)
+    for _ in range(40):
+        n, m = rng.integers(1, 5, size=2)
+        score = rng.normal(size=(n, m))
+        slack = float(rng.normal())
+        sol = linear_assignment(score, slack=slack)
+        matched = sol >= 0
+        value = assignment_score(score, sol) + slack / 2 * ((n - matched.sum()) + (m - matched.sum()))
+        assert value == pytest.approx(brute_force_partial(score, slack), abs=1e-8)
+    assert list(linear_assignment(np.array([[5.0, 0.0], [0.0, 1.0]]), slack=2.0)) == [0, -1]
+
+
+def test_rectangular_matches_scipy_and_warm_start():
+    rng = np.random.default_rng(3)
+    score = rng.random((30, 50))
+    sol = linear_assignment(score)
+    assert assignment_score(score, sol) == pytest.approx(exact_value(score), abs=1e-9)
+    wide = linear_assignment(score.T)
+    assert (wide >= 0).sum() == 30
+    prices = np.zeros(50)
+    first = linear_assignment(rng.random((50, 50)), prices=prices)
+    assert first.shape == (50,) and prices.max() > 0
+    second_score = rng.random((50, 50))
+    warm = linear_assignment(second_score, prices=prices)
+    assert assignment_score(second_score, warm) == pytest.approx(exact_value(second_score), abs=1e-8)
+
+
+def test_assignment_errors():
+    with pytest.raises(InputError, match="NaN"):
+        linear_assignment(np.array([[np.nan, 1.0], [0.0, 1.0]]))
+    with pytest.raises(InputError, match="non-empty"):
+        linear_assignment(np.zeros((0, 3)))
+    with pytest.raises(ParameterError, match="unknown assignment method"):
+        linear_assignment(np.eye(3), method="hungarian-magic")
+    flag = np.ones(1, dtype=np.int8)
+    with pytest.raises(Cancelled):
+        linear_assignment(np.random.default_rng(0).random((20, 20)), cancel=flag)
+    assert list(linear_assignment(np.eye(3), method="scipy")) == [0, 1, 2]

@@ -1,0 +1,156 @@
+"""Kernel matching: DC theory on brute-force instances, real shapes, invariance, refinement, bad input."""
+
+import itertools
+
+import numpy as np
+import pytest
+import trimesh
+
+from corrlib.assignment import linear_assignment
+from corrlib.errors import InputError, MeshError, ParameterError
+from corrlib.evaluation import geodesic_errors
+from corrlib.methods import solve
+from corrlib.methods.kernel_matching import InitialMatch
+from corrlib.shapes import TriMesh
+
+
+def random_psd(rng, n):
+    a = rng.normal(size=(n, n))
+    return a @ a.T / n
+
+
+def qap_value(perm_matrix, k_y, k_x):
+    return float(np.sum(perm_matrix * (k_y @ perm_matrix @ k_x)))
+
+
+def perm_matrix(perm):
+    p = np.zeros((perm.size, perm.size))
+    p[perm, np.arange(perm.size)] = 1.0  # column x -> row perm[x]
+    return p
+
+
+@pytest.mark.parametrize("n", [4, 5, 6])
+def test_relaxation_optimum_is_a_permutation_and_dc_is_monotone(n):
+    rng = np.random.default_rng(n)
+    for _ in range(5):
+        k_x, k_y = random_psd(rng, n), random_psd(rng, n)
+        best = max(qap_value(perm_matrix(np.array(p)), k_y, k_x) for p in itertools.permutations(range(n)))
+        # Corollary 2: a convex function on the Birkhoff polytope is maximal at a vertex (a permutation)
+        for _ in range(300):
+            d = rng.random((n, n)) + 1e-3
+            for _ in range(200):  # Sinkhorn: doubly stochastic
+                d /= d.sum(axis=0, keepdims=True)
+                d /= d.sum(axis=1, keepdims=True)
+            assert qap_value(d, k_y, k_x) <= best + 1e-9
+        # DC: each linear assignment on the gradient never decreases the objective
+        perm = rng.permutation(n)
+        values = [qap_value(perm_matrix(perm), k_y, k_x)]
+        for _ in range(10):
+            grad = k_y @ perm_matrix(perm) @ k_x
+            perm = linear_assignment(grad.T)  # x -> y
+            values.append(qap_value(perm_matrix(perm), k_y, k_x))
+        assert np.all(np.diff(values) >= -1e-10)
+        assert values[-1] <= best + 1e-9
+
+
+@pytest.fixture(scope="module")
+def wolf_result(wolf_pair):
+    return solve("kernel-matching", *wolf_pair)
+
+
+def test_wolf_recovers_the_identity(wolf_pair, wolf_result):
+    wolf0, wolf1 = wolf_pair
+    ident = np.arange(wolf0.n_vertices)
+    err = geodesic_errors(wolf_result.map_xy, wolf1, ident, ident).summary()
+    assert err["within_0.025"] >= 0.95, err
+    err_yx = geodesic_errors(wolf_result.map_yx, wolf0, ident, ident).summary()
+    assert err_yx["within_0.025"] >= 0.9, err_yx
+    assert wolf_result.extras["monotone"]
+    assert wolf_result.extras["unmatched_x"] == 0 and wolf_result.extras["unmatched_y"] == 0
+
+
+def test_energy_trace_never_decreases_within_a_time(wolf_result):
+    energy = wolf_result.extras["energy_trace"]
+    taus = wolf_result.extras["tau_trace"]
+    for tau in np.unique(taus):
+        e = energy[taus == tau]
+        assert np.all(np.diff(e) >= -1e-5 * np.abs(e).max())
+
+
+def test_cat_pair_with_symmetric_ground_truth(cat_pair):
+    cat0, cat1, gt = cat_pair
+    result = solve("kernel-matching", cat0, cat1)
+    report = geodesic_errors(result.map_xy, cat1, gt["cat0"], gt["cat1"], gt_target_sym=gt["cat1.sym"]).summary()
+    # cat0/cat1 are remeshed independently and far from isometric (median relative geodesic distortion of
+    # the ground-truth pairs ~9 %, 90th percentile ~28 %). Measured with the defaults: mean 0.046 and 72 % of
+    # points within 0.05 (symmetric); the issue's target of 80 % is NOT reached (see the closing note).
+    assert report["mean_sym"] <= 0.05, report
+    assert report["within_0.05_sym"] >= 0.68, report
+    assert report["within_0.1_sym"] >= 0.85, report
+
+
+def test_result_does_not_depend_on_vertex_order(wolf_pair):
+    wolf0, wolf1 = wolf_pair
+    fast = dict(n_eigs=150, n_seeds=800, n_times=5, iters_per_time=2)
+    base = solve("kernel-matching", wolf0, wolf1, **fast)
+    perm = np.random.default_rng(4).permutation(wolf1.n_vertices)
+    inv = np.argsort(perm)
+    shuffled = TriMesh(wolf1.vertices[perm], inv[wolf1.faces], name="shuffled")
+    other = solve("kernel-matching", wolf0, shuffled, **fast)
+    assert np.mean(perm[other.map_xy] == base.map_xy) > 0.97
+
+
+def test_refinement_of_a_noisy_map_and_of_landmarks(wolf_pair):
+    wolf0, wolf1 = wolf_pair
+    fast = dict(n_eigs=150, n_seeds=800, n_times=5, iters_per_time=2)
+    rng = np.random.default_rng(5)
+    noisy = np.arange(wolf0.n_vertices)
+    bad = rng.random(noisy.size) < 0.3
+    noisy[bad] = rng.integers(0, wolf1.n_vertices, bad.sum())
+    ident = np.arange(wolf0.n_vertices)
+    before = geodesic_errors(noisy, wolf1, ident, ident).summary()["within_0.025"]
+    refined = solve("kernel-matching", wolf0, wolf1, initial=InitialMatch(map_xy=noisy), **fast)
+    after = geodesic_errors(refined.map_xy, wolf1, ident, ident).summary()["within_0.025"]
+    assert before < 0.75 and after > 0.9
+    landmarks = rng.choice(wolf0.n_vertices, 15, replace=False)
+    from_landmarks = solve("kernel-matching", wolf0, wolf1, initial=InitialMatch(landmarks_x=landmarks,
+                                                                                 landmarks_y=landmarks), **fast)
+    assert geodesic_errors(from_landmarks.map_xy, wolf1, ident, ident).summary()["within_0.05"] > 0.9
+
+
+def test_partial_shape_and_unequal_sizes(wolf_pair):
+    wolf0, wolf1 = wolf_pair
+    # the front 60 % of wolf1 (a partial shape with boundary) against the whole wolf0
+    axis = np.linalg.svd(wolf1.vertices - wolf1.vertices.mean(0), full_matrices=False)[2][0]
+    coord = (wolf1.vertices - wolf1.vertices.mean(0)) @ axis
+    keep_face = np.all(coord[wolf1.faces] > np.quantile(coord, 0.4), axis=1)
+    part = TriMesh.from_arrays(wolf1.vertices, wolf1.faces[keep_face], largest_component=True)
+    assert part.n_vertices < wolf0.n_vertices
+    fast = dict(n_eigs=150, n_seeds=800, n_times=5, iters_per_time=2)
+    result = solve("kernel-matching", part, wolf0, **fast)
+    truth = part.original_indices
+    err = geodesic_errors(result.map_xy, wolf0, np.arange(part.n_vertices), truth).summary()
+    # a cut changes the heat kernels near the cut (Neumann boundary): measured 62 % within 0.1 (random
+    # partners: ~5 %), so only a loose threshold; partial shapes are the hard case of this method
+    assert err["within_0.1"] > 0.5, err
+    assert np.all(result.map_xy >= 0)
+    partial = solve("kernel-matching", part, wolf0, partial=True, **fast)
+    assert partial.extras["unmatched_y"] > 0.2 * wolf0.n_vertices  # most of the missing back stays unmatched
+
+
+def test_bad_inputs(wolf_pair):
+    two = trimesh.util.concatenate([trimesh.creation.icosphere(3), trimesh.creation.icosphere(3).apply_translation([3, 0, 0])])
+    broken = TriMesh(two.vertices, two.faces, validate=False, name="two-spheres")
+    with pytest.raises(InputError, match="two-spheres.*disconnected"):
+        solve("kernel-matching", broken, broken, n_eigs=50, n_seeds=100)
+    small = TriMesh(trimesh.creation.icosphere(1).vertices, trimesh.creation.icosphere(1).faces, name="small")
+    with pytest.raises(ParameterError, match="500 eigenpairs requested but small has only 42 vertices"):
+        solve("kernel-matching", small, wolf_pair[1])
+    with pytest.raises(MeshError, match="zero area"):
+        TriMesh(np.array([[0, 0, 0], [1, 0, 0], [2, 0, 0], [0, 1, 0]], float), np.array([[0, 1, 2], [0, 1, 3]]))
+    with pytest.raises(ParameterError, match="times"):
+        solve("kernel-matching", *wolf_pair, times="0.1,abc")
+    with pytest.raises(InputError, match="initial map has"):
+        solve("kernel-matching", *wolf_pair, initial=InitialMatch(map_xy=np.zeros(5, int)))
+    with pytest.raises(InputError, match="does not take an initial map"):
+        solve("descriptor-nn", *wolf_pair, initial=InitialMatch(map_xy=np.zeros(5, int)))

@@ -69,6 +69,49 @@ def _require_file(path) -> Path:
 # ----------------------------------------------------------------------------- meshes
 
 
+def _read_off(path: Path) -> tuple[np.ndarray, np.ndarray]:
+    """Parse a line-based OFF/COFF/NOFF file (vertex order kept; polygons fan-triangulated).
+
+    Each vertex and each face is on its own line; extra values on a line
+    (normals, colours) are ignored.
+    """
+    with open(path, "rb") as fh:
+        text = fh.read().decode("utf-8", errors="replace")
+    lines = [ln.split("#", 1)[0].split() for ln in text.splitlines()]
+    lines = [ln for ln in lines if ln]
+    if not lines:
+        raise FileFormatError(f"{path}: the file is empty")
+    if not lines[0][0].upper().endswith("OFF"):
+        raise FileFormatError(f"{path}: not an OFF file (it starts with {' '.join(lines[0])[:40]!r})")
+    counts, first = (lines[0][1:], 1) if len(lines[0]) > 1 else ((lines[1] if len(lines) > 1 else []), 2)
+    try:
+        n_v, n_f = int(counts[0]), int(counts[1])
+    except (IndexError, ValueError):
+        raise FileFormatError(f"{path}: the OFF header must give the vertex and face counts") from None
+    if n_v < 0 or n_f < 0:
+        raise FileFormatError(f"{path}: negative element counts in the OFF header")
+    if len(lines) < first + n_v + n_f:
+        raise FileFormatError(f"{path}: the header announces {n_v} vertices and {n_f} faces but the file "
+                              f"has only {len(lines) - first} data lines")
+    try:
+        coords = np.array([ln[:3] for ln in lines[first:first + n_v]], dtype=np.float64)
+    except ValueError:
+        raise FileFormatError(f"{path}: a vertex line does not hold 3 numbers") from None
+    if coords.shape != (n_v, 3) and n_v:
+        raise FileFormatError(f"{path}: a vertex line does not hold 3 numbers")
+    faces = []
+    for index, ln in enumerate(lines[first + n_v:first + n_v + n_f]):
+        try:
+            k = int(ln[0])
+            poly = [int(v) for v in ln[1:1 + k]]
+        except ValueError:
+            raise FileFormatError(f"{path}: face {index} is not made of integers") from None
+        if k < 3 or len(poly) != k:
+            raise FileFormatError(f"{path}: face {index} has fewer than 3 vertices or is truncated")
+        faces.extend((poly[0], poly[j], poly[j + 1]) for j in range(1, k - 1))
+    return coords.reshape(n_v, 3), np.array(faces, dtype=np.int64).reshape(-1, 3)
+
+
 def load_mesh(path, *, largest_component: bool = False) -> TriMesh:
     """Load a triangle mesh keeping the file's vertex order.
 
@@ -91,22 +134,25 @@ def load_mesh(path, *, largest_component: bool = False) -> TriMesh:
     MeshError
         Invalid mesh content (see :func:`corrlib.shapes.inspect_mesh`).
     """
-    import trimesh
-
     path = _require_file(path)
     suffix = path.suffix.lower()
     if suffix not in MESH_SUFFIXES:
         raise FileFormatError(f"{path}: unsupported mesh format {suffix!r} "
                               f"(supported: {', '.join(sorted(MESH_SUFFIXES))})")
-    try:
-        loaded = trimesh.load(str(path), process=False, maintain_order=True, force="mesh")
-    except Exception as exc:  # trimesh raises many exception types for malformed files
-        raise FileFormatError(f"{path}: cannot read mesh: {exc}") from exc
-    if suffix == ".stl" and hasattr(loaded, "merge_vertices"):
-        # STL is a triangle soup with no shared vertices (and so no vertex order to keep): weld it
-        loaded.merge_vertices()
-    vertices = np.asarray(getattr(loaded, "vertices", np.zeros((0, 3))))
-    faces = np.asarray(getattr(loaded, "faces", np.zeros((0, 3))))
+    if suffix == ".off":
+        vertices, faces = _read_off(path)  # our parser: fast, exact order, precise messages
+    else:
+        import trimesh
+
+        try:
+            loaded = trimesh.load(str(path), process=False, maintain_order=True, force="mesh")
+        except Exception as exc:  # trimesh raises many exception types for malformed files
+            raise FileFormatError(f"{path}: cannot read mesh: {exc}") from exc
+        if suffix == ".stl" and hasattr(loaded, "merge_vertices"):
+            # STL is a triangle soup with no shared vertices (and so no vertex order to keep): weld it
+            loaded.merge_vertices()
+        vertices = np.asarray(getattr(loaded, "vertices", np.zeros((0, 3))))
+        faces = np.asarray(getattr(loaded, "faces", np.zeros((0, 3))))
     if vertices.size == 0:
         raise FileFormatError(f"{path}: the file contains no vertices")
     if faces.size == 0:

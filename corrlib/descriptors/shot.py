@@ -367,7 +367,7 @@ def _histogram_kernel(rel, nrm, frame, radius, n_bins, desc):
         desc[cell * n_bins + step] += weight
 
 
-@numba.njit(cache=True, parallel=True)
+@numba.njit(cache=True, parallel=True, nogil=True)
 def _shot_all(vertices, normals, indptr, indices, radius, n_bins, min_neighbors, out):
     n = vertices.shape[0]
     for i in numba.prange(n):

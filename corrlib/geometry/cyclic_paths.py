@@ -42,7 +42,7 @@ from corrlib.errors import Cancelled, InputError, ParameterError
 from corrlib.progress import CancelToken, Progress
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _layered_dijkstra(cost, step2, graph_points, indptr, indices, edge_len, source_mask, target_mask,
                       upper, heuristic, cancel, dist, pred, origin):
     """Multi-source shortest paths through all layers; returns (best end vertex, its cost).

@@ -2,4 +2,4 @@
 
 from corrlib.methods import baselines, contour3d, kernel_matching  # noqa: F401  (registers the methods)
 from corrlib.methods.base import MatchResult, make_params, param  # noqa: F401
-from corrlib.methods.registry import all_methods, get_method, methods_for, solve  # noqa: F401
+from corrlib.methods.registry import all_methods, get_method, methods_for, solve, solve_iter  # noqa: F401

@@ -102,7 +102,7 @@ def paper_features(evals: np.ndarray, evecs: np.ndarray, mass_diag: np.ndarray, 
     return np.hstack([w, h])
 
 
-@numba.njit(parallel=True, cache=True)
+@numba.njit(parallel=True, cache=True, nogil=True)
 def _l1_costs(feat_a, feat_b, out):
     for i in numba.prange(feat_a.shape[0]):
         for j in range(feat_b.shape[0]):

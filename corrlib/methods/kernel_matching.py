@@ -100,6 +100,11 @@ class KernelMatchingParams:
     backend: str = param("auction", label="Assignment backend", choices=("auction", "scipy"),
                          help="ε-scaling auction (fast) or scipy's exact solver (slow, for checks).")
 
+    def __post_init__(self):
+        if isinstance(self.times, str) and isinstance(self.tau_min, (int, float)) and \
+                isinstance(self.tau_max, (int, float)):
+            diffusion_times(self)  # raises ParameterError on a bad schedule, before any run
+
 
 @dataclass
 class InitialMatch:

@@ -100,6 +100,36 @@ def methods_for(source, target) -> list[MethodSpec]:
     return [s for s in all_methods() if s.inputs == kinds]
 
 
+def solve_iter(method: str | MethodSpec, source, target, params=None, token: CancelToken | None = None, *,
+               initial=None, **overrides):
+    """Generator form of :func:`solve` (what the studio runs in a worker thread).
+
+    Validates the inputs and parameters, yields the method's progress and
+    returns its :class:`MatchResult` with ``timings["total"]``, ``params``
+    and ``method`` filled in.
+    """
+    spec = method if isinstance(method, MethodSpec) else get_method(method)
+    kinds = (kind_of(source), kind_of(target))
+    if kinds != spec.inputs:
+        raise InputError(f"method {spec.name!r} takes {spec.inputs[0]} + {spec.inputs[1]}, "
+                         f"got {kinds[0]} + {kinds[1]}")
+    if params is None:
+        params = make_params(spec.params, **overrides)
+    else:
+        validate_params(params)
+    token = token or CancelToken()
+    if initial is not None and not spec.refines:
+        raise InputError(f"method {spec.name!r} does not take an initial map")
+    start = time.perf_counter()
+    gen = spec.solve(source, target, params, token, initial=initial) if initial is not None else \
+        spec.solve(source, target, params, token)
+    result = yield from gen
+    result.timings.setdefault("total", time.perf_counter() - start)
+    result.params = asdict(params)
+    result.method = spec.name
+    return result
+
+
 def solve(method: str | MethodSpec, source, target, params=None, *, callback=None,
           token: CancelToken | None = None, initial=None, **overrides) -> MatchResult:
     """Run a registered method to completion.
@@ -122,23 +152,6 @@ def solve(method: str | MethodSpec, source, target, params=None, *, callback=Non
     MatchResult
         With ``timings["total"]`` and ``params`` filled in.
     """
-    spec = method if isinstance(method, MethodSpec) else get_method(method)
-    kinds = (kind_of(source), kind_of(target))
-    if kinds != spec.inputs:
-        raise InputError(f"method {spec.name!r} takes {spec.inputs[0]} + {spec.inputs[1]}, "
-                         f"got {kinds[0]} + {kinds[1]}")
-    if params is None:
-        params = make_params(spec.params, **overrides)
-    else:
-        validate_params(params)
     token = token or CancelToken()
-    if initial is not None and not spec.refines:
-        raise InputError(f"method {spec.name!r} does not take an initial map")
-    start = time.perf_counter()
-    gen = spec.solve(source, target, params, token, initial=initial) if initial is not None else \
-        spec.solve(source, target, params, token)
-    result = run(gen, callback=callback, token=token)
-    result.timings.setdefault("total", time.perf_counter() - start)
-    result.params = asdict(params)
-    result.method = spec.name
-    return result
+    return run(solve_iter(method, source, target, params, token, initial=initial, **overrides),
+               callback=callback, token=token)

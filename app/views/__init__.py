@@ -1,0 +1,1 @@
+"""The studio's central tabs: pair, product, sequence, retrieval and compare views."""

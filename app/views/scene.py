@@ -1,0 +1,43 @@
+"""Building pyvista objects from corrlib arrays (GUI thread only)."""
+
+from __future__ import annotations
+
+import numpy as np
+import pyvista as pv
+
+from corrlib.plotting import coordinate_colors  # noqa: F401  (re-exported for the views)
+
+
+def polydata(vertices: np.ndarray, faces: np.ndarray) -> pv.PolyData:
+    """A pyvista mesh with the given vertex order."""
+    f = np.asarray(faces, dtype=np.int64)
+    cells = np.column_stack([np.full(f.shape[0], 3), f]).ravel()
+    return pv.PolyData(np.asarray(vertices, dtype=np.float64).copy(), cells)
+
+
+def polyline(points: np.ndarray, closed: bool = True) -> pv.PolyData:
+    """A line through ``points`` (n, 2 or 3)."""
+    p = np.asarray(points, dtype=np.float64)
+    if p.shape[1] == 2:
+        p = np.column_stack([p, np.zeros(p.shape[0])])
+    n = p.shape[0]
+    idx = np.arange(n + 1 if closed else n) % n
+    return pv.PolyData(p, lines=np.concatenate([[idx.size], idx]))
+
+
+def hue_colors(values: np.ndarray) -> np.ndarray:
+    """(n, 3) RGB in [0, 1] from values in [0, 1) on the HSV hue circle."""
+    from matplotlib import cm
+
+    return cm.hsv(np.mod(values, 1.0))[:, :3]
+
+
+def make_plotter(parent, **kwargs):
+    """A QtInteractor that renders only when asked (no periodic auto-update timer).
+
+    pyvistaqt's default re-renders every plotter five times per second; with
+    several views under software OpenGL that alone can stall the GUI thread.
+    """
+    from pyvistaqt import QtInteractor
+
+    return QtInteractor(parent, auto_update=False, **kwargs)

@@ -1,0 +1,123 @@
+"""Sequence view: interpolation and extrapolation player with in-place vertex updates."""
+
+from __future__ import annotations
+
+from collections.abc import Callable
+
+import numpy as np
+from PySide6.QtCore import Qt, QTimer
+from PySide6.QtWidgets import (
+    QCheckBox,
+    QDoubleSpinBox,
+    QHBoxLayout,
+    QLabel,
+    QPushButton,
+    QSlider,
+    QVBoxLayout,
+    QWidget,
+)
+
+from app.views.scene import coordinate_colors, polydata, make_plotter
+from corrlib.morph import linear_positions
+
+STEPS = 1000
+
+
+class SequenceView(QWidget):
+    """Slider over t in [0, t_max] (t > 1 extrapolates), play/pause, speed, loop."""
+
+    def __init__(self, parent=None):
+        super().__init__(parent)
+        # no multisampling and no timed auto-updates: scrubbing redraws once per slider step
+        self.plotter = make_plotter(self, multi_samples=1)
+        self.slider = QSlider(Qt.Horizontal)
+        self.slider.setRange(0, STEPS)
+        self.slider.valueChanged.connect(self._on_slider)
+        self.t_max = QDoubleSpinBox()
+        self.t_max.setRange(1.0, 3.0)
+        self.t_max.setSingleStep(0.1)
+        self.t_max.setValue(1.5)
+        self.t_max.setToolTip("Largest t of the slider; t > 1 extrapolates beyond the target.")
+        self.speed = QDoubleSpinBox()
+        self.speed.setRange(0.05, 5.0)
+        self.speed.setValue(0.5)
+        self.speed.setSuffix(" /s")
+        self.loop = QCheckBox("loop")
+        self.loop.setChecked(True)
+        self.play_button = QPushButton("Play")
+        self.play_button.clicked.connect(self.toggle_play)
+        self.label = QLabel("t = 0.00")
+        self.kind = QLabel("")
+        self.timer = QTimer(self)
+        self.timer.setInterval(30)
+        self.timer.timeout.connect(self._tick)
+        row = QHBoxLayout()
+        for w in (self.play_button, QLabel("t max"), self.t_max, QLabel("speed"), self.speed, self.loop,
+                  self.label):
+            row.addWidget(w)
+        row.addWidget(self.slider, 1)
+        layout = QVBoxLayout(self)
+        layout.addWidget(self.kind)
+        layout.addWidget(self.plotter.interactor, 1)
+        layout.addLayout(row)
+        self.mesh = None
+        self.positions: Callable[[float], np.ndarray] | None = None
+        self.source = None
+
+    def set_sequence(self, source, target, map_xy, positions: Callable[[float], np.ndarray] | None = None,
+                     description: str = "") -> None:
+        """Show ``source`` deforming; ``positions(t)`` defaults to linear interpolation through the map."""
+        self.source = source
+        if positions is None:
+            positions = lambda t: linear_positions(source.vertices, target.vertices, map_xy, t)  # noqa: E731
+            description = description or ("linear vertex interpolation through the map (fallback: not a "
+                                          "deformation model; folds where the map does)")
+        self.positions = positions
+        self.kind.setText(description)
+        self.plotter.clear_actors()
+        self.mesh = polydata(source.vertices, source.faces)
+        self.plotter.add_mesh(self.mesh, scalars=coordinate_colors(source.vertices), rgb=True)
+        self.plotter.add_text(source.name, font_size=9)
+        self.plotter.reset_camera()
+        self.slider.setValue(0)
+        self._on_slider(0)
+
+    def t(self) -> float:
+        return self.slider.value() / STEPS * self.t_max.value()
+
+    def _on_slider(self, _value: int) -> None:
+        t = self.t()
+        self.label.setText(f"t = {t:.2f}")
+        if self.mesh is None or self.positions is None:
+            return
+        self.mesh.points[:] = self.positions(t)  # in place: no new VTK objects while scrubbing
+        self.mesh.Modified()
+        self.plotter.update()  # one repaint, scheduled by Qt (render() would draw twice)
+
+    def toggle_play(self) -> None:
+        if self.timer.isActive():
+            self.timer.stop()
+            self.play_button.setText("Play")
+        else:
+            self.timer.start()
+            self.play_button.setText("Pause")
+
+    def _tick(self) -> None:
+        step = int(round(self.speed.value() * STEPS * self.timer.interval() / 1000.0 / self.t_max.value()))
+        value = self.slider.value() + max(step, 1)
+        if value > STEPS:
+            if not self.loop.isChecked():
+                self.toggle_play()
+                return
+            value = 0
+        self.slider.setValue(value)
+
+    def frames(self, count: int, t_max: float | None = None):
+        """(t, vertices) of ``count`` evenly spaced frames from 0 to ``t_max``."""
+        t_max = self.t_max.value() if t_max is None else t_max
+        for t in np.linspace(0.0, t_max, count):
+            yield float(t), self.positions(float(t))
+
+    def close_plotters(self) -> None:
+        self.timer.stop()
+        self.plotter.close()

@@ -1,0 +1,199 @@
+"""The studio under a virtual X server (pytest-xvfb, Qt's xcb platform): drive the real window."""
+
+import os
+import shutil
+
+import numpy as np
+import pytest
+
+os.environ.setdefault("QT_QPA_PLATFORM", "xcb")
+pytest.importorskip("pyvistaqt")  # the gui extra is part of the test setup (scripts/test.sh installs it)
+
+from PySide6.QtCore import QSettings  # noqa: E402
+
+from _data import SILHOUETTES, TOSCA  # noqa: E402
+from app.main_window import MainWindow  # noqa: E402
+
+FAST_KERNEL = {"n_eigs": 100, "n_seeds": 500, "n_times": 4, "iters_per_time": 2}
+
+
+@pytest.fixture
+def window(qtbot, tmp_path):
+    settings = QSettings(str(tmp_path / "studio.ini"), QSettings.IniFormat)
+    win = MainWindow(settings=settings, interactive=False)
+    qtbot.addWidget(win)
+    win.show()
+    qtbot.waitExposed(win)
+    yield win
+    win.close()
+
+
+def set_params(win, method, **values):
+    form = win._form_of[method]
+    current = form.values()
+    current.update(values)
+    form.set_values(current)
+
+
+def run_and_wait(qtbot, win, method, timeout=180_000):
+    with qtbot.waitSignal(win.result_ready, timeout=timeout) as blocker:
+        win.run_method(method=method)
+    return blocker.args[0]
+
+
+def test_demo_pair_kernel_matching_colours_the_target(qtbot, window):
+    window.load_demo()
+    assert window.method_box.currentData() == "kernel-matching"  # the best method for two meshes
+    set_params(window, "kernel-matching", **FAST_KERNEL)
+    result = run_and_wait(qtbot, window, "kernel-matching")
+    colors = window.pair_view.target_colors
+    assert colors is not None and colors.shape == (window.target.n_vertices, 3)
+    assert colors.std(axis=0).min() > 0.1  # not the default grey
+    assert "within 0.05" in window.pair_view.info.text()  # demo ground truth is the identity
+    assert result.map_xy.shape == (window.source.n_vertices,)
+    for mode in ("texture", "error", "coordinates"):
+        window.pair_view.mode.setCurrentText(mode)
+    # the sequence slider moves the vertices in place
+    seq = window.sequence_view
+    seq.slider.setValue(0)
+    start = np.array(seq.mesh.points)
+    assert np.allclose(start, window.source.vertices)
+    seq.slider.setValue(600)
+    moved = np.array(seq.mesh.points)
+    assert np.abs(moved - start).max() > 1.0
+    expected = (1 - seq.t()) * window.source.vertices + seq.t() * window.target.vertices[result.map_xy]
+    assert np.allclose(moved, expected)
+
+
+@pytest.mark.parametrize("method", ["fmap-zoomout", "descriptor-nn"])
+def test_other_mesh_methods(qtbot, window, method):
+    window.load_demo()
+    result = run_and_wait(qtbot, window, method)
+    assert result.method == method and window.pair_view.target_colors is not None
+
+
+def test_contour_to_mesh_draws_the_curve(qtbot, window):
+    assert window.load_file(str(SILHOUETTES / "mpeg7" / "dog-1.gif"), "source")
+    assert window.load_file(str(TOSCA / "wolf1.off"), "target")
+    assert window.method_box.currentData() == "contour3d"
+    set_params(window, "contour3d", n_contour=60, eps=0.05)
+    result = run_and_wait(qtbot, window, "contour3d")
+    curve = window.product_view.curve
+    assert curve is not None and curve.n_points == len(result.extras["path_vertices"])
+    assert window.tabs.currentWidget() is window.product_view
+
+
+def test_sketch_becomes_a_query(qtbot, window):
+    t = np.linspace(0, 2 * np.pi, 80, endpoint=False)
+    window.sketch.area.set_points(np.column_stack([120 + 80 * np.cos(t), 100 + 50 * np.sin(3 * t) / 3 + 40 * np.sin(t)]))
+    with qtbot.waitSignal(window.sketch.contour_ready, timeout=5000) as blocker:
+        window.sketch.emit_contour()
+    contour = blocker.args[0]
+    assert contour.n_points == window.sketch.n_points.value() and contour.is_ccw
+    assert window.source is contour and window.retrieval_view.query is contour
+
+
+def test_retrieval_gallery_order(qtbot, window, tmp_path):
+    from corrlib.geometry.sections import render_silhouette
+    from corrlib.io import load_mesh
+
+    folder = tmp_path / "collection"
+    folder.mkdir()
+    for name in ("wolf0.off", "wolf1.off", "cat0.off"):
+        shutil.copy(TOSCA / name, folder / name)
+    wolf = load_mesh(TOSCA / "wolf0.off")
+    axes = np.linalg.svd(wolf.vertices - wolf.vertices.mean(0), full_matrices=False)[2]
+    window.retrieval_view.set_query(render_silhouette(wolf, axes[2], 300, up=axes[1]))
+    window.retrieval_view.set_folder(str(folder))
+    with qtbot.waitSignal(window.result_ready, timeout=180_000):
+        window.run_retrieval()
+    names = window.retrieval_view.ranked_names()
+    assert len(names) == 3 and set(names[:2]) == {"wolf0.off", "wolf1.off"}
+    assert window.retrieval_view.gallery.item(0).icon().isNull() is False
+
+
+def test_compare_two_methods(qtbot, window):
+    window.load_demo()
+    view = window.compare_view
+    for i in range(view.methods.count()):
+        name = view.methods.item(i).data(0x0100)
+        view.methods.item(i).setCheckState(
+            view.methods.item(i).checkState().Checked if name in ("descriptor-nn", "fmap-zoomout")
+            else view.methods.item(i).checkState().Unchecked)
+    with qtbot.waitSignal(window.result_ready, timeout=180_000):
+        window.run_compare()
+    qtbot.waitUntil(lambda: not window.runner.is_running("compare"), timeout=180_000)
+    rows = view.table_rows()
+    assert [r[0] for r in rows] == ["fmap-zoomout", "descriptor-nn"]
+    assert all(float(r[3]) >= 0 for r in rows)  # mean errors from the demo ground truth
+    assert len(view.figure.axes[0].lines) == 2
+
+
+def test_cancel_during_a_run(qtbot, window):
+    window.load_demo()
+    set_params(window, "kernel-matching", n_eigs=500, n_seeds=3000)
+    with qtbot.waitSignal(window.runner.progress, timeout=60_000):
+        window.run_method(method="kernel-matching")
+    with qtbot.waitSignal(window.runner.cancelled, timeout=120_000):
+        window.cancel_jobs()
+    assert "cancelled" in window.job_panel.stage.text()
+    assert not window.runner.is_running("pair")
+
+
+def test_close_during_a_run(qtbot, tmp_path):
+    settings = QSettings(str(tmp_path / "s.ini"), QSettings.IniFormat)
+    win = MainWindow(settings=settings, interactive=False)
+    qtbot.addWidget(win)
+    win.show()
+    win.load_demo()
+    with qtbot.waitSignal(win.runner.progress, timeout=60_000):
+        win.run_method(method="kernel-matching")
+    win.close()  # cancels, waits for the worker, closes every plotter
+    assert not win.runner.is_running("pair")
+    assert settings.value("window/state") is not None
+
+
+def test_bad_file_shows_a_dialog(qtbot, tmp_path, monkeypatch):
+    from PySide6.QtWidgets import QMessageBox
+
+    shown = []
+    monkeypatch.setattr(QMessageBox, "critical", lambda parent, title, text: shown.append(text))
+    settings = QSettings(str(tmp_path / "s.ini"), QSettings.IniFormat)
+    win = MainWindow(settings=settings, interactive=True)
+    qtbot.addWidget(win)
+    bad = tmp_path / "broken.off"
+    bad.write_text("OFF\n3 1 0\n0 0 0\n1 0 0\n")
+    assert not win.load_file(str(bad), "source")
+    assert shown and "broken.off" in shown[0]
+    assert win.source is None  # nothing half-loaded, the window keeps running
+    assert win.load_file(str(TOSCA / "wolf0.off"), "source")
+    win.close()
+
+
+def test_invalid_parameters_are_flagged(qtbot, window):
+    window.load_demo()
+    form = window._form_of["kernel-matching"]
+    form.widgets["times"].setText("0.1, abc")
+    assert not form.validate() and "times" in form.error.text()
+    messages = []
+    window.error_shown.connect(messages.append)
+    window.run_method(method="kernel-matching")
+    assert messages and "invalid parameters" in messages[0]
+    assert not window.runner.is_running("pair")
+    form.reset()
+    assert form.validate() and form.error.text() == ""
+
+
+def test_exports_are_written(qtbot, window, tmp_path, monkeypatch):
+    from corrlib.io import load_map, load_mesh
+
+    window.load_demo()
+    run_and_wait(qtbot, window, "descriptor-nn")
+    targets = iter([str(tmp_path / "map.txt"), str(tmp_path / "colored.ply"), str(tmp_path / "shot.png")])
+    monkeypatch.setattr(window, "_save_path", lambda *a: next(targets))
+    window.export_map("txt")
+    window.export_colored()
+    window.export_screenshot()
+    assert load_map(tmp_path / "map.txt").shape == (window.source.n_vertices,)
+    assert load_mesh(tmp_path / "colored.ply").n_vertices == window.target.n_vertices
+    assert (tmp_path / "shot.png").read_bytes()[:4] == b"\x89PNG"

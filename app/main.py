@@ -22,7 +22,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--demo", action="store_true", help="open the bundled demo pair and run a method")
     parser.add_argument("--method", help="method to run on start (default: the best available)")
     parser.add_argument("--tab", help="tab to show: Pair, Product, Sequence, Retrieval, Compare")
-    parser.add_argument("--pair-mode", choices=["coordinates", "texture", "error"],
+    from app.views.pair import MODES
+
+    parser.add_argument("--pair-mode", choices=list(MODES),
                         help="what the pair view shows")
     parser.add_argument("--sequence-t", type=float, help="with --screenshot: put the sequence slider at this t")
     parser.add_argument("--retrieve", metavar="FOLDER", help="rank this folder against the query (first file)")

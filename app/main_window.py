@@ -230,6 +230,7 @@ class MainWindow(QMainWindow):
                                      ("Open target…", lambda: self.open_dialog("target"), None),
                                      ("Open contour / silhouette…", self.open_contour_dialog, None),
                                      ("Load ground truth (.vts pair)…", self.open_gt_dialog, None),
+                                     ("Texture image…", self.open_texture_dialog, None),
                                      ("Demo pair", self.load_demo, None)):
             action = QAction(text, self)
             action.triggered.connect(slot)
@@ -242,7 +243,9 @@ class MainWindow(QMainWindow):
         for text, slot in (("Map (text)…", lambda: self.export_map("txt")),
                            ("Result (.npz + .json)…", lambda: self.export_map("npz")),
                            ("Coloured target (PLY)…", self.export_colored),
-                           ("Morph frames (OBJ/PLY)…", self.export_frames),
+                           ("Morph frames (OBJ)…", lambda: self.export_frames(".obj")),
+                           ("Morph frames (PLY)…", lambda: self.export_frames(".ply")),
+                           ("Sequence picture strip (PNG)…", self.export_strip),
                            ("Screenshot of the view (PNG)…", self.export_screenshot),
                            ("Comparison table (CSV)…", self.export_table)):
             action = QAction(text, self)
@@ -564,19 +567,63 @@ class MainWindow(QMainWindow):
             except (CorrError, OSError) as exc:
                 self.show_error(str(exc))
 
-    def export_frames(self) -> None:
+    def open_texture_dialog(self) -> None:
+        path, _ = QFileDialog.getOpenFileName(self, "Texture image", "", "Images (*.png *.jpg *.jpeg *.bmp)")
+        if path:
+            self.load_texture(path)
+
+    def load_texture(self, path: str) -> None:
+        from PIL import Image, UnidentifiedImageError
+
+        try:
+            with Image.open(path) as im:
+                self.pair_view.texture_image = np.asarray(im.convert("RGB"))
+        except (OSError, UnidentifiedImageError) as exc:
+            self.show_error(f"{path}: cannot read the texture image: {exc}")
+            return
+        self.pair_view.mode.setCurrentText("texture")
+        self.pair_view.redraw()
+
+    def export_frames(self, suffix: str = ".obj", folder: str | None = None) -> list[Path]:
+        """Write 11 frames from t = 0 to t max with the source's connectivity (asks before overwriting)."""
         from corrlib.io import save_mesh
 
         if self.sequence_view.positions is None:
             self.show_error("no sequence to export (run a method on two meshes)")
+            return []
+        folder = folder or QFileDialog.getExistingDirectory(self, "Folder for the frames")
+        if not folder:
+            return []
+        frames = list(self.sequence_view.frames(11))
+        paths = [Path(folder) / f"frame_{i:03d}_t{t:.2f}{suffix}" for i, (t, _) in enumerate(frames)]
+        existing = [p for p in paths if p.exists()]
+        if existing and self.interactive and QMessageBox.question(
+                self, "corr studio", f"{len(existing)} frame files exist in {folder}. Overwrite them?") \
+                != QMessageBox.Yes:
+            return []
+        try:
+            for path, (_t, verts) in zip(paths, frames):
+                save_mesh(path, verts, self.source.faces)
+        except (CorrError, OSError) as exc:
+            self.show_error(str(exc))
+            return []
+        self.job_panel.write(f"wrote {len(paths)} frames to {folder}")
+        return paths
+
+    def export_strip(self) -> None:
+        from PIL import Image
+
+        from corrlib.io import atomic_write
+
+        if self.sequence_view.positions is None:
+            self.show_error("no sequence to export (run a method on two meshes)")
             return
-        folder = QFileDialog.getExistingDirectory(self, "Folder for the frames")
-        if folder:
-            try:
-                for i, (t, verts) in enumerate(self.sequence_view.frames(11)):
-                    save_mesh(Path(folder) / f"frame_{i:03d}_t{t:.2f}.obj", verts, self.source.faces)
-            except (CorrError, OSError) as exc:
-                self.show_error(str(exc))
+        path = self._save_path("Sequence picture strip", "PNG (*.png)")
+        if path:
+            self.tabs.setCurrentWidget(self.sequence_view)
+            strip = self.sequence_view.picture_strip()
+            with atomic_write(path, "wb") as fh:
+                Image.fromarray(strip).save(fh, format="PNG")
 
     def export_screenshot(self) -> None:
         path = self._save_path("Screenshot", "PNG (*.png)")

@@ -197,3 +197,35 @@ def test_exports_are_written(qtbot, window, tmp_path, monkeypatch):
     assert load_map(tmp_path / "map.txt").shape == (window.source.n_vertices,)
     assert load_mesh(tmp_path / "colored.ply").n_vertices == window.target.n_vertices
     assert (tmp_path / "shot.png").read_bytes()[:4] == b"\x89PNG"
+
+
+def test_lines_function_texture_and_sequence_exports(qtbot, window, tmp_path, monkeypatch):
+    from PIL import Image
+
+    from corrlib.io import load_mesh
+
+    window.load_demo()
+    result = run_and_wait(qtbot, window, "descriptor-nn")
+    view = window.pair_view
+    view.mode.setCurrentText("lines")
+    assert view.lines is not None and view.lines.n_cells == len(view.picked) == 12
+    view.add_line(100)  # what a mouse pick on the source does
+    assert view.lines.n_cells == 13
+    # the line from vertex 100 ends at its partner (shifted with the target)
+    view.mode.setCurrentText("function")
+    assert view.target_colors is not None and view.target_colors.std() > 0.05
+    img = np.zeros((32, 32, 3), np.uint8)
+    img[:, :16] = 255
+    Image.fromarray(img).save(tmp_path / "tex.png")
+    window.load_texture(str(tmp_path / "tex.png"))
+    assert view.mode.currentText() == "texture" and view.texture_image.shape == (32, 32, 3)
+    paths = window.export_frames(".ply", folder=str(tmp_path))
+    assert len(paths) == 11
+    last = load_mesh(paths[-1])
+    t_max = window.sequence_view.t_max.value()
+    expected = (1 - t_max) * window.source.vertices + t_max * window.target.vertices[result.map_xy]
+    assert np.allclose(last.vertices, expected, atol=1e-5)
+    monkeypatch.setattr(window, "_save_path", lambda *a: str(tmp_path / "strip.png"))
+    window.export_strip()
+    strip = np.asarray(Image.open(tmp_path / "strip.png"))
+    assert strip.shape[1] >= 6 * 100 and strip.shape[1] > 3 * strip.shape[0]

@@ -118,6 +118,17 @@ class SequenceView(QWidget):
         for t in np.linspace(0.0, t_max, count):
             yield float(t), self.positions(float(t))
 
+    def picture_strip(self, count: int = 6) -> np.ndarray:
+        """(h, count * w, 3) uint8: screenshots of the view at evenly spaced t, side by side."""
+        current = self.slider.value()
+        images = []
+        for i in range(count):
+            self.slider.setValue(int(round(i * STEPS / max(count - 1, 1))))
+            self.plotter.render()
+            images.append(self.plotter.screenshot(return_img=True))
+        self.slider.setValue(current)
+        return np.hstack(images)
+
     def close_plotters(self) -> None:
         self.timer.stop()
         self.plotter.close()

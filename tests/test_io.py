@@ -211,3 +211,15 @@ def test_atomic_write_leaves_nothing_on_failure(tmp_path):
             raise RuntimeError("crash mid-write")
     assert target.read_text() == "precious"
     assert list(tmp_path.iterdir()) == [target]
+
+
+def test_atomic_write_uses_normal_permissions(tmp_path):
+    import os
+    import stat
+
+    old = os.umask(0o022)
+    try:
+        save_map(tmp_path / "m.txt", np.arange(3))
+    finally:
+        os.umask(old)
+    assert stat.S_IMODE((tmp_path / "m.txt").stat().st_mode) == 0o644

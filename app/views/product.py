@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from PySide6.QtWidgets import QLabel, QVBoxLayout, QWidget
 
-from app.views.scene import hue_colors, polydata, polyline, make_plotter
+from app.views.scene import LazyPlotter, hue_colors, polydata, polyline
 
 
 class ProductView(QWidget):
@@ -13,14 +13,19 @@ class ProductView(QWidget):
 
     def __init__(self, parent=None):
         super().__init__(parent)
-        self.plotter = make_plotter(self, shape=(1, 2))
         self.info = QLabel("Match a contour to a mesh (2D-to-3D) to see the matched curve here. "
                            "Product-torus views of contour pairs appear when that method is available.")
         self.info.setWordWrap(True)
         layout = QVBoxLayout(self)
         layout.addWidget(self.info)
-        layout.addWidget(self.plotter.interactor, 1)
+        plot_box = QVBoxLayout()
+        layout.addLayout(plot_box, 1)
+        self._plotter = LazyPlotter(self, plot_box, shape=(1, 2))
         self.curve = None  # the matched curve's polydata (for tests)
+
+    @property
+    def plotter(self):
+        return self._plotter.get()
 
     def show_contour_match(self, contour_points: np.ndarray, mesh, path_vertices: np.ndarray,
                            path_contour_index: np.ndarray, energy: float) -> None:
@@ -48,4 +53,4 @@ class ProductView(QWidget):
         self.info.setText(f"{m} contour points matched along a closed curve of {len(path_vertices)} steps.")
 
     def close_plotters(self) -> None:
-        self.plotter.close()
+        self._plotter.close()

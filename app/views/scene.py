@@ -41,3 +41,30 @@ def make_plotter(parent, **kwargs):
     from pyvistaqt import QtInteractor
 
     return QtInteractor(parent, auto_update=False, **kwargs)
+
+
+class LazyPlotter:
+    """A view's plotter, created on first use (views on hidden tabs cost nothing at start-up).
+
+    Parameters
+    ----------
+    parent : QWidget
+    layout : QLayout
+        Where the interactor widget goes once created (stretch 1).
+    **kwargs
+        Passed to :func:`make_plotter`.
+    """
+
+    def __init__(self, parent, layout, **kwargs):
+        self._parent, self._layout, self._kwargs = parent, layout, kwargs
+        self._plotter = None
+
+    def get(self):
+        if self._plotter is None:
+            self._plotter = make_plotter(self._parent, **self._kwargs)
+            self._layout.addWidget(self._plotter.interactor, 1)
+        return self._plotter
+
+    def close(self) -> None:
+        if self._plotter is not None:
+            self._plotter.close()

@@ -17,7 +17,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from app.views.scene import coordinate_colors, polydata, make_plotter
+from app.views.scene import LazyPlotter, coordinate_colors, polydata
 from corrlib.morph import linear_positions
 
 STEPS = 1000
@@ -28,8 +28,6 @@ class SequenceView(QWidget):
 
     def __init__(self, parent=None):
         super().__init__(parent)
-        # no multisampling and no timed auto-updates: scrubbing redraws once per slider step
-        self.plotter = make_plotter(self, multi_samples=1)
         self.slider = QSlider(Qt.Horizontal)
         self.slider.setRange(0, STEPS)
         self.slider.valueChanged.connect(self._on_slider)
@@ -58,11 +56,18 @@ class SequenceView(QWidget):
         row.addWidget(self.slider, 1)
         layout = QVBoxLayout(self)
         layout.addWidget(self.kind)
-        layout.addWidget(self.plotter.interactor, 1)
+        plot_box = QVBoxLayout()
+        layout.addLayout(plot_box, 1)
         layout.addLayout(row)
+        # no multisampling (and no timed auto-updates): scrubbing redraws once per slider step
+        self._plotter = LazyPlotter(self, plot_box, multi_samples=1)
         self.mesh = None
         self.positions: Callable[[float], np.ndarray] | None = None
         self.source = None
+
+    @property
+    def plotter(self):
+        return self._plotter.get()
 
     def set_sequence(self, source, target, map_xy, positions: Callable[[float], np.ndarray] | None = None,
                      description: str = "") -> None:
@@ -131,4 +136,4 @@ class SequenceView(QWidget):
 
     def close_plotters(self) -> None:
         self.timer.stop()
-        self.plotter.close()
+        self._plotter.close()

@@ -192,7 +192,17 @@ class MainWindow(QMainWindow):
         b_tgt.clicked.connect(lambda: self.open_dialog("target"))
         b_demo = QPushButton("Demo pair (wolf)")
         b_demo.clicked.connect(self.load_demo)
-        for w in (b_src, self.source_info, b_tgt, self.target_info, b_demo):
+        from corrlib.resources import bundled_shapes
+
+        self.bundled = QComboBox()
+        self.bundled.addItem("bundled shapes…", None)
+        for label, rel in bundled_shapes():
+            self.bundled.addItem(label, rel)
+        b_bsrc = QPushButton("as source")
+        b_bsrc.clicked.connect(lambda: self.load_bundled("source"))
+        b_btgt = QPushButton("as target")
+        b_btgt.clicked.connect(lambda: self.load_bundled("target"))
+        for w in (b_src, self.source_info, b_tgt, self.target_info, b_demo, self.bundled, b_bsrc, b_btgt):
             lay.addWidget(w)
         lay.addStretch(1)
         self.sketch = SketchPanel()
@@ -370,6 +380,13 @@ class MainWindow(QMainWindow):
             self.gt = (ident, ident)  # the demo pair shares its vertex order
             self.job_panel.write("demo pair loaded (identity ground truth)")
 
+    def load_bundled(self, which: str) -> None:
+        from corrlib.resources import resource
+
+        rel = self.bundled.currentData()
+        if rel:
+            self.load_file(str(resource(rel)), which)
+
     def use_sketch(self, contour) -> None:
         self.set_shape(contour, "source")
         self.retrieval_view.set_query(contour)
@@ -486,7 +503,10 @@ class MainWindow(QMainWindow):
                 self.result_ready.emit(result)
             return
         self.last_result = result
-        if isinstance(self.source, Contour2D):
+        if isinstance(self.source, Contour2D) and isinstance(self.target, Contour2D):
+            self.tabs.setCurrentWidget(self.product_view)
+            self.product_view.show_contour_pair(result)
+        elif isinstance(self.source, Contour2D):
             ex = result.extras
             self.tabs.setCurrentWidget(self.product_view)  # shown first, so the cameras fit its real size
             self.product_view.show_contour_match(ex["contour_points"], self.target, ex["path_vertices"],

@@ -157,10 +157,17 @@ def _write_match_outputs(result, source, target, out: Path, *, quiet: bool = Fal
                                          result.extras.get("tau_trace")))
     if result.map_yx is not None:
         written.append(save_map(out.with_name(out.name + ".map_yx.txt"), result.map_yx))
+    from corrlib.shapes import TriMesh
+
+    if result.map_yx is not None and isinstance(source, TriMesh) and isinstance(target, TriMesh):
         from corrlib.plotting import save_colour_transfer
 
         written.append(save_colour_transfer(out.with_name(out.name + ".png"), source, target, result.map_yx,
                                             title=f"{result.method}"))
+    elif "cost" in result.extras and "path_layers" in result.extras:
+        from corrlib.plotting import save_torus_pictures
+
+        written.append(save_torus_pictures(out.with_name(out.name + ".png"), result))
     if not quiet:
         for path in written:
             print(f"wrote {path}")
@@ -398,6 +405,14 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", default="contour_match", help="output path without suffix")
     p.add_argument("-q", "--quiet", action="store_true")
     p.set_defaults(func=cmd_match_contour)
+
+    p = sub.add_parser("match-contours", help="match two closed contours on their product torus")
+    p.add_argument("source")
+    p.add_argument("target")
+    p.add_argument("--param", action="append", metavar="NAME=VALUE", help="method parameter (repeatable)")
+    p.add_argument("-o", "--output", default="contours", help="output path without suffix")
+    p.add_argument("-q", "--quiet", action="store_true")
+    p.set_defaults(func=cmd_match, method="contour2d", init=None, times=None)
 
     p = sub.add_parser("retrieve", help="rank the meshes of a folder by matching energy to a query contour")
     p.add_argument("query")

@@ -181,3 +181,43 @@ def save_energy_trace(path, energy: np.ndarray, tau: np.ndarray | None = None) -
     ax.set_yscale("log")
     ax.grid(alpha=0.3)
     return _save_figure(fig, path)
+
+
+def save_torus_pictures(path, result) -> Path:
+    """PNG of a contour-to-contour result: the two contours, the flat torus with the cost and the path,
+    and the 3D product torus with the path."""
+    from corrlib.geometry.torus import arclength_angles, path_angles, torus_embedding
+
+    plt = _pyplot()
+    ex = result.extras
+    a, b = ex["source_points"], ex["target_points"]
+    u, v = arclength_angles(a), arclength_angles(b)
+    uv = path_angles(ex["path_layers"], ex["path_vertices"], u, v)
+    fig = plt.figure(figsize=(15, 4.5), dpi=100)
+    ax = fig.add_subplot(1, 3, 1)
+    m = a.shape[0]
+    from matplotlib import cm
+
+    hue = cm.hsv(np.arange(m) / m)[:, :3]
+    offset = np.array([1.2 * np.ptp(a[:, 0]) + 0.2 * np.ptp(b[:, 0]), 0.0]) + a.mean(0) - b.mean(0)
+    ax.scatter(a[:, 0], a[:, 1], c=hue, s=8)
+    ax.scatter(b[result.map_xy, 0] + offset[0], b[result.map_xy, 1] + offset[1], c=hue, s=8)
+    ax.set_aspect("equal")
+    ax.set_axis_off()
+    ax.set_title("A and B, coloured by the position on A")
+    ax = fig.add_subplot(1, 3, 2)
+    ax.imshow(np.asarray(ex["cost"]).T, origin="lower", extent=(0, 1, 0, 1), aspect="auto", cmap="viridis")
+    ax.plot(uv[:, 0], np.mod(uv[:, 1], 1.0), ".", color="crimson", ms=2)
+    ax.set_xlabel("u (contour A)")
+    ax.set_ylabel("v (contour B)")
+    ax.set_title("flat torus: cost and correspondence")
+    ax = fig.add_subplot(1, 3, 3, projection="3d")
+    gu, gv = np.meshgrid(np.linspace(0, 1, 60), np.linspace(0, 1, 30), indexing="ij")
+    surf = torus_embedding(gu, gv)
+    ax.plot_surface(surf[..., 0], surf[..., 1], surf[..., 2], color="0.85", alpha=0.5, linewidth=0)
+    pts = torus_embedding(uv[:, 0], uv[:, 1], 1.0, 0.41)
+    ax.plot(pts[:, 0], pts[:, 1], pts[:, 2], color="crimson", lw=2)
+    ax.set_box_aspect((1, 1, 0.4))
+    ax.set_axis_off()
+    ax.set_title("product torus A × B")
+    return _save_figure(fig, path)

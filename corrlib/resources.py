@@ -30,3 +30,15 @@ def resource(relative: str) -> Path:
 
 #: the demo pair: same connectivity, different pose (identity ground truth)
 DEMO_PAIR = ("data/tosca/wolf0.off", "data/tosca/wolf1.off")
+
+
+def bundled_shapes() -> list[tuple[str, str]]:
+    """(label, relative path) of the bundled meshes and silhouettes, for the studio's shape panel."""
+    root = resource_dir()
+    out = []
+    for pattern in ("data/tosca/*.off", "data/sumner/*.off", "data/sketch2d/*.off", "data/silhouettes/*.png",
+                    "data/silhouettes/mpeg7/*.gif"):
+        for path in sorted(root.glob(pattern)):
+            rel = path.relative_to(root).as_posix()
+            out.append((rel.removeprefix("data/"), rel))
+    return out

@@ -143,3 +143,13 @@ def test_match_kernel_with_init_file(tmp_path, capsys):
                  "--init", str(tmp_path / "init.txt")]) == 2
     assert "does not take an initial map" in capsys.readouterr().err
     assert main(args[:5] + ["--init", str(tmp_path / "nothing.txt")]) == 2
+
+
+def test_match_contours(tmp_path, capsys):
+    out = tmp_path / "cc"
+    assert main(["match-contours", str(SILHOUETTES / "mpeg7" / "dog-1.gif"), str(SILHOUETTES / "horse.png"),
+                 "--param", "n_source=50", "--param", "n_target=40", "-o", str(out), "-q"]) == 0
+    assert np.loadtxt(tmp_path / "cc.map_xy.txt", dtype=int).shape == (50,)
+    assert (tmp_path / "cc.png").stat().st_size > 20_000
+    assert main(["match-contours", str(SILHOUETTES / "horse.png"), str(TOSCA / "wolf0.off")]) == 2
+    assert "takes contour + contour" in capsys.readouterr().err

@@ -38,8 +38,8 @@ def explicit_product_optimum(graph: ProductGraph) -> float:
                 rows.append(node(i, j)), cols.append(node(i + 1, j))
                 w.append(0.5 * (graph.cost[i, j] + graph.cost[i + 1, j]) * np.sqrt(graph.step2[i]))
     product = sp.coo_matrix((w, (rows, cols)), shape=((m + 1) * n,) * 2).tocsr()
-    dist = dijkstra(product, directed=True, indices=np.arange(n))
-    return float(min(dist[s, node(m, s)] for s in range(n)))
+    dist = dijkstra(product, directed=True, indices=np.arange(graph.n_starts))
+    return float(min(dist[s, node(m, s + graph.closing_shift)] for s in range(graph.n_starts)))
 
 
 def tiny_graph(seed, m=7, subdivisions=1):

@@ -229,3 +229,26 @@ def test_lines_function_texture_and_sequence_exports(qtbot, window, tmp_path, mo
     window.export_strip()
     strip = np.asarray(Image.open(tmp_path / "strip.png"))
     assert strip.shape[1] >= 6 * 100 and strip.shape[1] > 3 * strip.shape[0]
+
+
+def test_bundled_shapes_and_retrieved_pair(qtbot, window):
+    labels = [window.bundled.itemText(i) for i in range(window.bundled.count())]
+    assert "tosca/cat0.off" in labels and "silhouettes/mpeg7/dog-1.gif" in labels
+    window.bundled.setCurrentIndex(labels.index("silhouettes/mpeg7/dog-1.gif"))
+    window.load_bundled("source")
+    assert window.source.name == "dog-1.gif"
+    set_params(window, "contour3d", n_contour=40, eps=0.1)
+    with qtbot.waitSignal(window.result_ready, timeout=120_000):
+        window.open_retrieved_pair(window.source, str(TOSCA / "wolf0.off"))  # a double-click in the gallery
+    assert window.target.name == "wolf0.off" and window.product_view.curve is not None
+
+
+def test_contour_pair_shows_the_torus(qtbot, window):
+    assert window.load_file(str(SILHOUETTES / "mpeg7" / "dog-1.gif"), "source")
+    assert window.load_file(str(SILHOUETTES / "mpeg7" / "horse-1.gif"), "target")
+    assert window.method_box.currentData() == "contour2d"
+    set_params(window, "contour2d", n_source=50, n_target=50)
+    result = run_and_wait(qtbot, window, "contour2d")
+    view = window.product_view
+    assert view.torus_curve is not None and view.torus_curve.n_points == len(result.extras["path_layers"])
+    assert view.function.currentText() == "cost"

@@ -3,7 +3,7 @@
 from __future__ import annotations
 
 import numpy as np
-from PySide6.QtWidgets import QLabel, QVBoxLayout, QWidget
+from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QVBoxLayout, QWidget
 
 from app.views.scene import LazyPlotter, hue_colors, polydata, polyline
 
@@ -16,12 +16,22 @@ class ProductView(QWidget):
         self.info = QLabel("Match a contour to a mesh (2D-to-3D) to see the matched curve here. "
                            "Product-torus views of contour pairs appear when that method is available.")
         self.info.setWordWrap(True)
+        self.function = QComboBox()
+        self.function.setToolTip("Product function drawn on the torus (what the method provides: cost, "
+                                 "densities, basis functions)")
+        self.function.currentTextChanged.connect(self._redraw_pair)
+        top = QHBoxLayout()
+        top.addWidget(self.info, 1)
+        top.addWidget(QLabel("function"))
+        top.addWidget(self.function)
         layout = QVBoxLayout(self)
-        layout.addWidget(self.info)
+        layout.addLayout(top)
         plot_box = QVBoxLayout()
         layout.addLayout(plot_box, 1)
         self._plotter = LazyPlotter(self, plot_box, shape=(1, 2))
         self.curve = None  # the matched curve's polydata (for tests)
+        self.torus_curve = None  # the correspondence curve on the torus (for tests)
+        self._pair = None
 
     @property
     def plotter(self):
@@ -51,6 +61,61 @@ class ProductView(QWidget):
         p.reset_camera()
         p.render()
         self.info.setText(f"{m} contour points matched along a closed curve of {len(path_vertices)} steps.")
+
+    def show_contour_pair(self, result) -> None:
+        """Two contours: the product torus (3D) and the flat square, with the correspondence curve."""
+        ex = result.extras
+        names = [n for n in str(ex.get("product_functions", "")).split(",") if n and n in ex]
+        self._pair = result
+        self.function.blockSignals(True)
+        self.function.clear()
+        self.function.addItems(names)
+        self.function.blockSignals(False)
+        self._redraw_pair()
+
+    def _redraw_pair(self, *_args) -> None:
+        from corrlib.geometry.torus import arclength_angles, path_angles, torus_embedding, torus_grid
+
+        result = self._pair
+        if result is None:
+            return
+        ex = result.extras
+        u = arclength_angles(ex["source_points"])
+        v = arclength_angles(ex["target_points"])
+        name = self.function.currentText()
+        values = np.asarray(ex[name], dtype=np.float64).ravel() if name else None
+        p = self.plotter
+        p.clear_actors()
+        curve_uv = path_angles(ex["path_layers"], ex["path_vertices"], u, v)
+        for col, flat in ((0, False), (1, True)):
+            p.subplot(0, col)
+            verts, faces, index = torus_grid(u, v, flat=flat)
+            grid = polydata(verts, faces)
+            if values is not None:
+                grid[name] = values[index]
+                p.add_mesh(grid, scalars=name, cmap="viridis", show_scalar_bar=flat,
+                           scalar_bar_args={"title": name}, opacity=1.0 if flat else 0.75)
+            else:
+                p.add_mesh(grid, color="lightgrey", opacity=1.0 if flat else 0.75)
+            if flat:
+                pts = np.column_stack([curve_uv[:, 0], np.mod(curve_uv[:, 1], 1.0), np.full(len(curve_uv), 0.01)])
+                # break the drawn curve where it wraps across the seam of the square
+                cut = np.flatnonzero(np.abs(np.diff(pts[:, 1])) > 0.5) + 1
+                for piece in np.split(pts, cut):
+                    if len(piece) > 1:
+                        p.add_mesh(polyline(piece, closed=False), color="crimson", line_width=4)
+                p.add_text("flat torus (u: contour A, v: contour B)", font_size=9)
+                p.view_xy()
+            else:
+                pts = torus_embedding(curve_uv[:, 0], curve_uv[:, 1], 1.0, 0.41)
+                self.torus_curve = polyline(pts, closed=False)
+                p.add_mesh(self.torus_curve.tube(radius=0.015), color="crimson")
+                p.add_text("product torus A × B", font_size=9)
+            p.reset_camera()
+            if not flat:
+                p.camera.zoom(0.8)
+        p.render()
+        self.info.setText(f"{len(u)} × {len(v)} product torus; correspondence energy {result.energy:.4g}")
 
     def close_plotters(self) -> None:
         self._plotter.close()

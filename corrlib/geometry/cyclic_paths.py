@@ -171,7 +171,8 @@ class ProductGraph:
         Symmetric graph adjacency (non-zero pattern = edges).
     """
 
-    def __init__(self, node_cost, curve_points, graph_points, adjacency):
+    def __init__(self, node_cost, curve_points, graph_points, adjacency, *, directed: bool = False,
+                 closing_shift: int = 0, n_starts: int | None = None):
         cost = np.asarray(node_cost, dtype=np.float64)
         curve = np.asarray(curve_points, dtype=np.float64)
         pts = np.asarray(graph_points, dtype=np.float64)
@@ -182,18 +183,30 @@ class ProductGraph:
         if not np.all(np.isfinite(cost)) or cost.min() < 0:
             raise InputError("node costs must be finite and non-negative")
         adj = csr_matrix(adjacency)
-        adj = (adj + adj.T).tocsr()
-        adj.sort_indices()
+        if not directed:
+            adj = (adj + adj.T).tocsr()
         self.m, self.n = m, n
+        # a closed path starts at (0, s) and ends at (m, s + closing_shift), s < n_starts
+        self.closing_shift = int(closing_shift)
+        self.n_starts = int(n_starts if n_starts is not None else n)
+        self.cyclic_starts = directed and self.closing_shift > 0
         # layer m duplicates layer 0: the path closes on the curve's first point
         self.cost = np.ascontiguousarray(np.vstack([cost, cost[:1]]))
         curve_closed = np.vstack([curve, curve[:1]])
         self.step2 = np.ascontiguousarray(np.sum(np.diff(curve_closed, axis=0) ** 2, axis=1))
         self.graph_points = np.ascontiguousarray(pts)
-        self.indptr = adj.indptr.astype(np.int64)
-        self.indices = adj.indices.astype(np.int64)
-        rows = np.repeat(np.arange(n), np.diff(self.indptr))
-        self.edge_len = np.ascontiguousarray(np.linalg.norm(pts[self.indices] - pts[rows], axis=1))
+
+        def csr_arrays(matrix):
+            matrix = csr_matrix(matrix)
+            matrix.sort_indices()
+            indptr = matrix.indptr.astype(np.int64)
+            indices = matrix.indices.astype(np.int64)
+            rows = np.repeat(np.arange(n), np.diff(indptr))
+            return indptr, indices, np.ascontiguousarray(np.linalg.norm(pts[indices] - pts[rows], axis=1))
+
+        self.indptr, self.indices, self.edge_len = csr_arrays(adj)
+        # the backward search of the heuristic walks the edges in reverse
+        self._reverse = csr_arrays(adj.T)
         self.adjacency = csr_matrix((self.edge_len, self.indices, self.indptr), shape=(n, n))
         # admissible heuristic (remaining cost to the last layer); zero until compute_heuristic()
         self.heuristic = np.zeros((m + 1, n))
@@ -207,15 +220,17 @@ class ProductGraph:
         """Exact cost-to-go ignoring where the path must end: one backward layered Dijkstra.
 
         Edge costs are symmetric and the product structure is the same with
-        the layers reversed, so the backward search is the forward kernel run
-        on the reversed layers from every node of the last layer. The result
+        the layers (and the graph edges) reversed, so the backward search is
+        the forward kernel run on the reversed layers and transposed graph
+        from every node of the last layer. The result
         is the tightest admissible A* heuristic for every later search.
         """
         flag = np.zeros(1, dtype=np.int8) if cancel is None else cancel
         everything = np.ones(self.n, dtype=np.bool_)
         start = time.perf_counter()
+        indptr, indices, edge_len = self._reverse
         t, _ = _layered_dijkstra(np.ascontiguousarray(self.cost[::-1]), np.ascontiguousarray(self.step2[::-1]),
-                                 self.graph_points, self.indptr, self.indices, self.edge_len, everything,
+                                 self.graph_points, indptr, indices, edge_len, everything,
                                  everything, np.inf, np.zeros((self.m + 1, self.n)), flag, self.dist, self.pred,
                                  self.origin)
         self.runs += 1
@@ -274,11 +289,40 @@ class ProductGraph:
         return CyclicPath(np.array(vertices[::-1], dtype=np.int64), np.array(layers[::-1], dtype=np.int64),
                           float(self.dist[self.m, end]))
 
+    def endpoints(self, region: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """(sources, targets) masks over the graph vertices for a region of start vertices."""
+        sources = np.zeros(self.n, dtype=np.bool_)
+        targets = np.zeros(self.n, dtype=np.bool_)
+        idx = np.flatnonzero(region)
+        sources[idx] = True
+        targets[idx + self.closing_shift] = True
+        return sources, targets
+
+    def is_closed(self, start: int, end: int) -> bool:
+        return end == start + self.closing_shift
+
+    def split(self, region: np.ndarray, start: int, end: int) -> tuple[np.ndarray, np.ndarray]:
+        """Split a region of starts into the parts nearer to ``start`` and to ``end``'s start."""
+        if self.cyclic_starts:
+            idx = np.arange(self.n_starts)
+            k = self.n_starts
+
+            def cyclic(a):
+                d = np.abs(idx - a) % k
+                return np.minimum(d, k - d)
+
+            near_start = cyclic(start) <= cyclic((end - self.closing_shift) % k)
+        else:
+            dist = dijkstra(self.adjacency, directed=False, indices=[start, end])
+            near_start = dist[0] <= dist[1]
+        return region & near_start, region & ~near_start
+
     def closed_from(self, start: int, upper: float = np.inf, cancel=None) -> tuple[float, CyclicPath | None]:
         """The cheapest closed path through ``(0, start)`` (if cheaper than ``upper``)."""
-        mask = np.zeros(self.n, dtype=np.bool_)
-        mask[start] = True
-        cost, _, end = self.shortest(mask, mask, upper, cancel)
+        region = np.zeros(self.n_starts, dtype=np.bool_)
+        region[start] = True
+        sources, targets = self.endpoints(region)
+        cost, _, end = self.shortest(sources, targets, upper, cancel)
         if end < 0:
             return np.inf, None
         return cost, self.backtrack(end)
@@ -325,9 +369,8 @@ def branch_and_bound(graph: ProductGraph, *, eps: float = 0.0, token: CancelToke
         raise ParameterError(f"eps must be in [0, 1), got {eps}")
     token = token or CancelToken()
     cancel = token.flag
-    n = graph.n
     counter = itertools.count()
-    everything = np.ones(n, dtype=np.bool_)
+    everything = np.ones(graph.n_starts, dtype=np.bool_)
     upper, best = np.inf, None
     graph.compute_heuristic(cancel)
 
@@ -336,11 +379,11 @@ def branch_and_bound(graph: ProductGraph, *, eps: float = 0.0, token: CancelToke
         if path is not None and cost < upper:
             upper, best = cost, path
 
-    cost, s, t = graph.shortest(everything, everything, upper, cancel)
+    cost, s, t = graph.shortest(*graph.endpoints(everything), upper, cancel)
     if s < 0:
         raise InputError("no path through the product graph (is the graph connected?)")
     heap = []
-    if s == t:
+    if graph.is_closed(s, t):
         consider_closed(cost, graph.backtrack(t))
     else:
         heapq.heappush(heap, (cost, next(counter), everything, s, t))
@@ -359,15 +402,13 @@ def branch_and_bound(graph: ProductGraph, *, eps: float = 0.0, token: CancelToke
             lower_bound = lower
             break
         # split the region by graph distance to the open path's start and end
-        dist = dijkstra(graph.adjacency, directed=False, indices=[s, t])
-        near_start = dist[0] <= dist[1]
-        for child in (region & near_start, region & ~near_start):
+        for child in graph.split(region, s, t):
             if not child.any():
                 continue
-            c_cost, c_s, c_t = graph.shortest(child, child, upper, cancel)
+            c_cost, c_s, c_t = graph.shortest(*graph.endpoints(child), upper, cancel)
             if c_s < 0:
                 continue  # nothing in this region beats the best closed path
-            if c_s == c_t:
+            if graph.is_closed(c_s, c_t):
                 consider_closed(c_cost, graph.backtrack(c_t))
             elif c_cost * (1.0 + eps) < upper:
                 heapq.heappush(heap, (c_cost, next(counter), child, c_s, c_t))

@@ -252,3 +252,17 @@ def test_contour_pair_shows_the_torus(qtbot, window):
     view = window.product_view
     assert view.torus_curve is not None and view.torus_curve.n_points == len(result.extras["path_layers"])
     assert view.function.currentText() == "cost"
+
+
+def test_drag_and_drop_and_recent_files(qtbot, window):
+    from PySide6.QtCore import QMimeData, QPoint, Qt, QUrl
+    from PySide6.QtGui import QDropEvent
+
+    mime = QMimeData()
+    mime.setUrls([QUrl.fromLocalFile(str(TOSCA / "wolf0.off")), QUrl.fromLocalFile(str(TOSCA / "wolf1.off"))])
+    event = QDropEvent(QPoint(10, 10), Qt.CopyAction, mime, Qt.LeftButton, Qt.NoModifier)
+    window.dropEvent(event)
+    assert window.source.name == "wolf0.off" and window.target.name == "wolf1.off"
+    recent = window.settings.value("recent")
+    assert recent[:2] == [str(TOSCA / "wolf1.off"), str(TOSCA / "wolf0.off")]
+    assert [a.text() for a in window.recent_menu.actions()][:2] == recent[:2]

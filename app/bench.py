@@ -39,6 +39,10 @@ def run_benchmarks(t_process_start: float) -> int:
     app.processEvents()
     print(f"{'start to first rendered frame (demo pair)  [target <= 3 s]':<62} "
           f"{time.perf_counter() - t_process_start:7.3f} s", flush=True)
+    settle = time.perf_counter() + 3.0  # let the idle-time warm-up of the compiled kernels finish
+    while time.perf_counter() < settle:
+        app.processEvents()
+        time.sleep(0.01)
 
     # GUI responsiveness while kernel matching runs on the 5k cat pair (second run: warm caches)
     cat0 = load_mesh(resource("data/tosca/cat0.off"))

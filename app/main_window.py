@@ -175,6 +175,15 @@ class MainWindow(QMainWindow):
         if state is not None:
             self.restoreState(state)
         self.refresh_methods()
+        # load the compiled kernels while the window is idle, not during the first solve
+        QTimer.singleShot(300, self._warm_up)
+
+    def _warm_up(self) -> None:
+        import threading
+
+        from corrlib.warmup import warm_up
+
+        threading.Thread(target=warm_up, name="corr-warm-up", daemon=True).start()
 
     # ------------------------------------------------------------------ layout
 

@@ -107,3 +107,9 @@ def test_result_save(tmp_path, wolf_pair):
     arrays, meta = load_result(tmp_path / "out")
     assert np.array_equal(arrays["map_xy"], result.map_xy)
     assert meta["method"] == "descriptor-nn" and meta["params"]["descriptor"] == "wks"
+
+
+def test_warm_up_runs_every_kernel():
+    from corrlib.warmup import warm_up
+
+    warm_up()  # tiny problems through the auction, layered Dijkstra, L1 costs and SHOT

@@ -1,0 +1,34 @@
+"""Load (or compile) every numba kernel once on tiny inputs.
+
+The first call of a numba function loads its machine code from the on-disk
+cache, or compiles it, holding the GIL. The studio calls :func:`warm_up` in
+a background thread while it is idle after start-up, so the first real solve
+neither pays that time nor freezes the window for it.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+
+def warm_up() -> None:
+    """Run each compiled kernel once on a tiny problem."""
+    import scipy.sparse as sp
+
+    from corrlib.assignment import linear_assignment
+    from corrlib.descriptors.shot import shot
+    from corrlib.geometry.cyclic_paths import ProductGraph, branch_and_bound
+    from corrlib.methods.contour3d import node_costs
+    from corrlib.progress import run
+
+    rng = np.random.default_rng(0)
+    for dtype in (np.float64, np.float32):
+        linear_assignment(rng.random((4, 4)).astype(dtype))
+    t = np.linspace(0, 2 * np.pi, 6, endpoint=False)
+    ring = np.column_stack([np.cos(t), np.sin(t), np.zeros(6)])
+    adj = sp.coo_matrix((np.ones(6), (np.arange(6), (np.arange(6) + 1) % 6)), shape=(6, 6))
+    cost = node_costs(rng.random((5, 3)), rng.random((6, 3)))
+    run(branch_and_bound(ProductGraph(cost, ring[:5, :2], ring, adj)))
+    sphere_v = np.array([[0, 0, 1], [1, 0, 0], [0, 1, 0], [-1, 0, 0], [0, -1, 0], [0, 0, -1]], float)
+    sphere_f = np.array([[0, 1, 2], [0, 2, 3], [0, 3, 4], [0, 4, 1], [5, 2, 1], [5, 3, 2], [5, 4, 3], [5, 1, 4]])
+    shot(sphere_v, sphere_f, radius=2.0, min_neighbors=1)

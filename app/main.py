@@ -43,6 +43,11 @@ def main(argv: list[str] | None = None) -> int:
     t_start = time.perf_counter()
     args = build_parser().parse_args(argv)
     os.environ.setdefault("QT_QPA_PLATFORM", "xcb")
+    if os.environ["QT_QPA_PLATFORM"] == "xcb" and not os.environ.get("DISPLAY"):
+        print("corr-studio: no display (DISPLAY is not set). Run it on a desktop, or on a virtual screen: "
+              'xvfb-run -a -s "-screen 0 1600x1000x24" corr-studio --demo --screenshot shot.png',
+              file=sys.stderr)
+        return 2
     if args.bench:
         from app.bench import run_benchmarks
 

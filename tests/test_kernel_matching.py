@@ -154,3 +154,17 @@ def test_bad_inputs(wolf_pair):
         solve("kernel-matching", *wolf_pair, initial=InitialMatch(map_xy=np.zeros(5, int)))
     with pytest.raises(InputError, match="does not take an initial map"):
         solve("descriptor-nn", *wolf_pair, initial=InitialMatch(map_xy=np.zeros(5, int)))
+
+
+def test_fmap_initialisation_and_final_smoothing(wolf_pair):
+    wolf0, wolf1 = wolf_pair
+    fast = dict(n_eigs=150, n_seeds=800, n_times=5, iters_per_time=2)
+    ident = np.arange(wolf0.n_vertices)
+    from_fmap = solve("kernel-matching", wolf0, wolf1, init="fmap", **fast)
+    fmap_only = solve("fmap-zoomout", wolf0, wolf1)
+    refined = geodesic_errors(from_fmap.map_xy, wolf1, ident, ident).summary()["within_0.05"]
+    baseline = geodesic_errors(fmap_only.map_xy, wolf1, ident, ident).summary()["within_0.05"]
+    assert refined > baseline + 0.05  # kernel matching improves the functional-maps baseline's map
+    smoothed = solve("kernel-matching", wolf0, wolf1, smooth_k=100, **fast)
+    assert smoothed.map_xy.min() >= 0 and smoothed.map_yx.min() >= 0
+    assert np.mean(smoothed.map_xy != solve("kernel-matching", wolf0, wolf1, **fast).map_xy) > 0.01

@@ -266,3 +266,14 @@ def test_drag_and_drop_and_recent_files(qtbot, window):
     recent = window.settings.value("recent")
     assert recent[:2] == [str(TOSCA / "wolf1.off"), str(TOSCA / "wolf0.off")]
     assert [a.text() for a in window.recent_menu.actions()][:2] == recent[:2]
+
+
+def test_studio_without_display_says_so():
+    import subprocess
+    import sys
+
+    env = {k: v for k, v in os.environ.items() if k != "DISPLAY"}
+    env["QT_QPA_PLATFORM"] = "xcb"
+    proc = subprocess.run([sys.executable, "-m", "app.main", "--demo"], env=env, capture_output=True, text=True,
+                          timeout=120)
+    assert proc.returncode == 2 and "no display" in proc.stderr

@@ -69,11 +69,23 @@ def main(argv: list[str] | None = None) -> int:
     for item in args.param:
         name, _, value = item.partition("=")
         method = args.method or window.method_box.currentData()
-        if method:
-            form = window._form_of[method]
-            current = form.values()
-            current[name] = type(current[name])(value) if not isinstance(current[name], bool) else value == "true"
-            form.set_values(current)
+        if method not in window._form_of:
+            print(f"corr-studio: --param {item}: no method to apply it to (load inputs or pass --method)",
+                  file=sys.stderr)
+            return 2
+        form = window._form_of[method]
+        current = form.values()
+        if name not in current:
+            print(f"corr-studio: --param {item}: {method} has no parameter {name!r} "
+                  f"(it has {', '.join(current)})", file=sys.stderr)
+            return 2
+        try:
+            current[name] = (value.lower() in {"1", "true", "yes", "on"} if isinstance(current[name], bool)
+                             else type(current[name])(value))
+        except ValueError:
+            print(f"corr-studio: --param {item}: cannot interpret {value!r}", file=sys.stderr)
+            return 2
+        form.set_values(current)
     started = False
     if args.retrieve:
         window.retrieval_view.set_folder(args.retrieve)

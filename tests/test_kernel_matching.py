@@ -112,6 +112,7 @@ def test_refinement_of_a_noisy_map_and_of_landmarks(wolf_pair):
     refined = solve("kernel-matching", wolf0, wolf1, initial=InitialMatch(map_xy=noisy), **fast)
     after = geodesic_errors(refined.map_xy, wolf1, ident, ident).summary()["within_0.025"]
     assert before < 0.75 and after > 0.9
+    assert refined.extras["monotone"]
     landmarks = rng.choice(wolf0.n_vertices, 15, replace=False)
     from_landmarks = solve("kernel-matching", wolf0, wolf1, initial=InitialMatch(landmarks_x=landmarks,
                                                                                  landmarks_y=landmarks), **fast)

@@ -277,3 +277,25 @@ def test_studio_without_display_says_so():
     proc = subprocess.run([sys.executable, "-m", "app.main", "--demo"], env=env, capture_output=True, text=True,
                           timeout=120)
     assert proc.returncode == 2 and "no display" in proc.stderr
+
+
+def test_about_and_remembered_layout(qtbot, tmp_path, monkeypatch):
+    from PySide6.QtWidgets import QMessageBox
+
+    texts = []
+    monkeypatch.setattr(QMessageBox, "about", lambda parent, title, text: texts.append(text))
+    settings = QSettings(str(tmp_path / "layout.ini"), QSettings.IniFormat)
+    first = MainWindow(settings=settings, interactive=False)
+    qtbot.addWidget(first)
+    first.show_about()
+    assert "numpy" in texts[0] and "TOSCA" in texts[0]  # versions and data provenance
+    from PySide6.QtWidgets import QDockWidget
+
+    sketch_dock = next(d for d in first.findChildren(QDockWidget) if d.objectName() == "dock-Sketch")
+    sketch_dock.setFloating(True)
+    first.close()
+    second = MainWindow(settings=QSettings(str(tmp_path / "layout.ini"), QSettings.IniFormat), interactive=False)
+    qtbot.addWidget(second)
+    again = next(d for d in second.findChildren(QDockWidget) if d.objectName() == "dock-Sketch")
+    assert again.isFloating()  # the dock layout came back from QSettings
+    second.close()

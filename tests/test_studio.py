@@ -17,13 +17,19 @@ from app.main_window import MainWindow  # noqa: E402
 FAST_KERNEL = {"n_eigs": 100, "n_seeds": 500, "n_times": 4, "iters_per_time": 2}
 
 
+def make_window(qtbot, ini_path, interactive=False, show=True):
+    """A studio window with its own settings file (no state shared between tests)."""
+    win = MainWindow(settings=QSettings(str(ini_path), QSettings.IniFormat), interactive=interactive)
+    qtbot.addWidget(win)
+    if show:
+        win.show()
+        qtbot.waitExposed(win)
+    return win
+
+
 @pytest.fixture
 def window(qtbot, tmp_path):
-    settings = QSettings(str(tmp_path / "studio.ini"), QSettings.IniFormat)
-    win = MainWindow(settings=settings, interactive=False)
-    qtbot.addWidget(win)
-    win.show()
-    qtbot.waitExposed(win)
+    win = make_window(qtbot, tmp_path / "studio.ini")
     yield win
     win.close()
 
@@ -141,10 +147,8 @@ def test_cancel_during_a_run(qtbot, window):
 
 
 def test_close_during_a_run(qtbot, tmp_path):
-    settings = QSettings(str(tmp_path / "s.ini"), QSettings.IniFormat)
-    win = MainWindow(settings=settings, interactive=False)
-    qtbot.addWidget(win)
-    win.show()
+    win = make_window(qtbot, tmp_path / "s.ini")
+    settings = win.settings
     win.load_demo()
     with qtbot.waitSignal(win.runner.progress, timeout=60_000):
         win.run_method(method="kernel-matching")
@@ -158,9 +162,7 @@ def test_bad_file_shows_a_dialog(qtbot, tmp_path, monkeypatch):
 
     shown = []
     monkeypatch.setattr(QMessageBox, "critical", lambda parent, title, text: shown.append(text))
-    settings = QSettings(str(tmp_path / "s.ini"), QSettings.IniFormat)
-    win = MainWindow(settings=settings, interactive=True)
-    qtbot.addWidget(win)
+    win = make_window(qtbot, tmp_path / "s.ini", interactive=True, show=False)
     bad = tmp_path / "broken.off"
     bad.write_text("OFF\n3 1 0\n0 0 0\n1 0 0\n")
     assert not win.load_file(str(bad), "source")
@@ -284,9 +286,7 @@ def test_about_and_remembered_layout(qtbot, tmp_path, monkeypatch):
 
     texts = []
     monkeypatch.setattr(QMessageBox, "about", lambda parent, title, text: texts.append(text))
-    settings = QSettings(str(tmp_path / "layout.ini"), QSettings.IniFormat)
-    first = MainWindow(settings=settings, interactive=False)
-    qtbot.addWidget(first)
+    first = make_window(qtbot, tmp_path / "layout.ini", show=False)
     first.show_about()
     assert "numpy" in texts[0] and "TOSCA" in texts[0]  # versions and data provenance
     from PySide6.QtWidgets import QDockWidget
@@ -294,8 +294,7 @@ def test_about_and_remembered_layout(qtbot, tmp_path, monkeypatch):
     sketch_dock = next(d for d in first.findChildren(QDockWidget) if d.objectName() == "dock-Sketch")
     sketch_dock.setFloating(True)
     first.close()
-    second = MainWindow(settings=QSettings(str(tmp_path / "layout.ini"), QSettings.IniFormat), interactive=False)
-    qtbot.addWidget(second)
+    second = make_window(qtbot, tmp_path / "layout.ini", show=False)
     again = next(d for d in second.findChildren(QDockWidget) if d.objectName() == "dock-Sketch")
     assert again.isFloating()  # the dock layout came back from QSettings
     second.close()

@@ -64,6 +64,12 @@ def main(argv: list[str] | None = None) -> int:
         window.load_file(path, "source" if i == 0 else "target")
     if args.demo:
         window.load_demo()
+    def select_tab() -> None:
+        for i in range(window.tabs.count()):
+            if args.tab and window.tabs.tabText(i).lower() == args.tab.lower():
+                window.tabs.setCurrentIndex(i)
+
+    select_tab()
     if args.pair_mode:
         window.pair_view.mode.setCurrentText(args.pair_mode)
     for item in args.param:
@@ -102,10 +108,7 @@ def main(argv: list[str] | None = None) -> int:
             started = True
     if args.screenshot:
         def shoot(*_a):
-            if args.tab:
-                for i in range(window.tabs.count()):
-                    if window.tabs.tabText(i).lower() == args.tab.lower():
-                        window.tabs.setCurrentIndex(i)
+            select_tab()  # a finished job switches to its own view; show the requested one
             if args.sequence_t is not None and window.sequence_view.positions is not None:
                 window.sequence_view.slider.setValue(int(1000 * args.sequence_t / window.sequence_view.t_max.value()))
             for _ in range(5):

@@ -157,14 +157,14 @@ def _write_match_outputs(result, source, target, out: Path, *, quiet: bool = Fal
                                          result.extras.get("tau_trace")))
     if result.map_yx is not None:
         written.append(save_map(out.with_name(out.name + ".map_yx.txt"), result.map_yx))
-    from corrlib.shapes import TriMesh
+    from corrlib.shapes import Contour2D, TriMesh
 
     if result.map_yx is not None and isinstance(source, TriMesh) and isinstance(target, TriMesh):
         from corrlib.plotting import save_colour_transfer
 
         written.append(save_colour_transfer(out.with_name(out.name + ".png"), source, target, result.map_yx,
                                             title=f"{result.method}"))
-    elif "cost" in result.extras and "path_layers" in result.extras:
+    elif isinstance(source, Contour2D) and isinstance(target, Contour2D):
         from corrlib.plotting import save_torus_pictures
 
         written.append(save_torus_pictures(out.with_name(out.name + ".png"), result))

@@ -265,10 +265,13 @@ class TriMesh:
 
     def __init__(self, vertices, faces, *, name: str = "mesh", validate: bool = True, labels=None):
         self.name = str(name)
+        self._findings = None
         if validate:
-            errors = [fd for fd in inspect_mesh(vertices, faces) if fd.level == "error"]
+            findings = inspect_mesh(vertices, faces)
+            errors = [fd for fd in findings if fd.level == "error"]
             if errors:
                 raise MeshError(f"{self.name}: {errors[0].message}")
+            self._findings = findings  # kept for report(): a mesh is inspected once
         self.vertices = _readonly(np.asarray(vertices, dtype=np.float64))
         self.faces = _readonly(np.asarray(faces, dtype=np.int64))
         self.labels = None if labels is None else _check_labels(labels, self.n_vertices, self.name, MeshError)
@@ -321,7 +324,9 @@ class TriMesh:
 
     def report(self) -> list[Finding]:
         """Validation findings (warnings only, for a mesh that was constructed)."""
-        return inspect_mesh(self.vertices, self.faces)
+        if self._findings is None:
+            self._findings = inspect_mesh(self.vertices, self.faces)
+        return list(self._findings)
 
     @cached_property
     def face_areas(self) -> np.ndarray:

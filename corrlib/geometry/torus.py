@@ -81,7 +81,6 @@ def path_angles(layers: np.ndarray, vertices: np.ndarray, u: np.ndarray, v: np.n
 
     The closing layer m is curve A's point 0 at u = 1.
     """
-    m = len(u)
     uu = np.append(u, 1.0)[np.asarray(layers)]
     vv = np.asarray(v)[np.asarray(vertices)]
     vv = vv + np.concatenate([[0.0], np.cumsum(np.round(-np.diff(vv)))])  # undo jumps across the seam

@@ -454,6 +454,8 @@ class MainWindow(QMainWindow):
         return self._form_of[name].params()
 
     def run_method(self, *_args, method: str | None = None) -> None:
+        if method is not None and self.method_box.findData(method) >= 0:
+            self.method_box.setCurrentIndex(self.method_box.findData(method))  # the form shows what runs
         name = method or self.method_box.currentData()
         if name is None:
             self.show_error("no method accepts the loaded inputs (load a source and a target)")
@@ -529,8 +531,20 @@ class MainWindow(QMainWindow):
                 self.job_panel.write("error: " + ", ".join(f"{k} {v:.3f}" for k, v in report.summary().items()))
             self.tabs.setCurrentWidget(self.pair_view)
             self.pair_view.set_result(result, errors)
-            self.sequence_view.set_sequence(self.source, self.target, result.map_xy)
+            self._show_sequence(result)
         self.result_ready.emit(result)
+
+    def _show_sequence(self, result) -> None:
+        from corrlib.morph import sequence_positions
+
+        if "trajectory" in result.extras:
+            positions = sequence_positions(result, self.source, self.target,
+                                           t_max=float(result.extras["trajectory_times"][-1]))
+            self.sequence_view.set_sequence(self.source, self.target, result.map_xy, positions,
+                                            description="divergence-free flow (volume preserving; t > 1 "
+                                                        "extrapolates along the same field)")
+        else:
+            self.sequence_view.set_sequence(self.source, self.target, result.map_xy)
 
     def run_retrieval(self) -> None:
         view = self.retrieval_view
@@ -614,8 +628,9 @@ class MainWindow(QMainWindow):
         self.pair_view.redraw()
 
     def export_frames(self, suffix: str = ".obj", folder: str | None = None) -> list[Path]:
-        """Write 11 frames from t = 0 to t max with the source's connectivity (asks before overwriting)."""
-        from corrlib.io import save_mesh
+        """Write 11 frames from t = 0 to t max with the source's connectivity, ``animation.glb`` (glTF
+        morph-target animation) and ``volumes.csv`` (asks before overwriting)."""
+        from corrlib.morph import export_sequence
 
         if self.sequence_view.positions is None:
             self.show_error("no sequence to export (run a method on two meshes)")
@@ -624,20 +639,23 @@ class MainWindow(QMainWindow):
         if not folder:
             return []
         frames = list(self.sequence_view.frames(11))
-        paths = [Path(folder) / f"frame_{i:03d}_t{t:.2f}{suffix}" for i, (t, _) in enumerate(frames)]
-        existing = [p for p in paths if p.exists()]
+        existing = [p for p in Path(folder).glob("frame_*") if p.suffix == suffix] + \
+            [p for p in (Path(folder) / "animation.glb",) if p.exists()]
         if existing and self.interactive and QMessageBox.question(
                 self, "corr studio", f"{len(existing)} frame files exist in {folder}. Overwrite them?") \
                 != QMessageBox.Yes:
             return []
         try:
-            for path, (_t, verts) in zip(paths, frames):
-                save_mesh(path, verts, self.source.faces)
+            written = export_sequence(folder, [v for _t, v in frames], self.source.faces, [t for t, _v in frames],
+                                      fmt=suffix.lstrip("."), closed=self.source.is_closed)
         except (CorrError, OSError) as exc:
             self.show_error(str(exc))
             return []
-        self.job_panel.write(f"wrote {len(paths)} frames to {folder}")
-        return paths
+        volumes = written["volume"]
+        note = (f"largest volume change {max(abs(v / volumes[0] - 1) for v in volumes):.2e}"
+                if volumes[0] is not None else "volume does not apply (open mesh)")
+        self.job_panel.write(f"wrote {len(frames)} frames, animation.glb and volumes.csv to {folder} ({note})")
+        return written["frames"]
 
     def export_strip(self) -> None:
         from PIL import Image

@@ -22,3 +22,223 @@ def linear_positions(source_vertices: np.ndarray, target_vertices: np.ndarray, m
         raise InputError(f"the map has {mp.shape[0]} entries for {source_vertices.shape[0]} source vertices")
     partner = np.where((mp >= 0)[:, None], target_vertices[np.clip(mp, 0, None)], source_vertices)
     return (1.0 - t) * source_vertices + t * partner
+
+
+def sequence_positions(result, source, target, t_max: float = 1.5):
+    """A ``positions(t)`` callable for a result: the method's deformation if it has one, else linear.
+
+    Parameters
+    ----------
+    result : MatchResult
+    source, target : TriMesh
+    t_max : float
+        Largest time the callable will be asked for (the flow is precomputed up to it).
+
+    Returns
+    -------
+    callable
+        ``positions(t) -> (n_x, 3)``; for a divergence-free result the flow's
+        RK2 trajectory (exact at its steps, linear in between), otherwise
+        :func:`linear_positions` through ``result.map_xy``.
+    """
+    ex = result.extras
+    if "trajectory" in ex and float(ex["trajectory_times"][-1]) >= t_max - 1e-9:
+        return _stored_trajectory(np.asarray(ex["trajectory_times"]), np.asarray(ex["trajectory"]))
+    if "coefficients" in ex and "frames" in ex:
+        from corrlib.methods.divergence_free import Deformation
+
+        return Deformation.from_result(result).interpolator(source.vertices, t_max)
+    if result.map_xy is None:
+        raise InputError(f"the result of {result.method!r} has no point-to-point map to interpolate")
+    return lambda t: linear_positions(source.vertices, target.vertices, result.map_xy, t)
+
+
+def _stored_trajectory(times: np.ndarray, steps: np.ndarray):
+    """``positions(t)``: linear between the stored RK2 steps (exact at the step times)."""
+    def positions(t: float) -> np.ndarray:
+        t = float(np.clip(t, times[0], times[-1]))
+        i = int(np.clip(np.searchsorted(times, t, side="right") - 1, 0, len(times) - 2))
+        alpha = (t - times[i]) / (times[i + 1] - times[i])
+        return ((1.0 - alpha) * steps[i] + alpha * steps[i + 1]).astype(np.float64)
+
+    return positions
+
+
+def frame_positions(result, source, target, times) -> list[np.ndarray]:
+    """Exact positions at ``times`` (the flow integrated to each time, or linear interpolation)."""
+    if "coefficients" in result.extras and "frames" in result.extras:
+        from corrlib.methods.divergence_free import Deformation
+
+        deformation = Deformation.from_result(result)
+        return [deformation.positions(source.vertices, float(t)) for t in times]
+    if result.map_xy is None:
+        raise InputError(f"the result of {result.method!r} has no point-to-point map to interpolate")
+    return [linear_positions(source.vertices, target.vertices, result.map_xy, float(t)) for t in times]
+
+
+def frame_volumes(frames, faces, closed: bool) -> list[float | None]:
+    """Enclosed volume of every frame (``None`` for every frame of a mesh that is not closed)."""
+    from corrlib.shapes import signed_volume
+
+    return [signed_volume(f, faces) if closed else None for f in frames]
+
+
+def export_sequence(folder, frames, faces, times, *, fmt: str = "obj", animation: bool = True,
+                    closed: bool = True, name: str = "frame") -> dict:
+    """Write a mesh sequence: one mesh per frame, a glTF animation and a volume table.
+
+    Parameters
+    ----------
+    folder : path
+        Created if needed.
+    frames : list of (n, 3) float
+        Vertex positions per frame (same connectivity).
+    faces : (f, 3) int
+    times : (F,) float
+        The time of every frame (t = 1 is the target; t > 1 extrapolates).
+    fmt : {"obj", "ply", "off"}
+    animation : bool
+        Also write ``animation.glb``: glTF 2.0 binary, the first frame as the
+        base mesh and one morph target per further frame, with a weights
+        animation (one second per unit of t) that passes through every frame
+        (Blender, three.js and most viewers play it).
+    closed : bool
+        Whether volumes apply (the source mesh is closed).
+
+    Returns
+    -------
+    dict
+        ``{"frames": [paths], "animation": path or None, "volumes": path,
+        "volume": [floats or None]}``.
+    """
+    from pathlib import Path
+
+    from corrlib.io import atomic_write, save_mesh
+
+    if fmt not in ("obj", "ply", "off"):
+        raise InputError(f"unknown frame format {fmt!r} (use obj, ply or off)")
+    if len(frames) != len(times) or len(frames) == 0:
+        raise InputError(f"{len(frames)} frames for {len(times)} times")
+    out = Path(folder)
+    out.mkdir(parents=True, exist_ok=True)
+    digits = max(3, len(str(len(frames) - 1)))
+    paths = [save_mesh(out / f"{name}_{i:0{digits}d}.{fmt}", f, faces) for i, f in enumerate(frames)]
+    volumes = frame_volumes(frames, faces, closed)
+    table = out / "volumes.csv"
+    with atomic_write(table) as fh:
+        fh.write("frame,t,volume,relative_change\n")
+        base = volumes[0]
+        for i, (t, v) in enumerate(zip(times, volumes)):
+            if v is None:
+                fh.write(f"{i},{t:.6g},not applicable (open mesh),\n")
+            else:
+                fh.write(f"{i},{t:.6g},{v:.9g},{v / base - 1.0:.3e}\n")
+    anim = save_glb_animation(out / "animation.glb", frames, faces, times) if animation else None
+    return {"frames": paths, "animation": anim, "volumes": table, "volume": volumes}
+
+
+def save_glb_animation(path, frames, faces, times):
+    """Write a glTF 2.0 binary (.glb) morph-target animation of a mesh sequence.
+
+    The first frame is the base mesh; frame ``i > 0`` is morph target ``i - 1``
+    (its displacement from the base); the animation channel drives the
+    morph weights linearly from one-hot vector to one-hot vector at the
+    frame times (seconds = t), so playback passes through every frame.
+    """
+    import json
+    import struct
+    from pathlib import Path
+
+    from corrlib.io import atomic_write
+
+    base = np.asarray(frames[0], dtype=np.float32)
+    faces32 = np.ascontiguousarray(faces, dtype=np.uint32)
+    n_targets = len(frames) - 1
+    blobs: list[bytes] = []
+    views: list[dict] = []
+    accessors: list[dict] = []
+
+    def add(array: np.ndarray, accessor: dict, target: int | None = None) -> int:
+        offset = sum(len(b) for b in blobs)
+        data = np.ascontiguousarray(array).tobytes()
+        view = {"buffer": 0, "byteOffset": offset, "byteLength": len(data)}
+        if target is not None:
+            view["target"] = target
+        blobs.append(data + b"\0" * (-len(data) % 4))
+        views.append(view)
+        accessors.append({"bufferView": len(views) - 1, **accessor})
+        return len(accessors) - 1
+
+    def vec3(a: np.ndarray) -> dict:
+        return {"componentType": 5126, "count": len(a), "type": "VEC3",
+                "min": a.min(axis=0).tolist(), "max": a.max(axis=0).tolist()}
+
+    pos = add(base, vec3(base), 34962)
+    idx = add(faces32.ravel(), {"componentType": 5125, "count": faces32.size, "type": "SCALAR"}, 34963)
+    targets = []
+    for f in frames[1:]:
+        disp = np.asarray(f, dtype=np.float32) - base
+        targets.append({"POSITION": add(disp, vec3(disp), 34962)})
+    t = np.asarray(times, dtype=np.float32)
+    t = t - t[0]
+    weights = np.zeros((len(frames), n_targets), dtype=np.float32)
+    weights[np.arange(1, len(frames)), np.arange(n_targets)] = 1.0
+    primitive = {"attributes": {"POSITION": pos}, "indices": idx, "mode": 4}
+    mesh = {"primitives": [primitive], "name": "sequence"}
+    doc = {"asset": {"version": "2.0", "generator": "corrlib"}, "scene": 0, "scenes": [{"nodes": [0]}],
+           "nodes": [{"mesh": 0, "name": "sequence"}], "meshes": [mesh]}
+    if n_targets:
+        primitive["targets"] = targets
+        mesh["weights"] = [0.0] * n_targets
+        t_acc = add(t, {"componentType": 5126, "count": len(t), "type": "SCALAR",
+                        "min": [float(t.min())], "max": [float(t.max())]})
+        w_acc = add(weights.ravel(), {"componentType": 5126, "count": weights.size, "type": "SCALAR"})
+        doc["animations"] = [{"name": "morph", "channels": [{"sampler": 0, "target": {"node": 0, "path": "weights"}}],
+                              "samplers": [{"input": t_acc, "output": w_acc, "interpolation": "LINEAR"}]}]
+    binary = b"".join(blobs)
+    doc["buffers"] = [{"byteLength": len(binary)}]
+    doc["bufferViews"] = views
+    doc["accessors"] = accessors
+    text = json.dumps(doc, separators=(",", ":")).encode()
+    text += b" " * (-len(text) % 4)
+    total = 12 + 8 + len(text) + 8 + len(binary)
+    path = Path(path)
+    with atomic_write(path, "wb") as fh:
+        fh.write(struct.pack("<III", 0x46546C67, 2, total))
+        fh.write(struct.pack("<II", len(text), 0x4E4F534A) + text)
+        fh.write(struct.pack("<II", len(binary), 0x004E4942) + binary)
+    return path
+
+
+def load_glb_frames(path) -> tuple[np.ndarray, list[np.ndarray], np.ndarray]:
+    """Read back what :func:`save_glb_animation` wrote: faces, frame positions and key times."""
+    import json
+    import struct
+    from pathlib import Path
+
+    from corrlib.errors import FileFormatError
+
+    data = Path(path).read_bytes()
+    if len(data) < 20 or struct.unpack_from("<I", data, 0)[0] != 0x46546C67:
+        raise FileFormatError(f"{path}: not a glTF binary")
+    json_len = struct.unpack_from("<I", data, 12)[0]
+    doc = json.loads(data[20:20 + json_len])
+    binary = data[20 + json_len + 8:]
+    types = {5126: np.float32, 5125: np.uint32}
+    widths = {"SCALAR": 1, "VEC3": 3}
+
+    def read(i: int) -> np.ndarray:
+        acc = doc["accessors"][i]
+        view = doc["bufferViews"][acc["bufferView"]]
+        arr = np.frombuffer(binary, dtype=types[acc["componentType"]], count=acc["count"] * widths[acc["type"]],
+                            offset=view["byteOffset"])
+        return arr.reshape(acc["count"], widths[acc["type"]]) if acc["type"] != "SCALAR" else arr
+
+    prim = doc["meshes"][0]["primitives"][0]
+    base = read(prim["attributes"]["POSITION"]).astype(np.float64)
+    faces = read(prim["indices"]).reshape(-1, 3).astype(np.int64)
+    frames = [base] + [base + read(t["POSITION"]) for t in prim.get("targets", [])]
+    times = np.zeros(1)
+    if doc.get("animations"):
+        times = read(doc["animations"][0]["samplers"][0]["input"]).astype(np.float64)
+    return faces, frames, times

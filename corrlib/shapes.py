@@ -78,6 +78,12 @@ def triangle_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     return 0.5 * np.linalg.norm(np.cross(e1, e2), axis=1)
 
 
+def signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
+    """Signed volume enclosed by a closed triangle surface (divergence theorem; positive if outward-oriented)."""
+    v, f = np.asarray(vertices, dtype=np.float64), np.asarray(faces)
+    return float(np.einsum("ij,ij->i", v[f[:, 0]], np.cross(v[f[:, 1]], v[f[:, 2]])).sum() / 6.0)
+
+
 def area_weighted_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     """(n, 3) float: area-weighted unit vertex normals; zero for vertices in no non-degenerate face."""
     v = np.asarray(vertices, dtype=np.float64)
@@ -414,8 +420,7 @@ class TriMesh:
         """Signed enclosed volume by the divergence theorem; ``None`` if the mesh is not closed."""
         if not self.is_closed:
             return None
-        v, f = self.vertices, self.faces
-        return float(np.einsum("ij,ij->i", v[f[:, 0]], np.cross(v[f[:, 1]], v[f[:, 2]])).sum() / 6.0)
+        return signed_volume(self.vertices, self.faces)
 
 
 # ----------------------------------------------------------------------------- contours

@@ -298,3 +298,23 @@ def test_about_and_remembered_layout(qtbot, tmp_path, monkeypatch):
     again = next(d for d in second.findChildren(QDockWidget) if d.objectName() == "dock-Sketch")
     assert again.isFloating()  # the dock layout came back from QSettings
     second.close()
+
+
+def test_divergence_free_sequence_uses_the_flow(qtbot, window, tmp_path):
+    from corrlib.io import load_mesh
+    from corrlib.morph import load_glb_frames
+
+    window.load_demo()
+    set_params(window, "divergence-free", n_samples=400, n_fields=150, max_iter=5)
+    result = run_and_wait(qtbot, window, "divergence-free")
+    view = window.sequence_view
+    assert "divergence-free flow" in view.kind.text()
+    assert np.allclose(view.positions(1.0), result.extras["morphed_vertices"], atol=1e-3)
+    view.slider.setValue(view.slider.maximum())  # t = t max extrapolates along the flow
+    assert np.allclose(view.mesh.points, view.positions(view.t_max.value()), atol=1e-4)
+    paths = window.export_frames(".obj", folder=str(tmp_path))
+    assert len(paths) == 11 and (tmp_path / "animation.glb").exists()
+    assert np.allclose(load_mesh(paths[0]).vertices, view.positions(0.0), atol=1e-4)
+    _faces, frames, _times = load_glb_frames(tmp_path / "animation.glb")
+    assert len(frames) == 11
+    assert "volume change" in window.job_panel.log.toPlainText()

@@ -1,0 +1,364 @@
+"""Flowing points along a divergence-free velocity field (thesis Eq. 10.13 and C.15).
+
+The deformation is the time-1 flow of the stationary field
+``v(x) = Σ_k a_k v_k(x)`` (:mod:`.basis`), integrated by T explicit midpoint
+(RK2) steps of size h = 1/T (Eq. 10.13)::
+
+    m_t     = x_t + (h/2) v(x_t)
+    x_{t+1} = x_t + h v(m_t)
+
+Evaluating the flow at time t runs ``ceil(t T)`` steps of size ``t / ceil(t T)``
+(t > 1 extrapolates along the same field; t < 0 runs it backwards).
+
+The derivative of the end points with respect to the coefficients follows
+the recursion of Eq. C.15, with ``V(x)`` the (3, K) matrix of basis values
+and ``J(x) = Σ_k a_k ∂v_k/∂x`` the (3, 3) Jacobian of the velocity::
+
+    ∂m_t/∂a     = ∂x_t/∂a + (h/2) [V(x_t) + J(x_t) ∂x_t/∂a]
+    ∂x_{t+1}/∂a = ∂x_t/∂a + h     [V(m_t) + J(m_t) ∂m_t/∂a]
+
+Two implementations: :func:`flow_with_jacobian` (compiled, one point per
+task, the (3, K) derivative in cache) for the fitting, and :func:`flow`
+(velocity only, separable sums vectorised over blocks of points) for flowing
+full-resolution meshes and animation frames.
+"""
+
+from __future__ import annotations
+
+import math
+
+import numba
+import numpy as np
+
+from corrlib.deformation.basis import DivFreeBasis
+from corrlib.errors import InputError, ParameterError
+
+
+
+def _check_points(points) -> np.ndarray:
+    p = np.asarray(points, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] != 3:
+        raise InputError(f"points must have shape (n, 3), got {p.shape}")
+    if not np.all(np.isfinite(p)):
+        raise InputError("points contain NaN or inf")
+    return p
+
+
+def step_count(t: float, n_steps: int) -> tuple[int, float]:
+    """Steps and step size for time ``t`` at the resolution of ``n_steps`` steps per unit time."""
+    if int(n_steps) != n_steps or n_steps < 1:
+        raise ParameterError(f"the number of flow steps T must be a positive integer, got {n_steps!r}")
+    if not math.isfinite(t):
+        raise ParameterError(f"the flow time must be finite, got {t!r}")
+    steps = max(1, math.ceil(abs(t) * n_steps - 1e-9))
+    return steps, t / steps
+
+
+# ----------------------------------------------------------------------------- velocity only
+
+_BLOCK = 128  # points per SIMD block of the velocity kernel
+
+
+def _coefficient_tensor(basis: DivFreeBasis, coeffs) -> tuple[np.ndarray, np.ndarray]:
+    """Coefficients as a dense (3, M, M, M) tensor ``A[d, j1-1, j2-1, j3-1]`` and the (M, M) count of j3 used."""
+    a = basis.padded(coeffs).reshape(-1, 3)
+    m = basis.max_freq
+    j = basis.freqs - 1
+    tens = np.zeros((3, m, m, m))
+    for d in range(3):
+        tens[d, j[:, 0], j[:, 1], j[:, 2]] = a[:, d]
+    top = np.zeros((m, m), dtype=np.int64)
+    np.maximum.at(top, (j[:, 0], j[:, 1]), j[:, 2] + 1)
+    return tens, top
+
+
+@numba.njit(cache=True, parallel=True, fastmath=True, nogil=True)
+def _velocity_kernel(x, tens, top, out):
+    """Separable evaluation of Eq. 10.11 summed with the coefficients, vectorised over blocks of points.
+
+    v₁ = Σ_{j1,j2} [s₁c₂ Σ_{j3} a₃ s₃ − s₁s₂ Σ_{j3} a₂ c₃], and cyclically (a_d: coefficient of curl(φ e_d)).
+    """
+    n = x.shape[0]
+    m = tens.shape[1]
+    n_blocks = (n + _BLOCK - 1) // _BLOCK
+    for b in numba.prange(n_blocks):
+        lo = b * _BLOCK
+        size = min(n, lo + _BLOCK) - lo
+        s = np.empty((3, m, _BLOCK))
+        c = np.empty((3, m, _BLOCK))
+        for d in range(3):
+            for f in range(m):
+                w = math.pi * (f + 1)
+                for i in range(size):
+                    s[d, f, i] = math.sin(w * x[lo + i, d])
+                    c[d, f, i] = w * math.cos(w * x[lo + i, d])
+        v1 = np.zeros(_BLOCK)
+        v2 = np.zeros(_BLOCK)
+        v3 = np.zeros(_BLOCK)
+        a2s3 = np.empty(_BLOCK)
+        a1c3 = np.empty(_BLOCK)
+        a0c3 = np.empty(_BLOCK)
+        a1s3 = np.empty(_BLOCK)
+        a0s3 = np.empty(_BLOCK)
+        for j1 in range(m):
+            for j2 in range(m):
+                count = top[j1, j2]
+                if count == 0:
+                    continue
+                a2s3[:] = 0.0
+                a1c3[:] = 0.0
+                a0c3[:] = 0.0
+                a1s3[:] = 0.0
+                a0s3[:] = 0.0
+                for j3 in range(count):
+                    e0 = tens[0, j1, j2, j3]
+                    e1 = tens[1, j1, j2, j3]
+                    e2 = tens[2, j1, j2, j3]
+                    for i in range(size):
+                        s3 = s[2, j3, i]
+                        c3 = c[2, j3, i]
+                        a2s3[i] += e2 * s3
+                        a1c3[i] += e1 * c3
+                        a0c3[i] += e0 * c3
+                        a1s3[i] += e1 * s3
+                        a0s3[i] += e0 * s3
+                for i in range(size):
+                    s1c2 = s[0, j1, i] * c[1, j2, i]
+                    s1s2 = s[0, j1, i] * s[1, j2, i]
+                    c1s2 = c[0, j1, i] * s[1, j2, i]
+                    v1[i] += s1c2 * a2s3[i] - s1s2 * a1c3[i]
+                    v2[i] += s1s2 * a0c3[i] - c1s2 * a2s3[i]
+                    v3[i] += c1s2 * a1s3[i] - s1c2 * a0s3[i]
+        for i in range(size):
+            out[lo + i, 0] = v1[i]
+            out[lo + i, 1] = v2[i]
+            out[lo + i, 2] = v3[i]
+
+
+class _VelocityTensors:
+    """The velocity field of fixed coefficients, callable on (n, 3) points."""
+
+    def __init__(self, basis: DivFreeBasis, coeffs):
+        self.tens, self.top = _coefficient_tensor(basis, coeffs)
+
+    def __call__(self, x: np.ndarray) -> np.ndarray:
+        out = np.empty_like(x)
+        _velocity_kernel(np.ascontiguousarray(x), self.tens, self.top, out)
+        return out
+
+
+def velocity(basis: DivFreeBasis, points, coeffs) -> np.ndarray:
+    """(n, 3) float: the velocity ``Σ_k a_k v_k`` at ``points`` (fast separable evaluation)."""
+    p = _check_points(points)
+    return _VelocityTensors(basis, coeffs)(p)
+
+
+def trajectory(basis: DivFreeBasis, points, coeffs, t: float = 1.0, n_steps: int = 20,
+               keep: bool = True) -> np.ndarray:
+    """Flow ``points`` to time ``t`` by RK2 (Eq. 10.13).
+
+    Parameters
+    ----------
+    basis : DivFreeBasis
+    points : (n, 3) float
+        Start positions (in the unit-cube frame).
+    coeffs : (K,) float
+    t : float
+        End time (t > 1 extrapolates, t < 0 runs backwards).
+    n_steps : int
+        T, steps per unit time.
+    keep : bool
+        Return every step (``(s + 1, n, 3)``) instead of the end points only.
+
+    Returns
+    -------
+    (n, 3) or (s + 1, n, 3) float
+        With ``s = ceil(|t| T)`` steps.
+    """
+    p = _check_points(points)
+    steps, h = step_count(t, n_steps)
+    vel = _VelocityTensors(basis, coeffs)
+    out = np.empty((steps + 1,) + p.shape) if keep else None
+    x = p.copy()
+    if keep:
+        out[0] = x
+    for step in range(steps):
+        mid = x + 0.5 * h * vel(x)
+        x = x + h * vel(mid)
+        if keep:
+            out[step + 1] = x
+    return out if keep else x
+
+
+def flow(basis: DivFreeBasis, points, coeffs, t: float = 1.0, n_steps: int = 20) -> np.ndarray:
+    """(n, 3) float: ``points`` flowed to time ``t`` (see :func:`trajectory`)."""
+    return trajectory(basis, points, coeffs, t, n_steps, keep=False)
+
+
+# ----------------------------------------------------------------------------- with derivatives (numba)
+
+
+@numba.njit(cache=True, fastmath=True, nogil=True)
+def _eval_point(x, a, freqs, s, c, ss, pairs, vals, vel, jac, want_vals):
+    """Velocity (3,), its Jacobian (3, 3) and, if ``want_vals``, every field's value (3, 3Q) at ``x``.
+
+    ``pairs`` (6, M, M) is scratch for the products of the first two axes' tables, so every
+    gradient or Hessian entry of a potential costs one multiplication.
+    """
+    n_freq = s.shape[1]
+    for d in range(3):
+        for m in range(n_freq):
+            w = math.pi * (m + 1)
+            arg = w * x[d]
+            s[d, m] = math.sin(arg)
+            c[d, m] = w * math.cos(arg)
+            ss[d, m] = -w * w * s[d, m]
+    for i1 in range(n_freq):
+        for i2 in range(n_freq):
+            pairs[0, i1, i2] = s[0, i1] * s[1, i2]
+            pairs[1, i1, i2] = s[0, i1] * c[1, i2]
+            pairs[2, i1, i2] = c[0, i1] * s[1, i2]
+            pairs[3, i1, i2] = ss[0, i1] * s[1, i2]
+            pairs[4, i1, i2] = s[0, i1] * ss[1, i2]
+            pairs[5, i1, i2] = c[0, i1] * c[1, i2]
+    v0 = 0.0
+    v1 = 0.0
+    v2 = 0.0
+    j00 = 0.0
+    j01 = 0.0
+    j02 = 0.0
+    j10 = 0.0
+    j11 = 0.0
+    j12 = 0.0
+    j20 = 0.0
+    j21 = 0.0
+    j22 = 0.0
+    for q in range(freqs.shape[0]):
+        i1 = freqs[q, 0] - 1
+        i2 = freqs[q, 1] - 1
+        i3 = freqs[q, 2] - 1
+        p_ss = pairs[0, i1, i2]
+        p_sc = pairs[1, i1, i2]
+        p_cs = pairs[2, i1, i2]
+        s3 = s[2, i3]
+        c3 = c[2, i3]
+        g1 = p_cs * s3
+        g2 = p_sc * s3
+        g3 = p_ss * c3
+        h11 = pairs[3, i1, i2] * s3
+        h22 = pairs[4, i1, i2] * s3
+        h33 = p_ss * ss[2, i3]
+        h12 = pairs[5, i1, i2] * s3
+        h13 = p_cs * c3
+        h23 = p_sc * c3
+        a0 = a[3 * q]
+        a1 = a[3 * q + 1]
+        a2 = a[3 * q + 2]
+        v0 += a2 * g2 - a1 * g3
+        v1 += a0 * g3 - a2 * g1
+        v2 += a1 * g1 - a0 * g2
+        j00 += a2 * h12 - a1 * h13
+        j01 += a2 * h22 - a1 * h23
+        j02 += a2 * h23 - a1 * h33
+        j10 += a0 * h13 - a2 * h11
+        j11 += a0 * h23 - a2 * h12
+        j12 += a0 * h33 - a2 * h13
+        j20 += a1 * h11 - a0 * h12
+        j21 += a1 * h12 - a0 * h22
+        j22 += a1 * h13 - a0 * h23
+        if want_vals:
+            k = 3 * q
+            vals[0, k] = 0.0
+            vals[1, k] = g3
+            vals[2, k] = -g2
+            vals[0, k + 1] = -g3
+            vals[1, k + 1] = 0.0
+            vals[2, k + 1] = g1
+            vals[0, k + 2] = g2
+            vals[1, k + 2] = -g1
+            vals[2, k + 2] = 0.0
+    vel[0] = v0
+    vel[1] = v1
+    vel[2] = v2
+    jac[0, 0] = j00
+    jac[0, 1] = j01
+    jac[0, 2] = j02
+    jac[1, 0] = j10
+    jac[1, 1] = j11
+    jac[1, 2] = j12
+    jac[2, 0] = j20
+    jac[2, 1] = j21
+    jac[2, 2] = j22
+
+
+@numba.njit(cache=True, fastmath=True, nogil=True)
+def _sensitivity_step(base, inner, vals, jac, scale, out):
+    """out = base + scale (vals + jac inner), all (3, K): one line of Eq. C.15 (``out`` may be ``base``)."""
+    n_cols = base.shape[1]
+    for i in range(3):
+        j0 = jac[i, 0]
+        j1 = jac[i, 1]
+        j2 = jac[i, 2]
+        for k in range(n_cols):
+            out[i, k] = base[i, k] + scale * (vals[i, k] + j0 * inner[0, k] + j1 * inner[1, k] + j2 * inner[2, k])
+
+
+@numba.njit(cache=True, parallel=True, fastmath=True, nogil=True)
+def _flow_jacobian_kernel(points, a, freqs, n_freq, steps, h, out_x, out_dx):
+    n_cols = a.shape[0]
+    n_out = out_dx.shape[2]
+    for n in numba.prange(points.shape[0]):
+        s = np.empty((3, n_freq))
+        c = np.empty((3, n_freq))
+        ss = np.empty((3, n_freq))
+        pairs = np.empty((6, n_freq, n_freq))
+        vals = np.empty((3, n_cols), out_dx.dtype)
+        dx = np.zeros((3, n_cols), out_dx.dtype)
+        dm = np.empty((3, n_cols), out_dx.dtype)
+        vel = np.empty(3)
+        jac = np.empty((3, 3))
+        x = points[n].copy()
+        mid = np.empty(3)
+        for _ in range(steps):
+            _eval_point(x, a, freqs, s, c, ss, pairs, vals, vel, jac, True)
+            for i in range(3):
+                mid[i] = x[i] + 0.5 * h * vel[i]
+            _sensitivity_step(dx, dx, vals, jac, 0.5 * h, dm)
+            _eval_point(mid, a, freqs, s, c, ss, pairs, vals, vel, jac, True)
+            for i in range(3):
+                x[i] += h * vel[i]
+            _sensitivity_step(dx, dm, vals, jac, h, dx)
+        out_x[n] = x
+        for i in range(3):
+            for k in range(n_out):
+                out_dx[n, i, k] = dx[i, k]
+
+
+def flow_with_jacobian(basis: DivFreeBasis, points, coeffs, n_steps: int = 20,
+                       dtype=np.float64) -> tuple[np.ndarray, np.ndarray]:
+    """Flow ``points`` to t = 1 and differentiate the end points (Eq. C.15).
+
+    Parameters
+    ----------
+    basis : DivFreeBasis
+    points : (n, 3) float
+    coeffs : (K,) float
+    n_steps : int
+        T.
+    dtype : numpy dtype
+        Of the returned derivative (float32 halves the memory of the Gauss–Newton system).
+
+    Returns
+    -------
+    x : (n, 3) float64
+        End points.
+    dx_da : (n, 3, K)
+        ``∂x_n / ∂a_k``.
+    """
+    p = _check_points(points)
+    steps, h = step_count(1.0, n_steps)
+    a = basis.padded(coeffs)
+    out_x = np.empty_like(p)
+    out_dx = np.empty((len(p), 3, basis.n_fields), dtype=dtype)
+    _flow_jacobian_kernel(p, a, basis.freqs, basis.max_freq, steps, h, out_x, out_dx)
+    return out_x, out_dx

@@ -1,0 +1,582 @@
+"""Divergence-free deformation (thesis ch. 10; Eisenberger, Lähner, Cremers, CGF 2019).
+
+The source is deformed into the target by the time-1 flow of a stationary,
+divergence-free velocity field ``v = Σ_k a_k v_k`` in the closed-form basis
+of :mod:`corrlib.deformation.basis` (volume preserving, no flux through the
+unit cube), integrated by RK2 (:mod:`corrlib.deformation.flow`). The
+correspondence and the coefficients are estimated jointly by EM:
+
+* Pre-processing: both shapes are mapped into Ω = [0, 1]³ by one common
+  scale (the larger shape fills ``1 - 2 margin``), each centred; the source
+  is rotated by the rigid PCA alignment whose proper axis orientation (or
+  no rotation at all) has the lowest Eq. 10.17 energy (mean over source
+  samples of the distance to the nearest target sample). Euclidean
+  farthest-point samples of both shapes (``n_samples`` each) are fitted.
+* Distance (Eq. 10.17): ``d(x, y) = |x - y|² + w |f(x) - f(y)|²`` with SHOT
+  features ``f`` computed once on the original meshes (point clouds:
+  coordinates only, or features given by the caller); ``w`` makes the mean
+  of both terms over all sample pairs equal at the start (times
+  ``feature_weight``).
+* E-step (Eq. 10.14): soft correspondences of a Gaussian mixture with a
+  uniform outlier term, ``P_nm = e^{-d_nm / 2σ²} / (Σ_m' e^{-d_nm' / 2σ²} + c)``
+  with ``c = (2πσ²)^{3/2} ω/(1 - ω) · M/N`` (the CPD form).
+* M-step: one Gauss–Newton step (Eq. C.12) on
+  ``E(a) = 1/N Σ_n p_n ρ(|x_n(a) - ŷ_n|) / σ² + β/2 Σ_k a_k² / λ_k``
+  with ``p_n = Σ_m P_nm``, ``ŷ_n`` the P-weighted target mean, the Huber
+  penalty ``ρ`` (threshold ``r₀``, §C.2.2, by iteratively reweighted least
+  squares) and the prior variances ``λ_k`` of Eq. 10.18. The data term is
+  averaged over the N samples (the paper sums it; β = 0.1 here is β = 0.1 N
+  there), so β does not depend on the sample count; β = 0.1 keeps the
+  enclosed volume of fitted TOSCA flows within 0.1 % at T = 20, a weaker
+  prior lets high frequencies grow until RK2 no longer follows the field.
+* Annealing (our addition, documented): the E-step variance starts at σ²
+  and is multiplied by ``anneal`` after every iteration down to
+  ``sigma2_min``; the feature term of the E-step distance is scaled by the
+  same factor, so its share of the exponent stays that of Eq. 10.17 at σ²
+  while the coordinates sharpen. Without it the fixed σ² = 0.01 (σ = 0.1,
+  a seventh of a shape's size) averages the targets over a wide
+  neighbourhood and the fit stalls at a blurred surface. The Gauss–Newton
+  data weight keeps σ². ``anneal = 1`` reproduces the fixed-σ² EM.
+* Dense result: every source vertex is flowed (linear in the vertex count)
+  and matched to its nearest target vertex in the Eq. 10.17 metric (with
+  the feature factor at the final annealed variance); the
+  reverse map matches every target vertex to the nearest flowed source
+  vertex.
+
+The flow can be evaluated at any time (interpolation t ∈ [0, 1],
+extrapolation t > 1) and resolution through :class:`Deformation`.
+"""
+
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+import scipy.linalg
+from scipy.spatial.distance import cdist
+
+from corrlib.deformation.basis import DivFreeBasis
+from corrlib.deformation.flow import flow_with_jacobian, trajectory
+from corrlib.errors import InputError, ParameterError
+from corrlib.geometry.sampling import farthest_point_sampling
+from corrlib.methods.base import MatchResult, param
+from corrlib.methods.registry import MethodSpec, register
+from corrlib.progress import Progress, Stopwatch
+from corrlib.shapes import signed_volume
+
+
+#: the result stores the flow of the source vertices at every RK2 step up to this time (scrubbing, export)
+SEQUENCE_T_MAX = 3.0
+
+
+@dataclass(frozen=True, kw_only=True)
+class DivergenceFreeParams:
+    n_fields: int = param(3000, label="Basis fields K", low=1, high=30000,
+                          help="Divergence-free basis fields (Eq. 10.11), lowest frequencies first.")
+    n_steps: int = param(20, label="Flow steps T", low=1, high=1000, help="RK2 steps of the flow (Eq. 10.13).")
+    n_samples: int = param(3000, label="Samples", low=10, high=20000,
+                           help="Farthest-point samples per shape used in the EM fit.")
+    sigma2: float = param(0.01, label="σ²", low=1e-8, high=10.0,
+                          help="Variance of the Gaussian mixture (unit-cube units², Eq. 10.14).")
+    outlier: float = param(0.1, label="Outlier weight ω", low=0.0, high=0.99,
+                           help="Weight of the uniform outlier component of the mixture.")
+    sigma2_min: float = param(1e-4, label="Smallest σ²", low=1e-10, high=10.0,
+                              help="Floor of the annealed E-step variance.")
+    anneal: float = param(0.8, label="σ² annealing", low=0.0, high=1.0,
+                          help="Factor applied to the E-step variance after every iteration (1: no annealing).")
+    huber: float = param(0.01, label="Huber r₀", low=1e-8, high=10.0,
+                         help="Residual length above which the penalty grows linearly (§C.2.2).")
+    prior_weight: float = param(0.1, label="Prior weight β", low=0.0, high=1e8,
+                                help="Weight of the smoothness prior Σ a_k²/λ_k (Eq. 10.18).")
+    features: str = param("shot", label="Features", choices=("shot", "none"),
+                          help="Features of the Eq. 10.17 distance (SHOT on the original meshes), or "
+                               "coordinates only.")
+    feature_weight: float = param(1.0, label="Feature weight", low=0.0, high=1e6,
+                                  help="Multiplies the factor that equalises the means of the coordinate "
+                                       "and feature terms.")
+    max_iter: int = param(40, label="EM iterations", low=1, high=10000, help="Iteration cap.")
+    tol: float = param(1e-4, label="Tolerance", low=0.0, high=1.0,
+                       help="Stop when the coefficient update is below tol × |a| (and 1e-8).")
+    prealign: str = param("pca", label="Pre-alignment", choices=("pca", "none"),
+                          help="Rigid PCA alignment (best proper axis orientation or none), or none.")
+    margin: float = param(0.15, label="Margin", low=0.0, high=0.45,
+                          help="Free border of the unit cube around the shapes.")
+    seed: int = param(0, label="Seed", low=0, high=2 ** 31 - 1, help="Start of the farthest-point sampling.")
+
+
+# ----------------------------------------------------------------------------- frames
+
+
+@dataclass(frozen=True)
+class Frames:
+    """The similarity transforms placing both shapes in the unit cube.
+
+    ``u = scale · (x @ rotation.T - centre_x) + 0.5`` for the source,
+    ``u = scale · (y - centre_y) + 0.5`` for the target.
+    """
+
+    rotation: np.ndarray  # (3, 3)
+    scale: float
+    centre_x: np.ndarray  # (3,)
+    centre_y: np.ndarray  # (3,)
+
+    def source_to_cube(self, points: np.ndarray) -> np.ndarray:
+        return self.scale * (np.asarray(points, dtype=np.float64) @ self.rotation.T - self.centre_x) + 0.5
+
+    def target_to_cube(self, points: np.ndarray) -> np.ndarray:
+        return self.scale * (np.asarray(points, dtype=np.float64) - self.centre_y) + 0.5
+
+    def cube_to_target(self, points: np.ndarray) -> np.ndarray:
+        return (np.asarray(points, dtype=np.float64) - 0.5) / self.scale + self.centre_y
+
+    def as_array(self) -> np.ndarray:
+        """(16,) float: rotation (row-major), scale, centre_x, centre_y (how results store it)."""
+        return np.concatenate([self.rotation.ravel(), [self.scale], self.centre_x, self.centre_y])
+
+    @classmethod
+    def from_array(cls, arr) -> "Frames":
+        a = np.asarray(arr, dtype=np.float64).ravel()
+        if a.shape != (16,):
+            raise InputError(f"a frame record has 16 numbers, got {a.size}")
+        return cls(a[:9].reshape(3, 3), float(a[9]), a[10:13], a[13:16])
+
+
+def _bbox_centre(p: np.ndarray) -> np.ndarray:
+    return 0.5 * (p.min(axis=0) + p.max(axis=0))
+
+
+def _frames_for(points_x: np.ndarray, points_y: np.ndarray, rotation: np.ndarray, margin: float) -> Frames:
+    rx = points_x @ rotation.T
+    extent = max(np.ptp(rx, axis=0).max(), np.ptp(points_y, axis=0).max())
+    if extent <= 0:
+        raise InputError("the shapes have zero extent")
+    return Frames(rotation, (1.0 - 2.0 * margin) / extent, _bbox_centre(rx), _bbox_centre(points_y))
+
+
+def _principal_axes(p: np.ndarray) -> np.ndarray:
+    """(3, 3): columns are the principal axes, largest variance first."""
+    c = p - p.mean(axis=0)
+    evals, evecs = np.linalg.eigh(c.T @ c)
+    return evecs[:, ::-1]
+
+
+def candidate_rotations(points_x: np.ndarray, points_y: np.ndarray) -> list[np.ndarray]:
+    """No rotation, and the four proper rotations taking the source's principal axes onto the target's."""
+    ux, uy = _principal_axes(points_x), _principal_axes(points_y)
+    out = [np.eye(3)]
+    for signs in ((1, 1, 1), (1, -1, -1), (-1, 1, -1), (-1, -1, 1)):
+        r = uy @ np.diag(signs) @ ux.T
+        if np.linalg.det(r) < 0:  # one of the factors is a reflection: flip the last axis
+            r = uy @ np.diag(np.array(signs) * np.array([1, 1, -1])) @ ux.T
+        out.append(r)
+    return out
+
+
+# ----------------------------------------------------------------------------- distances
+
+
+def _sq_distances(a: np.ndarray, b: np.ndarray) -> np.ndarray:
+    """(n, m) float64 squared Euclidean distances (clipped at 0)."""
+    if a.shape[1] <= 8:  # coordinates: a direct loop is exact and faster than the BLAS expansion
+        return cdist(a, b, "sqeuclidean")
+    d = (a * a).sum(1)[:, None] + (b * b).sum(1)[None, :] - 2.0 * (a @ b.T)
+    return np.maximum(d, 0.0, out=d)
+
+
+def _mean_sq_distance(a: np.ndarray, b: np.ndarray) -> float:
+    """Mean of |a_n - b_m|² over all pairs, without forming them."""
+    return float((a * a).sum(1).mean() + (b * b).sum(1).mean() - 2.0 * a.mean(0) @ b.mean(0))
+
+
+def feature_factor(coords_x, coords_y, feats_x, feats_y) -> float:
+    """The factor w of Eq. 10.17 that equalises the mean coordinate and feature terms."""
+    f = _mean_sq_distance(feats_x, feats_y)
+    return _mean_sq_distance(coords_x, coords_y) / f if f > 0 else 0.0
+
+
+# ----------------------------------------------------------------------------- EM
+
+
+def e_step(dist: np.ndarray, sigma2: float, outlier: float) -> np.ndarray:
+    """Soft correspondences of Eq. 10.14.
+
+    Parameters
+    ----------
+    dist : (N, M) float
+        Eq. 10.17 distances between source and target samples.
+    sigma2 : float
+    outlier : float
+        ω in [0, 1).
+
+    Returns
+    -------
+    (N, M) float
+        ``P_nm``; rows sum to at most 1 (the rest is the outlier's share).
+    """
+    n, m = dist.shape
+    shift = dist.min(axis=1, keepdims=True)  # stabilise: multiply numerator and denominator by e^{shift/2σ²}
+    p = np.exp(-(dist - shift) / (2.0 * sigma2))
+    denom = p.sum(axis=1, keepdims=True)
+    if outlier > 0:
+        log_const = 1.5 * math.log(2.0 * math.pi * sigma2) + math.log(outlier / (1.0 - outlier) * m / n)
+        denom += np.exp(np.minimum(log_const + shift / (2.0 * sigma2), 700.0))
+    return p / denom
+
+
+def huber_weights(residual_norm: np.ndarray, r0: float) -> np.ndarray:
+    """IRLS weights of the Huber penalty: 1 below ``r0``, ``r0 / r`` above."""
+    return np.minimum(1.0, r0 / np.maximum(residual_norm, 1e-300))
+
+
+def huber_penalty(residual_norm: np.ndarray, r0: float) -> np.ndarray:
+    """ρ(r) = r²/2 below ``r0``, ``r0 (r - r0/2)`` above."""
+    r = residual_norm
+    return np.where(r <= r0, 0.5 * r * r, r0 * (r - 0.5 * r0))
+
+
+def gauss_newton_step(positions, jac, targets, weights, coeffs, prior_precision) -> np.ndarray:
+    """One Gauss–Newton step on ``Σ_n w_n |x_n(a) - ŷ_n|²/2 + Σ_k a_k² / (2 λ_k)`` (Eq. C.12).
+
+    Parameters
+    ----------
+    positions : (N, 3) float
+        ``x_n(a)``.
+    jac : (N, 3, K) float
+        ``∂x_n/∂a``; overwritten (scaled by √w in place, to spare a copy of the largest array).
+    targets : (N, 3) float
+        ``ŷ_n``.
+    weights : (N,) float
+        ``w_n ≥ 0``.
+    coeffs : (K,) float
+        ``a``.
+    prior_precision : (K,) float
+        ``1/λ_k`` times the prior weight.
+
+    Returns
+    -------
+    (K,) float
+        The update δ solving ``(Jᵀ W J + Λ⁻¹) δ = -(Jᵀ W r + Λ⁻¹ a)``.
+    """
+    n, _, k = jac.shape
+    sw = np.sqrt(weights)
+    jw = np.multiply(jac, sw.astype(jac.dtype)[:, None, None], out=jac)
+    jw_t = jw.reshape(3 * n, k).T  # (K, 3N), Fortran-ordered view: what BLAS wants, no copy
+    residual = ((positions - targets) * sw[:, None]).reshape(-1)
+    # numpy's matmul (syrk for A Aᵀ) and Cholesky release the GIL, so the studio stays responsive
+    normal = (jw_t @ jw_t.T).astype(np.float64)  # Jᵀ W J
+    normal[np.diag_indices(k)] += prior_precision
+    rhs = -(jw_t @ residual.astype(jw.dtype)).astype(np.float64) - prior_precision * coeffs
+    try:
+        lower = np.linalg.cholesky(normal)
+    except np.linalg.LinAlgError:
+        # without a prior the system can be singular: least-norm solution
+        return np.linalg.lstsq(normal, rhs, rcond=None)[0]
+    half = scipy.linalg.solve_triangular(lower, rhs, lower=True, check_finite=False)
+    return scipy.linalg.solve_triangular(lower.T, half, lower=False, check_finite=False)
+
+
+def em_iteration(basis, start, targets_y, feature_dist, coeffs, sigma2_e, precision, params, watch):
+    """One EM iteration: flow with derivatives, E-step, one Gauss–Newton step.
+
+    Parameters
+    ----------
+    basis : DivFreeBasis
+    start : (N, 3) float
+        Source samples in the unit cube (t = 0).
+    targets_y : (M, 3) float
+        Target samples in the unit cube.
+    feature_dist : (N, M) float or 0.0
+        The (annealed) feature term of the E-step distance.
+    coeffs : (K,) float
+    sigma2_e : float
+        E-step variance.
+    precision : (K,) float
+        β / λ_k.
+    params : DivergenceFreeParams
+    watch : Stopwatch
+
+    Returns
+    -------
+    delta : (K,) float
+        Coefficient update.
+    energy : float
+        The M-step objective at the current coefficients.
+    rnorm : (N,) float
+        Residual lengths.
+    """
+    n = len(start)
+    with watch("flow"):
+        pos, jac = flow_with_jacobian(basis, start, coeffs, params.n_steps, dtype=np.float32)
+    with watch("e-step"):
+        # the feature term shrinks with σ² so its share of the exponent stays that of Eq. 10.17 at σ²
+        dist = _sq_distances(pos, targets_y)
+        dist += feature_dist
+        prob = e_step(dist, sigma2_e, params.outlier)
+        mass = prob.sum(axis=1)
+        y_hat = (prob @ targets_y) / np.maximum(mass, 1e-300)[:, None]
+        rnorm = np.linalg.norm(pos - y_hat, axis=1)
+        robust = huber_weights(rnorm, params.huber)
+        weights = mass * robust / (params.sigma2 * n)
+        energy = float((mass * huber_penalty(rnorm, params.huber)).sum() / (params.sigma2 * n)
+                       + 0.5 * (precision * coeffs ** 2).sum())
+    with watch("gauss-newton"):
+        delta = gauss_newton_step(pos, jac, y_hat, weights, coeffs, precision)
+    return delta, energy, rnorm
+
+
+@dataclass
+class FitResult:
+    """Outcome of :func:`fit`: coefficients in the unit-cube frame and the EM record."""
+
+    basis: DivFreeBasis
+    coeffs: np.ndarray
+    frames: Frames
+    feature_factor: float
+    energy_trace: list
+    iterations: int
+    converged: bool
+
+
+def _prepare(points_x, points_y, feats_x, feats_y, params, watch):
+    """Frames (pre-alignment), samples and the fixed feature distances."""
+    rng_start = params.seed % len(points_x)
+    with watch("sampling"):
+        sx = farthest_point_sampling(points_x, min(params.n_samples, len(points_x)), start=rng_start)
+        sy = farthest_point_sampling(points_y, min(params.n_samples, len(points_y)),
+                                     start=params.seed % len(points_y))
+    feat_dist = None
+    if feats_x is not None:
+        feat_dist = _sq_distances(feats_x[sx], feats_y[sy])
+    rotations = candidate_rotations(points_x, points_y) if params.prealign == "pca" else [np.eye(3)]
+    best = None
+    w = 0.0
+    with watch("alignment"):
+        for rot in rotations:
+            frames = _frames_for(points_x, points_y, rot, params.margin)
+            ux, uy = frames.source_to_cube(points_x[sx]), frames.target_to_cube(points_y[sy])
+            dist = _sq_distances(ux, uy)
+            if feat_dist is not None:
+                if best is None:  # one factor for all candidates (from the unrotated placement)
+                    w = params.feature_weight * feature_factor(ux, uy, feats_x[sx], feats_y[sy])
+                dist += w * feat_dist
+            energy = float(dist.min(axis=1).mean())
+            if best is None or energy < best[0] - 1e-12:
+                best = (energy, frames)
+    return sx, sy, feat_dist, best[1], w
+
+
+def fit(points_x, points_y, params: DivergenceFreeParams | None = None, token=None, *,
+        feats_x=None, feats_y=None, watch: Stopwatch | None = None):
+    """EM fit of the divergence-free deformation of ``points_x`` onto ``points_y`` (generator).
+
+    Parameters
+    ----------
+    points_x : (n_x, 3) float
+        Source points (mesh vertices or a point cloud).
+    points_y : (n_y, 3) float
+        Target points.
+    params : DivergenceFreeParams
+    token : CancelToken, optional
+    feats_x : (n_x, f) float, optional
+        Features of the Eq. 10.17 distance (none: coordinates only).
+    feats_y : (n_y, f) float, optional
+    watch : Stopwatch, optional
+
+    Yields
+    ------
+    Progress
+        One per EM iteration (energy, update size).
+
+    Returns
+    -------
+    FitResult
+    """
+    params = params or DivergenceFreeParams()
+    watch = watch or Stopwatch()
+    px, py = _as_points(points_x, "source"), _as_points(points_y, "target")
+    if (feats_x is None) != (feats_y is None):
+        raise InputError("features must be given for both shapes or for neither")
+    if feats_x is not None:
+        feats_x, feats_y = np.asarray(feats_x, dtype=np.float64), np.asarray(feats_y, dtype=np.float64)
+        if feats_x.shape[0] != len(px) or feats_y.shape[0] != len(py) or feats_x.shape[1:] != feats_y.shape[1:]:
+            raise InputError(f"feature arrays {feats_x.shape} and {feats_y.shape} do not fit the point counts "
+                             f"{len(px)} and {len(py)}")
+    yield Progress("preparing", 0.02, "samples and pre-alignment")
+    sx, sy, feat_dist, frames, w = _prepare(px, py, feats_x, feats_y, params, watch)
+    basis = DivFreeBasis(params.n_fields)
+    start = frames.source_to_cube(px[sx])
+    targets_y = frames.target_to_cube(py[sy])
+    fixed = w * feat_dist if feat_dist is not None else 0.0
+    precision = params.prior_weight / basis.prior_variance
+    coeffs = np.zeros(basis.n_fields)
+    trace = []
+    converged = False
+    it = 0
+    sigma2_e = params.sigma2
+    for it in range(1, params.max_iter + 1):
+        if token is not None:
+            token.raise_if_cancelled()
+        delta, energy, rnorm = em_iteration(basis, start, targets_y, fixed * (sigma2_e / params.sigma2), coeffs,
+                                            sigma2_e, precision, params, watch)
+        coeffs = coeffs + delta
+        sigma2_e = max(params.sigma2_min, sigma2_e * params.anneal)
+        step = float(np.linalg.norm(delta))
+        trace.append(energy)
+        yield Progress(f"iteration {it}", 0.05 + 0.85 * it / params.max_iter,
+                       f"energy {energy:.6g}, update {step:.3g}, mean residual {rnorm.mean():.4f}")
+        if step <= params.tol * np.linalg.norm(coeffs) + 1e-8:
+            converged = True
+            break
+    # the dense map uses the Eq. 10.17 metric at the final E-step variance (see the annealing above)
+    return FitResult(basis, coeffs, frames, w * sigma2_e / params.sigma2, trace, it, converged)
+
+
+def _as_points(points, name: str) -> np.ndarray:
+    p = np.asarray(points, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] != 3:
+        raise InputError(f"the {name} points must have shape (n, 3), got {p.shape}")
+    if len(p) < 4:
+        raise InputError(f"the {name} has {len(p)} points; at least 4 are needed")
+    if not np.all(np.isfinite(p)):
+        raise InputError(f"the {name} points contain NaN or inf")
+    return p
+
+
+# ----------------------------------------------------------------------------- deformation
+
+
+class Deformation:
+    """The fitted flow, evaluable at any time and resolution.
+
+    Parameters
+    ----------
+    basis : DivFreeBasis
+    coeffs : (K,) float
+    frames : Frames
+    n_steps : int
+        T (steps per unit time).
+    """
+
+    def __init__(self, basis: DivFreeBasis, coeffs, frames: Frames, n_steps: int):
+        self.basis = basis
+        self.coeffs = np.asarray(coeffs, dtype=np.float64)
+        self.frames = frames
+        self.n_steps = int(n_steps)
+
+    @classmethod
+    def from_result(cls, result: MatchResult) -> "Deformation":
+        """The deformation stored in a divergence-free :class:`MatchResult` (also after loading it)."""
+        ex = result.extras
+        if "coefficients" not in ex or "frames" not in ex:
+            raise InputError(f"the result of {result.method!r} holds no divergence-free deformation")
+        coeffs = np.asarray(ex["coefficients"], dtype=np.float64)
+        return cls(DivFreeBasis(coeffs.size), coeffs, Frames.from_array(ex["frames"]),
+                   int(result.params.get("n_steps", 20)))
+
+    def positions(self, points, t: float = 1.0) -> np.ndarray:
+        """(n, 3) float: source points (original coordinates) flowed to time ``t``, in target coordinates.
+
+        t = 0 is the source after the rigid pre-alignment (placed on the
+        target), t = 1 the deformed source, t > 1 extrapolates.
+        """
+        u = self.frames.source_to_cube(points)
+        return self.frames.cube_to_target(trajectory(self.basis, u, self.coeffs, t, self.n_steps, keep=False))
+
+    def trajectory(self, points, t_max: float = 1.5) -> tuple[np.ndarray, np.ndarray]:
+        """Every RK2 step from 0 to ``t_max``: times (s + 1,) and positions (s + 1, n, 3) in target coordinates."""
+        u = self.frames.source_to_cube(points)
+        steps = trajectory(self.basis, u, self.coeffs, t_max, self.n_steps, keep=True)
+        times = np.linspace(0.0, t_max, len(steps))
+        return times, self.frames.cube_to_target(steps)
+
+    def interpolator(self, points, t_max: float = 1.5):
+        """A cheap ``positions(t)`` for scrubbing: the trajectory at every RK2 step, linear in between.
+
+        Exact at the step times; in between it is the piecewise-linear path
+        of the integrator (the step size is the flow's own resolution).
+        """
+        from corrlib.morph import _stored_trajectory
+
+        return _stored_trajectory(*self.trajectory(points, t_max))
+
+
+# ----------------------------------------------------------------------------- dense maps
+
+
+def dense_maps(deformation: Deformation, points_x, points_y, w: float, feats_x=None, feats_y=None):
+    """Nearest neighbours in the Eq. 10.17 metric between the flowed source and the target.
+
+    Returns
+    -------
+    map_xy : (n_x,) int
+    map_yx : (n_y,) int
+    morphed : (n_x, 3) float
+        The source at t = 1 (target coordinates).
+    """
+    from corrlib.methods.baselines import nearest_rows
+
+    morphed = deformation.positions(points_x, 1.0)
+    frames = deformation.frames
+    ux = frames.target_to_cube(morphed)
+    uy = frames.target_to_cube(points_y)
+    if feats_x is not None and w > 0:
+        ux = np.hstack([ux, math.sqrt(w) * feats_x])
+        uy = np.hstack([uy, math.sqrt(w) * feats_y])
+    return nearest_rows(ux, uy), nearest_rows(uy, ux), morphed
+
+
+def divergence_free(source, target, params: DivergenceFreeParams, token=None):
+    """Registered solver: fit, dense maps, deformation record (generator returning a MatchResult)."""
+    watch = Stopwatch()
+    for mesh, name in ((source, "source"), (target, "target")):
+        if mesh.n_vertices < 4:
+            raise InputError(f"the {name} has {mesh.n_vertices} vertices; at least 4 are needed")
+    feats_x = feats_y = None
+    if params.features == "shot":
+        yield Progress("features", 0.0, "SHOT on both shapes")
+        from corrlib.descriptors import mesh_descriptors
+
+        with watch("descriptors"):
+            feats_x = mesh_descriptors(source, "shot")
+            feats_y = mesh_descriptors(target, "shot")
+    fitted = yield from fit(source.vertices, target.vertices, params, token, feats_x=feats_x, feats_y=feats_y,
+                            watch=watch)
+    deformation = Deformation(fitted.basis, fitted.coeffs, fitted.frames, params.n_steps)
+    yield Progress("dense map", 0.95, f"flowing {source.n_vertices} vertices")
+    with watch("dense map"):
+        map_xy, map_yx, morphed = dense_maps(deformation, source.vertices, target.vertices, fitted.feature_factor,
+                                             feats_x, feats_y)
+    with watch("trajectory"):
+        traj_times, traj = deformation.trajectory(source.vertices, SEQUENCE_T_MAX)
+    extras = {
+        "coefficients": fitted.coeffs,
+        "trajectory": traj.astype(np.float32),
+        "trajectory_times": traj_times,
+        "frames": fitted.frames.as_array(),
+        "energy_trace": np.asarray(fitted.energy_trace),
+        "morphed_vertices": morphed,
+        "iterations": fitted.iterations,
+        "converged": bool(fitted.converged),
+        "feature_factor": fitted.feature_factor,
+    }
+    volume = source.enclosed_volume()
+    if volume is not None:
+        extras["volume_change"] = float(signed_volume(morphed, source.faces) / volume - 1.0)
+    yield Progress("done", 1.0, f"{fitted.iterations} EM iterations, energy {fitted.energy_trace[-1]:.6g}")
+    return MatchResult("divergence-free", map_xy, map_yx, fitted.energy_trace[-1], watch.times, extras=extras)
+
+
+def solve_divergence_free(source, target, params: DivergenceFreeParams, token=None):
+    if params.n_fields < 1 or params.n_steps < 1 or params.sigma2 <= 0:
+        raise ParameterError("n_fields and n_steps must be ≥ 1 and sigma2 > 0")
+    return (yield from divergence_free(source, target, params, token))
+
+
+register(MethodSpec(
+    name="divergence-free", label="Divergence-free deformation", inputs=("mesh", "mesh"),
+    params=DivergenceFreeParams, solve=solve_divergence_free, rank=15,
+    description="Volume-preserving deformation of the source into the target by the flow of a divergence-free "
+                "field (closed-form curl basis on the unit cube), fitted jointly with soft correspondences by EM; "
+                "the flow gives interpolation and extrapolation sequences at any resolution.",
+))

@@ -216,7 +216,10 @@ def e_step(dist: np.ndarray, sigma2: float, outlier: float) -> np.ndarray:
     """
     n, m = dist.shape
     shift = dist.min(axis=1, keepdims=True)  # stabilise: multiply numerator and denominator by e^{shift/2σ²}
-    p = np.exp(-(dist - shift) / (2.0 * sigma2))
+    z = (dist - shift) * (-0.5 / sigma2)
+    # terms below e^-60 (relative to the row's best) are dropped: exact zeros instead of slow subnormals
+    p = np.zeros_like(z)
+    np.exp(z, out=p, where=z > -60.0)
     denom = p.sum(axis=1, keepdims=True)
     if outlier > 0:
         log_const = 1.5 * math.log(2.0 * math.pi * sigma2) + math.log(outlier / (1.0 - outlier) * m / n)

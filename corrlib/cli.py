@@ -225,6 +225,28 @@ def cmd_match(args) -> int:
     return 0
 
 
+def cmd_refine(args) -> int:
+    from corrlib.methods import get_method, solve
+
+    source, target = _load_shape(args.source), _load_shape(args.target)
+    spec = get_method(args.method)
+    if not spec.refines:
+        raise CorrError(f"method {spec.name!r} does not refine a map (methods that do: "
+                        f"{', '.join(m.name for m in _refining_methods())})")
+    initial = _initial_match(args.init, source, target)
+    result = solve(spec, source, target, callback=_progress_printer(args.quiet), initial=initial,
+                   **_parse_overrides(args.param))
+    print(f"method {result.method}: {result.timings.get('total', 0):.2f} s")
+    _write_match_outputs(result, source, target, Path(args.output), quiet=args.quiet)
+    return 0
+
+
+def _refining_methods():
+    from corrlib.methods import all_methods
+
+    return [m for m in all_methods() if m.refines]
+
+
 def cmd_morph(args) -> int:
     from corrlib.methods import get_method, solve
     from corrlib.morph import export_sequence, frame_positions
@@ -456,6 +478,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", help="write the full ranking as TSV")
     p.add_argument("-q", "--quiet", action="store_true")
     p.set_defaults(func=cmd_retrieve)
+
+    p = sub.add_parser("refine", help="refine an initial map or landmarks into a dense map")
+    p.add_argument("source")
+    p.add_argument("target")
+    p.add_argument("--init", required=True,
+                   help="map file (one target index per source vertex) or landmarks (two columns: source target)")
+    p.add_argument("--method", default="product-manifold", help="a refining method (default product-manifold)")
+    p.add_argument("--param", action="append", metavar="NAME=VALUE", help="method parameter (repeatable)")
+    p.add_argument("-o", "--output", default="refined", help="output path without suffix")
+    p.add_argument("-q", "--quiet", action="store_true")
+    p.set_defaults(func=cmd_refine)
 
     p = sub.add_parser("morph", help="deform the source into the target and export interpolated and "
                                      "extrapolated meshes")

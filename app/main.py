@@ -27,6 +27,9 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--pair-mode", choices=list(MODES),
                         help="what the pair view shows")
     parser.add_argument("--sequence-t", type=float, help="with --screenshot: put the sequence slider at this t")
+    parser.add_argument("--torus-function", metavar="NAME",
+                        help="with --screenshot: the product function the torus view shows (cost, density, "
+                             "harmonic_1, ...)")
     parser.add_argument("--retrieve", metavar="FOLDER", help="rank this folder against the query (first file)")
     parser.add_argument("--compare", action="store_true", help="run the comparison of all methods on the pair")
     parser.add_argument("--screenshot", metavar="PATH", help="write a PNG of the window after the first result")
@@ -111,6 +114,8 @@ def main(argv: list[str] | None = None) -> int:
             select_tab()  # a finished job switches to its own view; show the requested one
             if args.sequence_t is not None and window.sequence_view.positions is not None:
                 window.sequence_view.slider.setValue(int(1000 * args.sequence_t / window.sequence_view.t_max.value()))
+            if args.torus_function:
+                window.product_view.function.setCurrentText(args.torus_function)
             for _ in range(5):
                 app.processEvents()
             QTimer.singleShot(500, lambda: (window.save_screenshot(args.screenshot), window.close(), app.quit()))

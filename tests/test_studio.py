@@ -254,6 +254,10 @@ def test_contour_pair_shows_the_torus(qtbot, window):
     view = window.product_view
     assert view.torus_curve is not None and view.torus_curve.n_points == len(result.extras["path_layers"])
     assert view.function.currentText() == "cost"
+    listed = [view.function.itemText(i) for i in range(view.function.count())]
+    assert {"density", "harmonic_1"} <= set(listed)  # the product-manifold refinement's functions
+    view.function.setCurrentText("harmonic_1")  # redraws the torus with the localized harmonic
+    assert view.function.currentText() == "harmonic_1"
 
 
 def test_drag_and_drop_and_recent_files(qtbot, window):

@@ -10,9 +10,14 @@ B is the discretised torus A × B, and the globally optimal closed path on it
 must wind once around both factors: B is unrolled twice with forward moves
 only, and a path from ``(0, s)`` must end at ``(m, s + n)``, so every
 matching is an orientation-preserving bijection of the curves (no
-collapse onto a few points). The
-product-manifold refinement of this path belongs to the product-manifold
-method.
+collapse onto a few points). The path's map is then refined on the product
+manifold (``refine``, :mod:`.product_manifold`): its matches diffused on
+the torus and extracted by assignment (optionally followed by localized
+Dirichlet harmonics on shrinking ``bands``); the density and the first
+localized harmonics of a band around the final map are stored as torus
+functions for the product view. On resampled silhouettes with a smooth
+synthetic warp the path is already at the sampling resolution (mean error
+0.4 % of the length at 250 points) and the refinement keeps it there.
 
 Map convention: ``map_xy[i]`` = point of (resampled) B matched to point i of
 (resampled) A; ``map_yx[j]`` the point of A first matched to point j of B.
@@ -41,6 +46,17 @@ class Contour2DParams:
     n_scales: int = param(100, label="Scales", low=2, high=500, help="Times of the HKS, energies of the WKS.")
     eps: float = param(0.0, label="Approximation ε", low=0.0, high=0.9,
                        help="0: global optimum; ε > 0: within a factor 1 + ε.")
+    refine: bool = param(True, label="Product refinement",
+                         help="Refine the path's map on the product manifold (diffusion, assignment, "
+                              "localized harmonics on shrinking bands).")
+    bands: str = param("", label="Band fractions",
+                       help="Bands of localized refinement stages (share of the torus; empty: global diffusion "
+                            "and assignment only — on resampled silhouettes the path is already at the "
+                            "sampling resolution and localized stages did not improve it).")
+    view_band: float = param(0.05, label="Band shown", low=0.001, high=1.0,
+                             help="Band around the final map whose localized harmonics the torus view shows.")
+    n_harmonics: int = param(100, label="Localized harmonics", low=1, high=2000,
+                             help="Dirichlet harmonics per band.")
 
 
 def forward_path_adjacency(n: int) -> sp.csr_matrix:
@@ -78,8 +94,48 @@ def solve_contour2d(source, target, params: Contour2DParams, token):
               "source_points": qa.contour.points, "target_points": qb.contour.points,
               "lower_bound": bb.lower_bound, "iterations": bb.iterations,
               "product_functions": "cost", "energy_meaning": "path energy on the product torus (unit areas)"}
+    if params.refine:
+        extras["path_map_xy"] = map_xy.copy()
+        map_xy, map_yx = yield from _refine_on_torus(qa.contour.points, qb.contour.points, map_xy, params, token,
+                                                     watch, extras)
     yield Progress("done", 1.0, f"energy {bb.energy:.6g}")
     return MatchResult("contour2d", map_xy, map_yx, bb.energy, watch.times, extras=extras)
+
+
+def _refine_on_torus(points_a, points_b, map_xy, params: Contour2DParams, token, watch, extras):
+    """Product-manifold refinement of the path's map; the torus functions go into ``extras``."""
+    from corrlib.geometry import product as pm
+    from corrlib.methods.product_manifold import ProductManifoldParams, refine
+
+    yield Progress("refinement", 0.8, "product manifold")
+    with watch("refinement"):
+        fx = pm.curve_factor(points_a, min(len(points_a), 200))
+        fy = pm.curve_factor(points_b, min(len(points_b), 200))
+    keep = np.flatnonzero(map_xy >= 0)
+    pm_params = ProductManifoldParams(bands=params.bands, n_harmonics=params.n_harmonics, t_global=2e-4,
+                                      t_local=2e-4)
+    refined_xy, refined_yx, info = yield from refine(fx, fy, keep, map_xy[keep], points_b, pm_params, token, watch)
+    shape = (fx.n, fy.n)
+    names = ["cost", "density"]
+    if "band_pairs" in info:
+        pairs, density_band = info["band_pairs"], info["band_density"]
+        harmonics = info["band_harmonics"]
+        density = np.zeros(shape, dtype=np.float32)
+        density[pairs[:, 0], pairs[:, 1]] = density_band
+    else:
+        density = pm.density_values(info["global_coefficients"], fx, fy).astype(np.float32)
+        with watch("harmonics"):  # for the view: the localized harmonics of a band around the final map
+            pairs = pm.largest_piece(fx, fy, pm.band_around_map(refined_xy, points_b, params.view_band))
+            harmonics = pm.localized_harmonics(fx, fy, pairs, min(6, len(pairs) - 1))[1]
+    extras["density"] = density
+    for col in range(harmonics.shape[1]):
+        harmonic = np.zeros(shape, dtype=np.float32)
+        harmonic[pairs[:, 0], pairs[:, 1]] = harmonics[:, col]
+        extras[f"harmonic_{col + 1}"] = harmonic
+        names.append(f"harmonic_{col + 1}")
+    extras["band_size"] = float(len(pairs) / (fx.n * fy.n))
+    extras["product_functions"] = ",".join(names)
+    return refined_xy, refined_yx
 
 
 register(MethodSpec(

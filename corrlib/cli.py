@@ -247,6 +247,53 @@ def _refining_methods():
     return [m for m in all_methods() if m.refines]
 
 
+def cmd_bench(args) -> int:
+    from corrlib.bench import Runner, load_dataset, methods_from_toml, parse_method
+
+    dataset = load_dataset(args.dataset, args.pairs)
+    methods = [parse_method(m) for m in args.method or []]
+    if args.methods_file:
+        methods += methods_from_toml(args.methods_file)
+    external = {}
+    for item in args.maps or []:
+        label, sep, folder = item.partition("=")
+        if not sep or not Path(folder).is_dir():
+            raise CorrError(f"--maps {item!r}: expected LABEL=FOLDER with an existing folder")
+        external[label] = folder
+    runner = Runner(dataset, methods, args.output, external=external, geodesics=args.geodesics)
+    todo = runner.pending()
+    print(f"{len(dataset.pairs)} pairs x {len(methods) + len(external)} methods: {len(todo)} jobs to run "
+          f"({len(runner.jobs()) - len(todo)} already done)", file=sys.stderr)
+
+    def progress(done, total, label, record):
+        if not args.quiet:
+            what = f"mean {record['mean']:.4f}" if record["status"] == "ok" else f"FAILED: {record['error']}"
+            print(f"  [{done}/{total}] {label} {record['source']} -> {record['target']}: {what}", file=sys.stderr)
+
+    summary = runner.run(jobs=args.jobs, scheduler=args.scheduler, callback=progress)
+    print((Path(args.output) / "summary.md").read_text())
+    return 0 if all(entry["failed"] == 0 for entry in summary.values()) else 1
+
+
+def cmd_bench_retrieval(args) -> int:
+    from dataclasses import replace
+
+    from corrlib.bench import retrieval_benchmark
+    from corrlib.methods.contour3d import Contour3DParams
+
+    params = replace(Contour3DParams(), eps=args.eps, n_contour=args.n_contour)
+
+    def progress(done, total, row):
+        if not args.quiet:
+            what = f"AP {row['ap']:.3f}" if not row["error"] else f"FAILED: {row['error']}"
+            print(f"  [{done}/{total}] {row['query']} ({row['class']}): {what}", file=sys.stderr)
+
+    summary = retrieval_benchmark(args.queries, args.collection, args.output, params=params, jobs=args.jobs,
+                                  scheduler=args.scheduler, callback=progress)
+    print((Path(args.output) / "retrieval_summary.md").read_text())
+    return 0 if summary["failed"] == 0 else 1
+
+
 def cmd_morph(args) -> int:
     from corrlib.methods import get_method, solve
     from corrlib.morph import export_sequence, frame_positions
@@ -364,7 +411,8 @@ def cmd_retrieve(args) -> int:
     contour = _query_contour(args.query)
     params = _contour3d_params(args)
     files = mesh_files(args.folder)
-    hits = run(retrieve(contour, files, params, jobs=args.jobs), callback=_progress_printer(args.quiet))
+    hits = run(retrieve(contour, files, params, jobs=args.jobs, scheduler=args.scheduler),
+               callback=_progress_printer(args.quiet))
     print(f"{'rank':>4}  {'energy':>12}  {'seconds':>7}  mesh")
     for rank, hit in enumerate(hits[: args.top], 1):
         extra = f"  ({hit.error})" if hit.error else ""
@@ -470,6 +518,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("folder")
     p.add_argument("--top", type=int, default=10, help="how many ranks to print")
     p.add_argument("--jobs", type=int, help="worker processes (default: all cores)")
+    p.add_argument("--scheduler", help="Dask scheduler address (tcp://host:8786): match on that cluster")
     p.add_argument("--eps", type=float, default=0.05, help="approximation factor (default 0.05)")
     p.add_argument("--k", type=int)
     p.add_argument("--n-contour", dest="n_contour", type=int, default=100,
@@ -478,6 +527,34 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", help="write the full ranking as TSV")
     p.add_argument("-q", "--quiet", action="store_true")
     p.set_defaults(func=cmd_retrieve)
+
+    p = sub.add_parser("bench", help="run methods over a benchmark dataset with the standard protocol")
+    p.add_argument("dataset", help="folder: meshes (*.off), corres/<name>.vts (+ .sym.vts), pairs.txt; or "
+                                   "meshes with one connectivity (identity ground truth)")
+    p.add_argument("--method", action="append", metavar="NAME[:k=v,...][@LABEL]",
+                   help="a registered method with parameters (repeatable)")
+    p.add_argument("--methods-file", help="TOML file of [[method]] tables (name, label, params)")
+    p.add_argument("--maps", action="append", metavar="LABEL=FOLDER",
+                   help="evaluate external map files <source>__<target>.txt from FOLDER (repeatable)")
+    p.add_argument("--pairs", help="pairs file (default: DATASET/pairs.txt, else all ordered pairs)")
+    p.add_argument("--jobs", type=int, help="local worker processes (default: all cores)")
+    p.add_argument("--scheduler", help="Dask scheduler address (tcp://host:8786) instead of local processes")
+    p.add_argument("--geodesics", default="exact", choices=["exact", "heat", "graph"])
+    p.add_argument("-o", "--output", default="bench_output", help="output folder (a rerun resumes it)")
+    p.add_argument("-q", "--quiet", action="store_true")
+    p.set_defaults(func=cmd_bench)
+
+    p = sub.add_parser("bench-retrieval", help="retrieval benchmark: queries against a collection, MAP and "
+                                               "per-class average precision")
+    p.add_argument("queries", help="folder of silhouette images / contour files (class = name without number)")
+    p.add_argument("collection", help="folder of meshes (class = name without number)")
+    p.add_argument("--jobs", type=int, help="local worker processes (default: all cores)")
+    p.add_argument("--scheduler", help="Dask scheduler address (tcp://host:8786) instead of local processes")
+    p.add_argument("--eps", type=float, default=0.05, help="approximation factor (default 0.05)")
+    p.add_argument("--n-contour", dest="n_contour", type=int, default=100, help="contour resampling (default 100)")
+    p.add_argument("-o", "--output", default="retrieval_output", help="output folder")
+    p.add_argument("-q", "--quiet", action="store_true")
+    p.set_defaults(func=cmd_bench_retrieval)
 
     p = sub.add_parser("refine", help="refine an initial map or landmarks into a dense map")
     p.add_argument("source")

@@ -10,6 +10,8 @@ import multiprocessing
 import os
 from concurrent.futures import ProcessPoolExecutor
 
+from corrlib.errors import CorrError
+
 
 def _limit_threads():
     from threadpoolctl import threadpool_limits
@@ -28,3 +30,38 @@ def process_pool(jobs: int | None = None) -> ProcessPoolExecutor:
     jobs = jobs or os.cpu_count() or 1
     return ProcessPoolExecutor(max_workers=jobs, initializer=_limit_threads,
                                mp_context=multiprocessing.get_context("forkserver"))
+
+
+class job_executor:
+    """Context manager: a local process pool, or Dask's ``concurrent.futures`` executor on a cluster.
+
+    ``with job_executor(jobs, scheduler) as pool: pool.submit(fn, ...)``: the
+    benchmark runner and retrieval use this one code path; ``scheduler`` is
+    the address of a running Dask scheduler (``tcp://host:8786``), ``None``
+    for ``jobs`` local processes.
+    """
+
+    def __init__(self, jobs: int | None, scheduler: str | None):
+        self.jobs, self.scheduler = jobs, scheduler
+        self.client = None
+
+    def __enter__(self):
+        if self.scheduler is None:
+            self.pool = process_pool(self.jobs)
+            return self.pool
+        try:
+            from distributed import Client
+        except ImportError:
+            raise CorrError("--scheduler needs Dask: pip install 'corrlib[dist]'") from None
+        try:
+            self.client = Client(self.scheduler, timeout=10)
+        except OSError as exc:
+            raise CorrError(f"cannot reach the Dask scheduler {self.scheduler}: {exc}") from None
+        self.pool = self.client.get_executor(pure=False)
+        return self.pool
+
+    def __exit__(self, *exc):
+        self.pool.shutdown(wait=True)
+        if self.client is not None:
+            self.client.close()
+        return False

@@ -12,6 +12,7 @@ import resource as _resource
 import tempfile
 import time
 from collections.abc import Callable
+from pathlib import Path
 
 import numpy as np
 
@@ -320,8 +321,48 @@ def suite_product(repeat: int, quick: bool = False) -> None:
           "4-dimensional band fills in (5 % band: 15-30 s for the factorisation alone, 10 %: about 170 s)")
 
 
+def suite_bench(repeat: int, quick: bool = False) -> None:
+    """Issue 8 targets: the runner's overhead per pair, and a kernel-matching benchmark on 5k pairs with
+    ``--jobs 1`` vs ``--jobs 2`` (20 pairs; ``quick``: 4)."""
+    import shutil
+
+    from corrlib.bench import Runner, load_dataset, parse_method
+    from corrlib.resources import resource
+
+    n_pairs = 4 if quick else 20
+    with tempfile.TemporaryDirectory() as tmp:
+        folder = Path(tmp) / "cats"
+        (folder / "corres").mkdir(parents=True)
+        copies = 5  # renamed copies of the two cats give distinct pairs
+        for name in ("cat0", "cat1"):
+            for c in range(copies):
+                shutil.copy(resource(f"data/tosca/{name}.off"), folder / f"{name}{'abcde'[c]}.off")
+                shutil.copy(resource(f"data/tosca/{name}.vts"), folder / "corres" / f"{name}{'abcde'[c]}.vts")
+        pairs = [(f"cat0{a}", f"cat1{b}") for a in "abcde" for b in "abcde"][:n_pairs]
+        (folder / "pairs.txt").write_text("".join(f"{a} {b}\n" for a, b in pairs))
+        ds = load_dataset(folder)
+        fast = [parse_method("descriptor-nn")]
+        runner = Runner(ds, fast, Path(tmp) / "nn")
+        start = time.perf_counter()
+        runner.run(jobs=1)
+        wall = time.perf_counter() - start
+        recs = runner.records()
+        overhead = np.median([r["overhead"] for r in recs])
+        _line("runner overhead per pair (load + exact geodesic errors, 5k)  [target <= 0.5 s]", overhead,
+              f"median over {len(recs)} pairs: loading {np.median([r['load_time'] for r in recs]):.3f} s, "
+              f"evaluation {np.median([r['evaluation_time'] for r in recs]):.3f} s; whole run {wall:.1f} s")
+        km = [parse_method("kernel-matching")]
+        times = {}
+        for jobs in (1, 2):
+            start = time.perf_counter()
+            Runner(ds, km, Path(tmp) / f"km{jobs}").run(jobs=jobs)
+            times[jobs] = time.perf_counter() - start
+            _line(f"kernel matching, {n_pairs} pairs of 5k, --jobs {jobs}", times[jobs])
+        print(f"speed-up of --jobs 2 over --jobs 1: {times[1] / times[2]:.2f}x")
+
+
 SUITES = {"foundation": suite_foundation, "contour3d": suite_contour3d, "kernel": suite_kernel,
-          "divfree": suite_divfree, "product": suite_product}
+          "divfree": suite_divfree, "product": suite_product, "bench": suite_bench}
 
 
 def run_suite(name: str, repeat: int = 3, quick: bool = False) -> None:

@@ -24,7 +24,7 @@ import numpy as np
 
 from corrlib.errors import CorrError, InputError, ParameterError
 from corrlib.io import MESH_SUFFIXES, load_mesh
-from corrlib.parallel import process_pool
+from corrlib.parallel import job_executor
 from corrlib.methods.contour3d import Contour3DParams, PreparedQuery, match_prepared, prepare_query
 from corrlib.progress import CancelToken, Progress, run
 
@@ -89,7 +89,7 @@ def mesh_files(folder) -> list[Path]:
 
 
 def retrieve(query_contour, meshes: Iterable, params: Contour3DParams | None = None, *, jobs: int | None = None,
-             token: CancelToken | None = None):
+             token: CancelToken | None = None, scheduler: str | None = None):
     """Rank meshes by matching energy to a query contour (solver generator).
 
     Parameters
@@ -102,6 +102,9 @@ def retrieve(query_contour, meshes: Iterable, params: Contour3DParams | None = N
     jobs : int, optional
         Worker processes (default: all cores; 1 runs in this process).
     token : CancelToken, optional
+    scheduler : str, optional
+        Address of a Dask scheduler: the meshes are matched on that cluster
+        (:func:`corrlib.parallel.job_executor`) instead of local processes.
 
     Yields
     ------
@@ -124,13 +127,13 @@ def retrieve(query_contour, meshes: Iterable, params: Contour3DParams | None = N
     yield Progress("query features", 0.0)
     query = prepare_query(query_contour, params)
     hits: list[RetrievalHit] = []
-    if jobs == 1:
+    if jobs == 1 and scheduler is None:
         for path in paths:
             token.raise_if_cancelled()
             hits.append(_match_one(query, path, params))
             yield Progress("matching", len(hits) / len(paths), f"{Path(path).name}: {hits[-1].energy:.6g}")
     else:
-        with process_pool(min(jobs, len(paths))) as pool:
+        with job_executor(min(jobs, len(paths)), scheduler) as pool:
             pending = {pool.submit(_match_one, query, path, params) for path in paths}
             try:
                 while pending:

@@ -1,0 +1,491 @@
+"""Benchmark runner with the standard protocol (``corr bench``).
+
+Dataset layouts
+---------------
+* Published-benchmark layout: meshes ``*.off`` in the folder, per-shape
+  ground truth ``corres/<name>.vts`` (1-based rows that correspond across
+  shapes), optional mirrored ``corres/<name>.sym.vts`` (or next to the
+  meshes), and a pairs file (``pairs.txt`` or ``--pairs``) of tab- or
+  space-separated shape names.
+* A folder of meshes with the same connectivity (no ``corres/``): the
+  ground truth is the identity.
+Without a pairs file every ordered pair of distinct shapes is run.
+
+Every (method, pair) is a job: it loads both meshes, runs the method from
+the registry, and returns the map and the per-point geodesic errors
+(Princeton protocol, :func:`corrlib.evaluation.geodesic_errors`). Jobs run
+in a local process pool or, with a scheduler address, on a Dask cluster
+(through Dask's ``concurrent.futures`` executor: one code path). The
+client writes every result atomically as soon as it arrives
+(``maps/<method>/<source>__<target>.txt``, ``records/...json``), so an
+interrupted run continues where it stopped; a failing pair is recorded with
+its error and does not stop the run.
+
+Outputs: ``errors.csv`` (one row per method and pair), ``summary.md`` and
+``summary.json`` (per method: mean error, fractions within 0.025 / 0.05 /
+0.1, the same with the mirrored ground truth accepted, median and total
+runtime, peak memory), ``curves.png`` (cumulative error curves of all
+methods) and ``environment.json`` (versions, methods with parameters,
+machine).
+
+External maps (``--maps NAME=FOLDER``): map files produced elsewhere
+(``<source>__<target>.txt`` or ``<source>_<target>.map``, 0-based target
+index per source vertex) are evaluated with the same protocol.
+"""
+
+from __future__ import annotations
+
+import json
+import os
+import platform
+import resource
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from corrlib.errors import FileFormatError, InputError, ParameterError
+from corrlib.parallel import job_executor
+
+MESH_SUFFIXES = (".off", ".ply", ".obj")
+
+
+@dataclass
+class Dataset:
+    """Shapes, ground truth and pairs of a benchmark folder."""
+
+    folder: Path
+    shapes: dict[str, Path]
+    pairs: list[tuple[str, str]]
+    gt: dict[str, Path] = field(default_factory=dict)
+    gt_sym: dict[str, Path] = field(default_factory=dict)
+
+    @property
+    def identity(self) -> bool:
+        return not self.gt
+
+
+def load_dataset(folder, pairs_file=None) -> Dataset:
+    """Discover a dataset (see the module docstring for the layouts)."""
+    root = Path(folder)
+    if not root.is_dir():
+        raise FileFormatError(f"{root}: not a folder")
+    shapes = {p.stem: p for p in sorted(root.iterdir()) if p.suffix.lower() in MESH_SUFFIXES}
+    if not shapes:
+        raise FileFormatError(f"{root}: no meshes ({', '.join(MESH_SUFFIXES)})")
+    gt, gt_sym = {}, {}
+    for base in (root / "corres", root):
+        if base.is_dir():
+            for p in base.glob("*.vts"):
+                name = p.name[:-len(".sym.vts")] if p.name.endswith(".sym.vts") else p.stem
+                (gt_sym if p.name.endswith(".sym.vts") else gt).setdefault(name, p)
+    if gt:
+        missing = sorted(set(shapes) - set(gt))
+        if missing:
+            raise FileFormatError(f"{root}: no ground truth (.vts) for {', '.join(missing[:5])}")
+    pairs_path = Path(pairs_file) if pairs_file else root / "pairs.txt"
+    if pairs_path.exists():
+        pairs = []
+        for number, line in enumerate(pairs_path.read_text().splitlines(), 1):
+            if not line.strip() or line.lstrip().startswith("#"):
+                continue
+            names = line.split()
+            if len(names) != 2:
+                raise FileFormatError(f"{pairs_path}:{number}: expected two shape names, got {line!r}")
+            names = [Path(n).stem for n in names]
+            for n in names:
+                if n not in shapes:
+                    raise FileFormatError(f"{pairs_path}:{number}: unknown shape {n!r}")
+            pairs.append((names[0], names[1]))
+    elif pairs_file:
+        raise FileFormatError(f"{pairs_path}: pairs file not found")
+    else:
+        names = list(shapes)
+        pairs = [(a, b) for a in names for b in names if a != b]
+    if not pairs:
+        raise FileFormatError(f"{root}: no pairs to run")
+    return Dataset(root, shapes, pairs, gt, gt_sym)
+
+
+@dataclass(frozen=True)
+class MethodRun:
+    """A method of the registry with parameters, under a label (one column of the results)."""
+
+    label: str
+    name: str
+    params: dict = field(default_factory=dict)
+
+
+def parse_method(text: str) -> MethodRun:
+    """``NAME[:key=value,key=value][@LABEL]`` (values as on the command line)."""
+    from corrlib.methods import get_method, make_params
+
+    label = None
+    if "@" in text:
+        text, label = text.rsplit("@", 1)
+    name, _, rest = text.partition(":")
+    params = {}
+    for item in filter(None, rest.split(",")):
+        if "=" not in item:
+            raise ParameterError(f"method parameter {item!r} must be key=value")
+        key, value = item.split("=", 1)
+        params[key.strip()] = value.strip()
+    spec = get_method(name.strip())
+    make_params(spec.params, **params)  # validate now, not in a worker
+    return MethodRun(label or (name.strip() if not params else f"{name.strip()}({rest})"), spec.name, params)
+
+
+def methods_from_toml(path) -> list[MethodRun]:
+    """``[[method]]`` tables with ``name``, optional ``label`` and a ``params`` table."""
+    import tomllib
+
+    from corrlib.methods import get_method, make_params
+
+    try:
+        doc = tomllib.loads(Path(path).read_text())
+    except (OSError, tomllib.TOMLDecodeError) as exc:
+        raise FileFormatError(f"{path}: cannot read the methods file: {exc}") from None
+    out = []
+    for i, table in enumerate(doc.get("method", [])):
+        if "name" not in table:
+            raise FileFormatError(f"{path}: method {i + 1} has no name")
+        spec = get_method(table["name"])
+        params = dict(table.get("params", {}))
+        make_params(spec.params, **params)
+        out.append(MethodRun(table.get("label", spec.name), spec.name, params))
+    if not out:
+        raise FileFormatError(f"{path}: no [[method]] tables")
+    return out
+
+
+# ----------------------------------------------------------------------------- jobs
+
+
+@dataclass(frozen=True)
+class Job:
+    """One (method, pair) to run in a worker; everything a worker needs, picklable."""
+
+    method: MethodRun | None
+    source: str
+    target: str
+    source_path: str
+    target_path: str
+    gt: tuple[str | None, str | None, str | None]  # source .vts, target .vts, target .sym.vts
+    geodesics: str = "exact"
+    external_map: str | None = None
+
+    @property
+    def key(self) -> str:
+        return f"{self.source}__{self.target}"
+
+
+def _peak_rss_mb() -> float:
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
+
+
+def run_job(job: Job) -> dict:
+    """Run one job (in a worker): the record, the map and the per-point errors. Never raises."""
+    from corrlib.evaluation import geodesic_errors
+    from corrlib.io import load_map, load_mesh, load_vts
+
+    record = {"source": job.source, "target": job.target, "status": "ok", "error": ""}
+    map_xy = errors = errors_sym = None
+    try:
+        start = time.perf_counter()
+        source, target = load_mesh(job.source_path), load_mesh(job.target_path)
+        load_time = time.perf_counter() - start
+        if job.external_map is not None:
+            map_xy = load_map(job.external_map, n_target=target.n_vertices, n_source=source.n_vertices)
+            runtime = 0.0
+        else:
+            from corrlib.methods import solve
+
+            start = time.perf_counter()
+            result = solve(job.method.name, source, target, **job.method.params)
+            runtime = time.perf_counter() - start
+            map_xy = result.map_xy
+        start = time.perf_counter()
+        if job.gt[0] is None:
+            if source.n_vertices != target.n_vertices:
+                raise InputError(f"identity ground truth needs equal vertex counts, got {source.n_vertices} and "
+                                 f"{target.n_vertices}")
+            gx = gy = np.arange(source.n_vertices)
+            sym = None
+        else:
+            gx = load_vts(job.gt[0], source.n_vertices)
+            gy = load_vts(job.gt[1], target.n_vertices)
+            sym = load_vts(job.gt[2], target.n_vertices) if job.gt[2] else None
+        report = geodesic_errors(map_xy, target, gx, gy, gt_target_sym=sym, method=job.geodesics)
+        errors, errors_sym = report.errors, report.errors_sym
+        record.update(report.summary())
+        evaluation = time.perf_counter() - start
+        record.update(runtime=runtime, load_time=load_time, evaluation_time=evaluation,
+                      overhead=load_time + evaluation,
+                      peak_memory_mb=_peak_rss_mb(), n_source=source.n_vertices, n_target=target.n_vertices)
+    except Exception as exc:  # a failing pair is recorded, the run goes on
+        record.update(status="failed", error=f"{type(exc).__name__}: {exc}")
+    return {"record": record, "map_xy": map_xy, "errors": errors, "errors_sym": errors_sym}
+
+
+# ----------------------------------------------------------------------------- runner
+
+
+def _label_dir(label: str) -> str:
+    return "".join(c if c.isalnum() or c in "-_.()=," else "_" for c in label)
+
+
+class Runner:
+    """Runs the jobs of a benchmark into an output folder (resumable).
+
+    Parameters
+    ----------
+    dataset : Dataset
+    methods : list of MethodRun
+    out : path
+    external : dict of label -> folder, optional
+        Map files made elsewhere, evaluated with the same protocol.
+    geodesics : {"exact", "heat", "graph"}
+    """
+
+    def __init__(self, dataset: Dataset, methods: list[MethodRun], out, *, external=None,
+                 geodesics: str = "exact"):
+        self.dataset = dataset
+        self.methods = list(methods)
+        self.external = dict(external or {})
+        if not self.methods and not self.external:
+            raise ParameterError("give at least one method or a folder of external maps")
+        labels = [m.label for m in self.methods] + list(self.external)
+        if len(set(labels)) != len(labels):
+            raise ParameterError(f"method labels must be unique, got {labels}")
+        self.out = Path(out)
+        self.geodesics = geodesics
+
+    def jobs(self) -> list[tuple[str, Job]]:
+        ds = self.dataset
+        out = []
+        for a, b in ds.pairs:
+            gt = (None, None, None) if ds.identity else (str(ds.gt[a]), str(ds.gt[b]),
+                                                          str(ds.gt_sym[b]) if b in ds.gt_sym else None)
+            base = dict(source=a, target=b, source_path=str(ds.shapes[a]), target_path=str(ds.shapes[b]), gt=gt,
+                        geodesics=self.geodesics)
+            for m in self.methods:
+                out.append((m.label, Job(method=m, **base)))
+            for label, folder in self.external.items():
+                candidates = [Path(folder) / f"{a}__{b}.txt", Path(folder) / f"{a}_{b}.map",
+                              Path(folder) / f"{a}__{b}.map"]
+                found = next((str(p) for p in candidates if p.exists()), str(candidates[0]))
+                out.append((label, Job(method=None, external_map=found, **base)))
+        return out
+
+    def _record_path(self, label: str, job: Job) -> Path:
+        return self.out / "records" / _label_dir(label) / f"{job.key}.json"
+
+    def pending(self) -> list[tuple[str, Job]]:
+        """Jobs without a record yet (what a resumed run still has to do)."""
+        return [(label, job) for label, job in self.jobs() if not self._record_path(label, job).exists()]
+
+    def _store(self, label: str, job: Job, outcome: dict) -> None:
+        from corrlib.io import atomic_write, save_map
+
+        rec = dict(outcome["record"], method=label)
+        folder = self.out / "maps" / _label_dir(label)
+        if outcome["map_xy"] is not None and job.external_map is None:
+            folder.mkdir(parents=True, exist_ok=True)
+            save_map(folder / f"{job.key}.txt", outcome["map_xy"])
+        if outcome["errors"] is not None:
+            err_dir = self.out / "errors" / _label_dir(label)
+            err_dir.mkdir(parents=True, exist_ok=True)
+            arrays = {"errors": outcome["errors"]}
+            if outcome["errors_sym"] is not None:
+                arrays["errors_sym"] = outcome["errors_sym"]
+            with atomic_write(err_dir / f"{job.key}.npz", "wb") as fh:
+                np.savez(fh, **arrays)
+        path = self._record_path(label, job)
+        path.parent.mkdir(parents=True, exist_ok=True)
+        with atomic_write(path) as fh:
+            json.dump(rec, fh, indent=1)
+
+    def run(self, *, jobs: int | None = None, scheduler: str | None = None, callback=None,
+            limit: int | None = None) -> dict:
+        """Run every pending job, then write the summary. ``limit`` stops after that many jobs (tests)."""
+        self.out.mkdir(parents=True, exist_ok=True)
+        self._write_environment(jobs, scheduler)
+        todo = self.pending()
+        if limit is not None:
+            todo = todo[:limit]
+        if todo:
+            with job_executor(jobs, scheduler) as pool:
+                from concurrent.futures import as_completed
+
+                futures = {pool.submit(run_job, job): (label, job) for label, job in todo}
+                for done, future in enumerate(as_completed(futures), 1):
+                    label, job = futures[future]
+                    outcome = future.result()
+                    self._store(label, job, outcome)
+                    if callback is not None:
+                        callback(done, len(todo), label, outcome["record"])
+        return self.summarize()
+
+    def _write_environment(self, jobs, scheduler) -> None:
+        from corrlib.io import atomic_write, environment
+
+        env = environment()
+        env.update(machine=platform.machine(), processor=platform.processor(), cores=os.cpu_count(),
+                   jobs=jobs, scheduler=scheduler, geodesics=self.geodesics,
+                   dataset=str(self.dataset.folder), pairs=len(self.dataset.pairs),
+                   methods=[{"label": m.label, "name": m.name, "params": m.params} for m in self.methods],
+                   external=self.external)
+        with atomic_write(self.out / "environment.json") as fh:
+            json.dump(env, fh, indent=1, default=str)
+
+    def records(self) -> list[dict]:
+        out = []
+        for label, job in self.jobs():
+            path = self._record_path(label, job)
+            if path.exists():
+                out.append(json.loads(path.read_text()))
+        return out
+
+    def summarize(self) -> dict:
+        """Write errors.csv, summary.md/.json and curves.png from the stored records; return the summary."""
+        from corrlib.evaluation import DEFAULT_THRESHOLDS, cumulative_curve
+        from corrlib.io import atomic_write
+
+        records = self.records()
+        columns = ["method", "source", "target", "status", "mean", "median", "within_0.025", "within_0.05",
+                   "within_0.1", "mean_sym", "within_0.05_sym", "runtime", "overhead", "peak_memory_mb", "error"]
+        with atomic_write(self.out / "errors.csv") as fh:
+            fh.write(",".join(columns) + "\n")
+            for rec in records:
+                fh.write(",".join(_csv(rec.get(c, "")) for c in columns) + "\n")
+        summary = {}
+        curves = {}
+        for label in [m.label for m in self.methods] + list(self.external):
+            recs = [r for r in records if r["method"] == label]
+            ok = [r for r in recs if r["status"] == "ok"]
+            errs, errs_sym = [], []
+            for r in ok:
+                data = np.load(self.out / "errors" / _label_dir(label) / f"{r['source']}__{r['target']}.npz")
+                errs.append(data["errors"])
+                if "errors_sym" in data:
+                    errs_sym.append(data["errors_sym"])
+            entry = {"pairs": len(recs), "failed": len(recs) - len(ok)}
+            if errs:
+                e = np.concatenate(errs)
+                entry.update(mean=float(e.mean()), **{f"within_{t}": float(np.mean(e <= float(t)))
+                                                      for t in ("0.025", "0.05", "0.1")})
+                if errs_sym:
+                    s = np.concatenate(errs_sym)
+                    entry.update(mean_sym=float(s.mean()), **{f"within_{t}_sym": float(np.mean(s <= float(t)))
+                                                              for t in ("0.025", "0.05", "0.1")})
+                runtimes = [r["runtime"] for r in ok]
+                entry.update(median_runtime=float(np.median(runtimes)), total_runtime=float(np.sum(runtimes)),
+                             median_overhead=float(np.median([r["overhead"] for r in ok])),
+                             peak_memory_mb=float(max(r["peak_memory_mb"] for r in ok)))
+                curves[label] = cumulative_curve(e, DEFAULT_THRESHOLDS)
+            summary[label] = entry
+        with atomic_write(self.out / "summary.json") as fh:
+            json.dump(summary, fh, indent=1)
+        with atomic_write(self.out / "summary.md") as fh:
+            fh.write(_markdown(summary))
+        if curves:
+            from corrlib.plotting import save_error_curves
+
+            save_error_curves(self.out / "curves.png", curves, DEFAULT_THRESHOLDS,
+                              title=f"{self.dataset.folder.name}: cumulative geodesic error")
+        return summary
+
+
+def _csv(value) -> str:
+    if isinstance(value, float):
+        return f"{value:.6g}"
+    text = str(value)
+    return '"' + text.replace('"', "'") + '"' if ("," in text or '"' in text) else text
+
+
+def _markdown(summary: dict) -> str:
+    head = ("| method | pairs | failed | mean | ≤0.025 | ≤0.05 | ≤0.1 | mean (sym) | ≤0.05 (sym) | median s | "
+            "total s | peak MB |\n|---|---|---|---|---|---|---|---|---|---|---|---|\n")
+    rows = []
+    for label, e in summary.items():
+        def f(key, fmt="{:.3f}"):
+            return fmt.format(e[key]) if key in e else "–"
+        rows.append(f"| {label} | {e['pairs']} | {e['failed']} | {f('mean')} | {f('within_0.025')} | "
+                    f"{f('within_0.05')} | {f('within_0.1')} | {f('mean_sym')} | {f('within_0.05_sym')} | "
+                    f"{f('median_runtime', '{:.2f}')} | {f('total_runtime', '{:.1f}')} | "
+                    f"{f('peak_memory_mb', '{:.0f}')} |")
+    return head + "\n".join(rows) + "\n"
+
+
+# ----------------------------------------------------------------------------- retrieval benchmark
+
+CONTOUR_SUFFIXES = (".png", ".gif", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".svg", ".txt", ".csv", ".xy")
+
+
+def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | None = None,
+                        scheduler: str | None = None, callback=None) -> dict:
+    """Rank a collection against every query; average precision per query and class, and their mean.
+
+    Parameters
+    ----------
+    queries : path
+        Folder of silhouette images or contour files; the class of a query
+        is its file name without a trailing number (``horse-3.png`` -> ``horse``).
+    collection : path
+        Folder of meshes, classes named the same way (``horse0.off``).
+    out : path
+        Writes ``retrieval.csv`` (query, class, AP, rank of the first relevant
+        mesh, top hits), ``retrieval_summary.json`` and ``retrieval_summary.md``.
+    params : Contour3DParams, optional
+    jobs, scheduler
+        Local processes or a Dask scheduler (see :func:`corrlib.parallel.job_executor`).
+
+    Returns
+    -------
+    dict
+        ``{"map": float, "per_class": {class: mean AP}, "queries": int, "failed": int}``.
+    """
+    from corrlib.io import atomic_write, load_contour
+    from corrlib.progress import run
+    from corrlib.retrieval import average_precision, class_of, mesh_files, retrieve
+
+    query_paths = sorted(p for p in Path(queries).iterdir() if p.suffix.lower() in CONTOUR_SUFFIXES)
+    if not query_paths:
+        raise FileFormatError(f"{queries}: no query silhouettes or contour files")
+    meshes = mesh_files(collection)
+    out = Path(out)
+    out.mkdir(parents=True, exist_ok=True)
+    rows = []
+    for number, q in enumerate(query_paths, 1):
+        row = {"query": q.name, "class": class_of(q), "ap": float("nan"), "first_relevant": "", "top": "",
+               "error": ""}
+        try:
+            hits = run(retrieve(load_contour(q), meshes, params, jobs=jobs, scheduler=scheduler))
+            labels = [h.label for h in hits]
+            row["ap"] = average_precision(labels, row["class"])
+            row["first_relevant"] = labels.index(row["class"]) + 1 if row["class"] in labels else ""
+            row["top"] = " ".join(h.path.name for h in hits[:5])
+        except Exception as exc:  # a failing query is recorded, the others go on
+            row["error"] = f"{type(exc).__name__}: {exc}"
+        rows.append(row)
+        if callback is not None:
+            callback(number, len(query_paths), row)
+    with atomic_write(out / "retrieval.csv") as fh:
+        fh.write("query,class,ap,first_relevant,top,error\n")
+        for r in rows:
+            fh.write(",".join(_csv(r[c]) for c in ("query", "class", "ap", "first_relevant", "top", "error")) + "\n")
+    ok = [r for r in rows if not r["error"]]
+    per_class = {}
+    for r in ok:
+        per_class.setdefault(r["class"], []).append(r["ap"])
+    summary = {"map": float(np.mean([r["ap"] for r in ok])) if ok else float("nan"),
+               "per_class": {c: float(np.mean(v)) for c, v in sorted(per_class.items())},
+               "queries": len(rows), "failed": len(rows) - len(ok), "collection": len(meshes)}
+    with atomic_write(out / "retrieval_summary.json") as fh:
+        json.dump(summary, fh, indent=1)
+    with atomic_write(out / "retrieval_summary.md") as fh:
+        fh.write(f"mean average precision: {summary['map']:.3f} over {len(ok)} queries "
+                 f"({summary['failed']} failed), {len(meshes)} meshes\n\n| class | AP |\n|---|---|\n")
+        fh.write("".join(f"| {c} | {v:.3f} |\n" for c, v in summary["per_class"].items()))
+    return summary

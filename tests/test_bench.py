@@ -1,0 +1,175 @@
+"""The benchmark runner: protocol, resuming, failures, external maps, the Dask path."""
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+
+from _data import TOSCA
+from corrlib.bench import Runner, load_dataset, methods_from_toml, parse_method
+from corrlib.errors import FileFormatError, ParameterError
+
+FAST = "descriptor-nn:n_eigs=30,n_scales=20"
+
+
+@pytest.fixture
+def cat_dataset(tmp_path):
+    folder = tmp_path / "cats"
+    (folder / "corres").mkdir(parents=True)
+    for name in ("cat0", "cat1"):
+        shutil.copy(TOSCA / f"{name}.off", folder)
+        shutil.copy(TOSCA / f"{name}.vts", folder / "corres")
+        shutil.copy(TOSCA / f"{name}.sym.vts", folder / "corres")
+    (folder / "pairs.txt").write_text("cat0\tcat1\ncat1 cat0\n")
+    return folder
+
+
+@pytest.fixture
+def wolf_dataset(tmp_path):
+    folder = tmp_path / "wolves"
+    folder.mkdir()
+    for name in ("wolf0", "wolf1"):
+        shutil.copy(TOSCA / f"{name}.off", folder)
+    return folder
+
+
+def test_runner_reproduces_the_direct_evaluation(cat_dataset, tmp_path):
+    from corrlib.evaluation import geodesic_errors
+    from corrlib.io import load_map, load_mesh, load_vts
+
+    ds = load_dataset(cat_dataset)
+    assert ds.pairs == [("cat0", "cat1"), ("cat1", "cat0")] and not ds.identity
+    out = tmp_path / "out"
+    summary = Runner(ds, [parse_method(FAST + "@nn")], out).run(jobs=2)
+    assert summary["nn"]["pairs"] == 2 and summary["nn"]["failed"] == 0
+    cat0, cat1 = load_mesh(TOSCA / "cat0.off"), load_mesh(TOSCA / "cat1.off")
+    map01 = load_map(out / "maps" / "nn" / "cat0__cat1.txt")
+    direct = geodesic_errors(map01, cat1, load_vts(TOSCA / "cat0.vts"), load_vts(TOSCA / "cat1.vts"),
+                             gt_target_sym=load_vts(TOSCA / "cat1.sym.vts"))
+    rows = (out / "errors.csv").read_text().splitlines()
+    assert rows[0].startswith("method,source,target,status,mean")
+    row = next(r.split(",") for r in rows[1:] if ",cat0,cat1," in r)
+    assert float(row[4]) == pytest.approx(direct.summary()["mean"], rel=1e-5)
+    map10 = load_map(out / "maps" / "nn" / "cat1__cat0.txt")
+    other = geodesic_errors(map10, cat0, load_vts(TOSCA / "cat1.vts"), load_vts(TOSCA / "cat0.vts"))
+    pooled = np.concatenate([direct.errors, other.errors])
+    assert summary["nn"]["mean"] == pytest.approx(pooled.mean(), rel=1e-9)
+    assert summary["nn"]["within_0.05"] == pytest.approx(np.mean(pooled <= 0.05))
+    assert "mean_sym" in summary["nn"] and summary["nn"]["mean_sym"] <= summary["nn"]["mean"]
+    assert (out / "curves.png").read_bytes()[:4] == b"\x89PNG"
+    assert "| nn | 2 | 0 |" in (out / "summary.md").read_text()
+    env = json.loads((out / "environment.json").read_text())
+    assert env["methods"][0]["params"] == {"n_eigs": "30", "n_scales": "20"} and env["cores"] >= 1
+    # external maps: the runner's own maps, evaluated like maps made elsewhere
+    again = Runner(ds, [], tmp_path / "ext", external={"ours": str(out / "maps" / "nn")}).run(jobs=1)
+    assert again["ours"]["mean"] == pytest.approx(summary["nn"]["mean"], rel=1e-12)
+
+
+def test_resume_after_an_interruption_gives_the_same_table(wolf_dataset, tmp_path):
+    ds = load_dataset(wolf_dataset)
+    assert ds.identity and len(ds.pairs) == 2
+    methods = [parse_method(FAST)]
+    full = Runner(ds, methods, tmp_path / "full").run(jobs=1)
+    partial = Runner(ds, methods, tmp_path / "resumed")
+    partial.run(jobs=1, limit=1)  # interrupted after one job
+    assert len(partial.pending()) == 1
+    resumed = Runner(ds, methods, tmp_path / "resumed")
+    summary = resumed.run(jobs=1)
+    assert not resumed.pending()
+    for key in ("mean", "within_0.025", "within_0.05", "pairs"):
+        assert summary[methods[0].label][key] == full[methods[0].label][key]
+
+
+def test_a_broken_mesh_is_recorded_and_skipped(wolf_dataset, tmp_path):
+    from corrlib.cli import main
+
+    (wolf_dataset / "broken.off").write_text("OFF\n3 1 0\n0 0 0\n1 nan 0\n")
+    (wolf_dataset / "pairs.txt").write_text("wolf0 wolf1\nbroken wolf1\n")
+    out = tmp_path / "out"
+    code = main(["bench", str(wolf_dataset), "--method", FAST, "-o", str(out), "--jobs", "1", "-q"])
+    assert code == 1  # some pair failed
+    rows = (out / "errors.csv").read_text().splitlines()
+    broken = next(r for r in rows if ",broken," in r)
+    assert ",failed," in broken and "broken.off" in broken
+    summary = json.loads((out / "summary.json").read_text())
+    entry = next(iter(summary.values()))
+    assert entry["pairs"] == 2 and entry["failed"] == 1 and entry["within_0.1"] > 0.5
+
+
+def test_bad_datasets_and_methods(tmp_path, wolf_dataset):
+    with pytest.raises(FileFormatError, match="no meshes"):
+        load_dataset(tmp_path)
+    (wolf_dataset / "pairs.txt").write_text("wolf0 wolf9\n")
+    with pytest.raises(FileFormatError, match="unknown shape 'wolf9'"):
+        load_dataset(wolf_dataset)
+    with pytest.raises(ParameterError, match="unknown method"):
+        parse_method("no-such-method")
+    with pytest.raises(ParameterError, match="n_eigs"):
+        parse_method("descriptor-nn:n_eigs=0")
+    toml = tmp_path / "methods.toml"
+    toml.write_text('[[method]]\nname = "descriptor-nn"\nlabel = "nn30"\n[method.params]\nn_eigs = 30\n')
+    assert methods_from_toml(toml)[0].label == "nn30"
+
+
+def test_dask_cluster_gives_the_local_results(wolf_dataset, tmp_path):
+    import distributed  # the dist extra is part of the test setup (scripts/test.sh)
+
+    ds = load_dataset(wolf_dataset)
+    methods = [parse_method(FAST)]
+    local = Runner(ds, methods, tmp_path / "local").run(jobs=2)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster:
+        remote = Runner(ds, methods, tmp_path / "dask").run(scheduler=cluster.scheduler_address)
+    accuracy = ("pairs", "failed", "mean", "within_0.025", "within_0.05", "within_0.1")
+    label = methods[0].label
+    assert {k: remote[label][k] for k in accuracy} == {k: local[label][k] for k in accuracy}
+    from corrlib.io import load_map
+
+    for pair in ("wolf0__wolf1", "wolf1__wolf0"):
+        assert np.array_equal(load_map(tmp_path / "dask" / "maps" / label / f"{pair}.txt"),
+                              load_map(tmp_path / "local" / "maps" / label / f"{pair}.txt"))
+
+
+def test_retrieval_benchmark_local_and_on_dask(tmp_path):
+    import distributed
+
+    from corrlib.cli import main
+    from corrlib.geometry.sections import render_silhouette
+    from corrlib.io import load_mesh, save_contour
+    from corrlib.retrieval import average_precision, class_of
+
+    queries, collection = tmp_path / "queries", tmp_path / "collection"
+    queries.mkdir()
+    collection.mkdir()
+    for name in ("cat1", "wolf1"):
+        shutil.copy(TOSCA / f"{name}.off", collection)
+    for name, cls in (("cat0", "cat"), ("wolf0", "wolf")):
+        save_contour(queries / f"{cls}-1.txt", render_silhouette(load_mesh(TOSCA / f"{name}.off"), [0, 0, 1]))
+    (queries / "broken-1.txt").write_text("0 0\n1 1\n")  # too few points: recorded, not fatal
+    out = tmp_path / "out"
+    code = main(["bench-retrieval", str(queries), str(collection), "-o", str(out), "--jobs", "2", "-q",
+                 "--n-contour", "60"])
+    assert code == 1  # one query failed
+    summary = json.loads((out / "retrieval_summary.json").read_text())
+    assert summary["queries"] == 3 and summary["failed"] == 1 and summary["collection"] == 2
+    rows = [r.split(",") for r in (out / "retrieval.csv").read_text().splitlines()[1:]]
+    aps = {r[0]: float(r[2]) for r in rows if r[2] != "nan"}
+    for r in rows:
+        if r[0] in aps:
+            ranked = [class_of(n) for n in r[4].split()]
+            assert aps[r[0]] == pytest.approx(average_precision(ranked, r[1]))
+    assert summary["map"] == pytest.approx(np.mean(list(aps.values())))
+    assert set(summary["per_class"]) == {"cat", "wolf"}
+    from dataclasses import replace
+
+    from corrlib.bench import retrieval_benchmark
+    from corrlib.methods.contour3d import Contour3DParams
+
+    params = replace(Contour3DParams(), eps=0.05, n_contour=60)
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster:
+        remote = retrieval_benchmark(queries, collection, tmp_path / "dask", params=params,
+                                     scheduler=cluster.scheduler_address)
+    assert remote["map"] == pytest.approx(summary["map"])
+    assert remote["per_class"] == pytest.approx(summary["per_class"])

@@ -334,7 +334,8 @@ class Runner:
         env.update(machine=platform.machine(), processor=platform.processor(), cores=os.cpu_count(),
                    jobs=jobs, scheduler=scheduler, geodesics=self.geodesics,
                    dataset=str(self.dataset.folder), pairs=len(self.dataset.pairs),
-                   methods=[{"label": m.label, "name": m.name, "params": m.params} for m in self.methods],
+                   methods=[{"label": m.label, "name": m.name, "params": m.params,
+                             "all_params": _all_params(m)} for m in self.methods],
                    external=self.external)
         with atomic_write(self.out / "environment.json") as fh:
             json.dump(env, fh, indent=1, default=str)
@@ -395,6 +396,15 @@ class Runner:
             save_error_curves(self.out / "curves.png", curves, DEFAULT_THRESHOLDS,
                               title=f"{self.dataset.folder.name}: cumulative geodesic error")
         return summary
+
+
+def _all_params(method: MethodRun) -> dict:
+    """Every parameter of a method run, defaults included (seeds too): what reproduces it."""
+    from dataclasses import asdict
+
+    from corrlib.methods import get_method, make_params
+
+    return asdict(make_params(get_method(method.name).params, **method.params))
 
 
 def _csv(value) -> str:

@@ -61,6 +61,7 @@ def test_runner_reproduces_the_direct_evaluation(cat_dataset, tmp_path):
     assert "| nn | 2 | 0 |" in (out / "summary.md").read_text()
     env = json.loads((out / "environment.json").read_text())
     assert env["methods"][0]["params"] == {"n_eigs": "30", "n_scales": "20"} and env["cores"] >= 1
+    assert env["methods"][0]["all_params"]["n_eigs"] == 30 and "descriptor" in env["methods"][0]["all_params"]
     # external maps: the runner's own maps, evaluated like maps made elsewhere
     again = Runner(ds, [], tmp_path / "ext", external={"ours": str(out / "maps" / "nn")}).run(jobs=1)
     assert again["ours"]["mean"] == pytest.approx(summary["nn"]["mean"], rel=1e-12)

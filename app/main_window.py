@@ -535,16 +535,12 @@ class MainWindow(QMainWindow):
         self.result_ready.emit(result)
 
     def _show_sequence(self, result) -> None:
-        from corrlib.morph import sequence_positions
+        from corrlib.morph import FLOW_DESCRIPTION, LINEAR_DESCRIPTION, has_deformation, sequence_positions
 
-        if "trajectory" in result.extras:
-            positions = sequence_positions(result, self.source, self.target,
-                                           t_max=float(result.extras["trajectory_times"][-1]))
-            self.sequence_view.set_sequence(self.source, self.target, result.map_xy, positions,
-                                            description="divergence-free flow (volume preserving; t > 1 "
-                                                        "extrapolates along the same field)")
-        else:
-            self.sequence_view.set_sequence(self.source, self.target, result.map_xy)
+        # up to the largest t the slider allows (a divergence-free result stores its flow that far)
+        positions = sequence_positions(result, self.source, self.target, t_max=self.sequence_view.t_max.maximum())
+        self.sequence_view.set_sequence(self.source, positions,
+                                        FLOW_DESCRIPTION if has_deformation(result) else LINEAR_DESCRIPTION)
 
     def run_retrieval(self) -> None:
         view = self.retrieval_view

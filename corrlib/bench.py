@@ -38,7 +38,6 @@ from __future__ import annotations
 import json
 import os
 import platform
-import resource
 import time
 from dataclasses import dataclass, field
 from pathlib import Path
@@ -47,6 +46,7 @@ import numpy as np
 
 from corrlib.errors import FileFormatError, InputError, ParameterError
 from corrlib.parallel import job_executor
+from corrlib.progress import peak_rss_mb
 
 MESH_SUFFIXES = (".off", ".ply", ".obj")
 
@@ -180,10 +180,6 @@ class Job:
         return f"{self.source}__{self.target}"
 
 
-def _peak_rss_mb() -> float:
-    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
-
-
 def run_job(job: Job) -> dict:
     """Run one job (in a worker): the record, the map and the per-point errors. Never raises."""
     from corrlib.evaluation import geodesic_errors
@@ -222,7 +218,7 @@ def run_job(job: Job) -> dict:
         evaluation = time.perf_counter() - start
         record.update(runtime=runtime, load_time=load_time, evaluation_time=evaluation,
                       overhead=load_time + evaluation,
-                      peak_memory_mb=_peak_rss_mb(), n_source=source.n_vertices, n_target=target.n_vertices)
+                      peak_memory_mb=peak_rss_mb(), n_source=source.n_vertices, n_target=target.n_vertices)
     except Exception as exc:  # a failing pair is recorded, the run goes on
         record.update(status="failed", error=f"{type(exc).__name__}: {exc}")
     return {"record": record, "map_xy": map_xy, "errors": errors, "errors_sym": errors_sym}

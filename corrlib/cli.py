@@ -296,7 +296,7 @@ def cmd_bench_retrieval(args) -> int:
 
 def cmd_morph(args) -> int:
     from corrlib.methods import get_method, solve
-    from corrlib.morph import export_sequence, frame_positions
+    from corrlib.morph import export_sequence, frame_positions, has_deformation
     from corrlib.shapes import TriMesh
 
     if args.frames < 2:
@@ -313,7 +313,7 @@ def cmd_morph(args) -> int:
     times = np.linspace(0.0, args.t_max, args.frames)
     frames = frame_positions(result, source, target, times)
     written = export_sequence(out, frames, source.faces, times, fmt=args.format, closed=source.is_closed)
-    kind = "divergence-free flow" if "coefficients" in result.extras else "linear interpolation through the map"
+    kind = "divergence-free flow" if has_deformation(result) else "linear interpolation through the map"
     print(f"{len(frames)} frames t = 0 .. {args.t_max:g} ({kind}) in {out}/, animation {written['animation']}")
     if source.is_closed:
         vols = np.array(written["volume"])
@@ -458,6 +458,12 @@ def cmd_perf(args) -> int:
 # ----------------------------------------------------------------------------- parser
 
 
+def _add_scale_out(p: argparse.ArgumentParser) -> None:
+    """``--jobs`` / ``--scheduler`` of the commands that run independent jobs (see corrlib.parallel.job_executor)."""
+    p.add_argument("--jobs", type=int, help="local worker processes (default: all cores)")
+    p.add_argument("--scheduler", help="Dask scheduler address (tcp://host:8786) instead of local processes")
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="corr", description="Continuous non-rigid shape correspondence.")
     sub = parser.add_subparsers(dest="command", required=True)
@@ -517,8 +523,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("query")
     p.add_argument("folder")
     p.add_argument("--top", type=int, default=10, help="how many ranks to print")
-    p.add_argument("--jobs", type=int, help="worker processes (default: all cores)")
-    p.add_argument("--scheduler", help="Dask scheduler address (tcp://host:8786): match on that cluster")
+    _add_scale_out(p)
     p.add_argument("--eps", type=float, default=0.05, help="approximation factor (default 0.05)")
     p.add_argument("--k", type=int)
     p.add_argument("--n-contour", dest="n_contour", type=int, default=100,
@@ -537,8 +542,7 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--maps", action="append", metavar="LABEL=FOLDER",
                    help="evaluate external map files <source>__<target>.txt from FOLDER (repeatable)")
     p.add_argument("--pairs", help="pairs file (default: DATASET/pairs.txt, else all ordered pairs)")
-    p.add_argument("--jobs", type=int, help="local worker processes (default: all cores)")
-    p.add_argument("--scheduler", help="Dask scheduler address (tcp://host:8786) instead of local processes")
+    _add_scale_out(p)
     p.add_argument("--geodesics", default="exact", choices=["exact", "heat", "graph"])
     p.add_argument("-o", "--output", default="bench_output", help="output folder (a rerun resumes it)")
     p.add_argument("-q", "--quiet", action="store_true")
@@ -548,8 +552,7 @@ def build_parser() -> argparse.ArgumentParser:
                                                "per-class average precision")
     p.add_argument("queries", help="folder of silhouette images / contour files (class = name without number)")
     p.add_argument("collection", help="folder of meshes (class = name without number)")
-    p.add_argument("--jobs", type=int, help="local worker processes (default: all cores)")
-    p.add_argument("--scheduler", help="Dask scheduler address (tcp://host:8786) instead of local processes")
+    _add_scale_out(p)
     p.add_argument("--eps", type=float, default=0.05, help="approximation factor (default 0.05)")
     p.add_argument("--n-contour", dest="n_contour", type=int, default=100, help="contour resampling (default 100)")
     p.add_argument("-o", "--output", default="retrieval_output", help="output folder")

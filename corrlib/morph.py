@@ -24,6 +24,23 @@ def linear_positions(source_vertices: np.ndarray, target_vertices: np.ndarray, m
     return (1.0 - t) * source_vertices + t * partner
 
 
+#: how the studio and the CLI describe the two kinds of sequence
+FLOW_DESCRIPTION = "divergence-free flow (volume preserving; t > 1 extrapolates along the same field)"
+LINEAR_DESCRIPTION = ("linear vertex interpolation through the map (fallback: not a deformation model; folds "
+                      "where the map does)")
+
+
+def has_deformation(result) -> bool:
+    """Whether a result carries a deformation model (a divergence-free flow) rather than only a map."""
+    return "coefficients" in result.extras and "frames" in result.extras
+
+
+def _linear(result, source, target):
+    if result.map_xy is None:
+        raise InputError(f"the result of {result.method!r} has no point-to-point map to interpolate")
+    return lambda t: linear_positions(source.vertices, target.vertices, result.map_xy, t)
+
+
 def sequence_positions(result, source, target, t_max: float = 1.5):
     """A ``positions(t)`` callable for a result: the method's deformation if it has one, else linear.
 
@@ -42,19 +59,18 @@ def sequence_positions(result, source, target, t_max: float = 1.5):
         :func:`linear_positions` through ``result.map_xy``.
     """
     ex = result.extras
+    if not has_deformation(result):
+        return _linear(result, source, target)
     if "trajectory" in ex and float(ex["trajectory_times"][-1]) >= t_max - 1e-9:
-        return _stored_trajectory(np.asarray(ex["trajectory_times"]), np.asarray(ex["trajectory"]))
-    if "coefficients" in ex and "frames" in ex:
-        from corrlib.methods.divergence_free import Deformation
+        return step_interpolator(np.asarray(ex["trajectory_times"]), np.asarray(ex["trajectory"]))
+    from corrlib.methods.divergence_free import Deformation
 
-        return Deformation.from_result(result).interpolator(source.vertices, t_max)
-    if result.map_xy is None:
-        raise InputError(f"the result of {result.method!r} has no point-to-point map to interpolate")
-    return lambda t: linear_positions(source.vertices, target.vertices, result.map_xy, t)
+    return Deformation.from_result(result).interpolator(source.vertices, t_max)
 
 
-def _stored_trajectory(times: np.ndarray, steps: np.ndarray):
-    """``positions(t)``: linear between the stored RK2 steps (exact at the step times)."""
+def step_interpolator(times: np.ndarray, steps: np.ndarray):
+    """``positions(t)`` from positions at increasing ``times`` (s,) and ``steps`` (s, n, 3): linear in
+    between, exact at the step times, clamped to the stored range."""
     def positions(t: float) -> np.ndarray:
         t = float(np.clip(t, times[0], times[-1]))
         i = int(np.clip(np.searchsorted(times, t, side="right") - 1, 0, len(times) - 2))
@@ -66,14 +82,13 @@ def _stored_trajectory(times: np.ndarray, steps: np.ndarray):
 
 def frame_positions(result, source, target, times) -> list[np.ndarray]:
     """Exact positions at ``times`` (the flow integrated to each time, or linear interpolation)."""
-    if "coefficients" in result.extras and "frames" in result.extras:
+    if has_deformation(result):
         from corrlib.methods.divergence_free import Deformation
 
         deformation = Deformation.from_result(result)
         return [deformation.positions(source.vertices, float(t)) for t in times]
-    if result.map_xy is None:
-        raise InputError(f"the result of {result.method!r} has no point-to-point map to interpolate")
-    return [linear_positions(source.vertices, target.vertices, result.map_xy, float(t)) for t in times]
+    positions = _linear(result, source, target)
+    return [positions(float(t)) for t in times]
 
 
 def frame_volumes(frames, faces, closed: bool) -> list[float | None]:

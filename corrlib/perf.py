@@ -8,7 +8,6 @@ where relevant, peak resident memory growth.
 from __future__ import annotations
 
 import os
-import resource as _resource
 import tempfile
 import time
 from collections.abc import Callable
@@ -17,6 +16,7 @@ from pathlib import Path
 import numpy as np
 
 from corrlib.errors import ParameterError
+from corrlib.progress import peak_rss_mb
 
 
 def _best_time(fn: Callable[[], object], repeat: int) -> tuple[float, object]:
@@ -26,10 +26,6 @@ def _best_time(fn: Callable[[], object], repeat: int) -> tuple[float, object]:
         out = fn()
         best = min(best, time.perf_counter() - start)
     return best, out
-
-
-def _peak_rss_mb() -> float:
-    return _resource.getrusage(_resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
 def _line(name: str, seconds: float, extra: str = "") -> None:
@@ -101,7 +97,7 @@ def suite_foundation(repeat: int, quick: bool = False) -> None:
           f"mean error {rep_rand.summary()['mean']:.3f}")
     t_heat = _best_time(lambda: geodesic_errors(result.map_xy, cat1, gt0, gt1, method="heat"), 1)[0]
     _line(f"geodesic error, {gt0.size}-point map (heat method)", t_heat)
-    print(f"peak resident memory: {_peak_rss_mb():.0f} MB")
+    print(f"peak resident memory: {peak_rss_mb():.0f} MB")
 
 
 def suite_contour3d(repeat: int, quick: bool = False) -> None:
@@ -182,7 +178,7 @@ def suite_kernel(repeat: int, quick: bool = False) -> None:
         old = os.environ.get("CORRLIB_CACHE_DIR")
         os.environ["CORRLIB_CACHE_DIR"] = tmp  # cold: eigenpairs are part of the pipeline
         try:
-            rss_before = _peak_rss_mb()
+            rss_before = peak_rss_mb()
             start = time.perf_counter()
             result = solve("kernel-matching", cat0, cat1)
             total = time.perf_counter() - start
@@ -193,7 +189,7 @@ def suite_kernel(repeat: int, quick: bool = False) -> None:
                 os.environ["CORRLIB_CACHE_DIR"] = old
     split = ", ".join(f"{k} {v:.2f} s" for k, v in result.timings.items() if k != "total")
     _line("kernel matching, complete pipeline (cold cache)  [target <= 30 s]", total, split)
-    print(f"peak resident memory: {_peak_rss_mb():.0f} MB (before the run: {rss_before:.0f} MB)  [target <= 4 GB]")
+    print(f"peak resident memory: {peak_rss_mb():.0f} MB (before the run: {rss_before:.0f} MB)  [target <= 4 GB]")
     gt = {n: load_vts(resource(f"data/tosca/{n}.vts")) for n in ("cat0", "cat1", "cat1.sym")}
     report = geodesic_errors(result.map_xy, cat1, gt["cat0"], gt["cat1"], gt_target_sym=gt["cat1.sym"]).summary()
     print("accuracy: " + ", ".join(f"{k} {v:.3f}" for k, v in report.items()))
@@ -251,14 +247,14 @@ def suite_divfree(repeat: int, quick: bool = False) -> None:
     _line(f"one EM iteration, N = {len(sx)}, K = {basis.n_fields}, T = {params.n_steps}  [target <= 1.5 s]", t_iter,
           ", ".join(f"{k} {v:.2f} s" for k, v in best.items()))
     if not quick:
-        rss_before = _peak_rss_mb()
+        rss_before = peak_rss_mb()
         start_time = time.perf_counter()
         result = solve("divergence-free", cat0, cat1)
         total = time.perf_counter() - start_time
         split = ", ".join(f"{k} {v:.2f} s" for k, v in result.timings.items() if k != "total")
         _line(f"divergence-free match cat0 -> cat1, {result.extras['iterations']} iterations  [target <= 120 s]",
               total, split)
-        print(f"peak resident memory: {_peak_rss_mb():.0f} MB (before the run: {rss_before:.0f} MB)")
+        print(f"peak resident memory: {peak_rss_mb():.0f} MB (before the run: {rss_before:.0f} MB)")
         gt = {n: load_vts(resource(f"data/tosca/{n}.vts")) for n in ("cat0", "cat1", "cat1.sym")}
         report = geodesic_errors(result.map_xy, cat1, gt["cat0"], gt["cat1"],
                                  gt_target_sym=gt["cat1.sym"]).summary()
@@ -313,10 +309,10 @@ def suite_product(repeat: int, quick: bool = False) -> None:
     print(f"meshes: two ellipsoids, {x.n_vertices} and {y.n_vertices} vertices")
     for fraction in ((0.01,) if quick else (0.005, 0.01, 0.02)):
         pairs = pm.largest_piece(mx, my, pm.band_around_map(map_xy, y.vertices, fraction))
-        rss = _peak_rss_mb()
+        rss = peak_rss_mb()
         t, _ = _best_time(lambda: pm.localized_harmonics(mx, my, pairs, 200), 1)
         _line(f"meshes ~1k x 1k: 200 harmonics, {fraction:.1%} band ({len(pairs)} vertices)", t,
-              f"peak memory {_peak_rss_mb():.0f} MB (before {rss:.0f} MB)")
+              f"peak memory {peak_rss_mb():.0f} MB (before {rss:.0f} MB)")
     print("the 10 % band (about 100k product vertices; target <= 60 s) is out of reach: the sparse LU of the "
           "4-dimensional band fills in (5 % band: 15-30 s for the factorisation alone, 10 %: about 170 s)")
 

@@ -8,6 +8,7 @@ thread. Compiled loops poll a :class:`CancelToken`.
 
 from __future__ import annotations
 
+import resource
 import threading
 import time
 from collections.abc import Callable, Generator
@@ -87,6 +88,11 @@ def run(generator: Generator[Progress, None, T], callback: Callable[[Progress], 
             return stop.value
         if callback is not None:
             callback(report)
+
+
+def peak_rss_mb() -> float:
+    """Peak resident memory of this process so far, in MB (Linux ``ru_maxrss`` is in kB)."""
+    return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0
 
 
 class Stopwatch:

@@ -18,7 +18,6 @@ from PySide6.QtWidgets import (
 )
 
 from app.views.scene import LazyPlotter, coordinate_colors, polydata
-from corrlib.morph import linear_positions
 
 STEPS = 1000
 
@@ -69,14 +68,9 @@ class SequenceView(QWidget):
     def plotter(self):
         return self._plotter.get()
 
-    def set_sequence(self, source, target, map_xy, positions: Callable[[float], np.ndarray] | None = None,
-                     description: str = "") -> None:
-        """Show ``source`` deforming; ``positions(t)`` defaults to linear interpolation through the map."""
+    def set_sequence(self, source, positions: Callable[[float], np.ndarray], description: str) -> None:
+        """Show ``source`` deforming along ``positions(t)`` (see :func:`corrlib.morph.sequence_positions`)."""
         self.source = source
-        if positions is None:
-            positions = lambda t: linear_positions(source.vertices, target.vertices, map_xy, t)  # noqa: E731
-            description = description or ("linear vertex interpolation through the map (fallback: not a "
-                                          "deformation model; folds where the map does)")
         self.positions = positions
         self.kind.setText(description)
         self.plotter.clear_actors()

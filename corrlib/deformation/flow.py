@@ -35,12 +35,15 @@ from corrlib.errors import InputError, ParameterError
 
 
 
-def _check_points(points) -> np.ndarray:
+def check_points(points, name: str = "points", min_count: int = 0) -> np.ndarray:
+    """(n, 3) float64 points, or :class:`InputError` naming the problem (shape, count, NaN/inf)."""
     p = np.asarray(points, dtype=np.float64)
     if p.ndim != 2 or p.shape[1] != 3:
-        raise InputError(f"points must have shape (n, 3), got {p.shape}")
+        raise InputError(f"{name} must have shape (n, 3), got {p.shape}")
+    if len(p) < min_count:
+        raise InputError(f"{name}: {len(p)} points; at least {min_count} are needed")
     if not np.all(np.isfinite(p)):
-        raise InputError("points contain NaN or inf")
+        raise InputError(f"{name} contain NaN or inf")
     return p
 
 
@@ -149,7 +152,7 @@ class _VelocityTensors:
 
 def velocity(basis: DivFreeBasis, points, coeffs) -> np.ndarray:
     """(n, 3) float: the velocity ``Σ_k a_k v_k`` at ``points`` (fast separable evaluation)."""
-    p = _check_points(points)
+    p = check_points(points)
     return _VelocityTensors(basis, coeffs)(p)
 
 
@@ -175,7 +178,7 @@ def trajectory(basis: DivFreeBasis, points, coeffs, t: float = 1.0, n_steps: int
     (n, 3) or (s + 1, n, 3) float
         With ``s = ceil(|t| T)`` steps.
     """
-    p = _check_points(points)
+    p = check_points(points)
     steps, h = step_count(t, n_steps)
     vel = _VelocityTensors(basis, coeffs)
     out = np.empty((steps + 1,) + p.shape) if keep else None
@@ -199,8 +202,8 @@ def flow(basis: DivFreeBasis, points, coeffs, t: float = 1.0, n_steps: int = 20)
 
 
 @numba.njit(cache=True, fastmath=True, nogil=True)
-def _eval_point(x, a, freqs, s, c, ss, pairs, vals, vel, jac, want_vals):
-    """Velocity (3,), its Jacobian (3, 3) and, if ``want_vals``, every field's value (3, 3Q) at ``x``.
+def _eval_point(x, a, freqs, s, c, ss, pairs, vals, vel, jac):
+    """Velocity (3,), its Jacobian (3, 3) and every field's value (3, 3Q) at ``x``.
 
     ``pairs`` (6, M, M) is scratch for the products of the first two axes' tables, so every
     gradient or Hessian entry of a potential costs one multiplication.
@@ -266,17 +269,16 @@ def _eval_point(x, a, freqs, s, c, ss, pairs, vals, vel, jac, want_vals):
         j20 += a1 * h11 - a0 * h12
         j21 += a1 * h12 - a0 * h22
         j22 += a1 * h13 - a0 * h23
-        if want_vals:
-            k = 3 * q
-            vals[0, k] = 0.0
-            vals[1, k] = g3
-            vals[2, k] = -g2
-            vals[0, k + 1] = -g3
-            vals[1, k + 1] = 0.0
-            vals[2, k + 1] = g1
-            vals[0, k + 2] = g2
-            vals[1, k + 2] = -g1
-            vals[2, k + 2] = 0.0
+        k = 3 * q
+        vals[0, k] = 0.0
+        vals[1, k] = g3
+        vals[2, k] = -g2
+        vals[0, k + 1] = -g3
+        vals[1, k + 1] = 0.0
+        vals[2, k + 1] = g1
+        vals[0, k + 2] = g2
+        vals[1, k + 2] = -g1
+        vals[2, k + 2] = 0.0
     vel[0] = v0
     vel[1] = v1
     vel[2] = v2
@@ -320,11 +322,11 @@ def _flow_jacobian_kernel(points, a, freqs, n_freq, steps, h, out_x, out_dx):
         x = points[n].copy()
         mid = np.empty(3)
         for _ in range(steps):
-            _eval_point(x, a, freqs, s, c, ss, pairs, vals, vel, jac, True)
+            _eval_point(x, a, freqs, s, c, ss, pairs, vals, vel, jac)
             for i in range(3):
                 mid[i] = x[i] + 0.5 * h * vel[i]
             _sensitivity_step(dx, dx, vals, jac, 0.5 * h, dm)
-            _eval_point(mid, a, freqs, s, c, ss, pairs, vals, vel, jac, True)
+            _eval_point(mid, a, freqs, s, c, ss, pairs, vals, vel, jac)
             for i in range(3):
                 x[i] += h * vel[i]
             _sensitivity_step(dx, dm, vals, jac, h, dx)
@@ -355,7 +357,7 @@ def flow_with_jacobian(basis: DivFreeBasis, points, coeffs, n_steps: int = 20,
     dx_da : (n, 3, K)
         ``∂x_n / ∂a_k``.
     """
-    p = _check_points(points)
+    p = check_points(points)
     steps, h = step_count(1.0, n_steps)
     a = basis.padded(coeffs)
     out_x = np.empty_like(p)

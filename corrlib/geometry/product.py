@@ -186,9 +186,8 @@ def product_eigenbasis(fx: Factor, fy: Factor, k: int) -> tuple[np.ndarray, np.n
 
 def product_coefficients(values, fx: Factor, fy: Factor) -> np.ndarray:
     """(k_X, k_Y) coefficients ``Φᵀ A_X F A_Y Ψ`` of a product function ``F`` (n_X, n_Y), dense or sparse."""
-    left = fx.evecs.T @ (fx.mass @ values)
-    return np.asarray((fy.mass @ np.asarray(left).T).T @ fy.evecs) if sp.issparse(values) else \
-        (left @ (fy.mass @ fy.evecs))
+    left = np.asarray(fx.evecs.T @ (fx.mass @ values))  # (k_X, n_Y) dense even for a sparse F
+    return left @ (fy.mass @ fy.evecs)
 
 
 def map_density(map_xy, fy: Factor):

@@ -57,8 +57,8 @@ import scipy.linalg
 from scipy.spatial.distance import cdist
 
 from corrlib.deformation.basis import DivFreeBasis
-from corrlib.deformation.flow import flow_with_jacobian, trajectory
-from corrlib.errors import InputError, ParameterError
+from corrlib.deformation.flow import check_points, flow_with_jacobian, trajectory
+from corrlib.errors import InputError
 from corrlib.geometry.sampling import farthest_point_sampling
 from corrlib.methods.base import MatchResult, param
 from corrlib.methods.registry import MethodSpec, register
@@ -397,7 +397,7 @@ def fit(points_x, points_y, params: DivergenceFreeParams | None = None, token=No
     """
     params = params or DivergenceFreeParams()
     watch = watch or Stopwatch()
-    px, py = _as_points(points_x, "source"), _as_points(points_y, "target")
+    px, py = check_points(points_x, "the source points", 4), check_points(points_y, "the target points", 4)
     if (feats_x is None) != (feats_y is None):
         raise InputError("features must be given for both shapes or for neither")
     if feats_x is not None:
@@ -433,17 +433,6 @@ def fit(points_x, points_y, params: DivergenceFreeParams | None = None, token=No
             break
     # the dense map uses the Eq. 10.17 metric at the final E-step variance (see the annealing above)
     return FitResult(basis, coeffs, frames, w * sigma2_e / params.sigma2, trace, it, converged)
-
-
-def _as_points(points, name: str) -> np.ndarray:
-    p = np.asarray(points, dtype=np.float64)
-    if p.ndim != 2 or p.shape[1] != 3:
-        raise InputError(f"the {name} points must have shape (n, 3), got {p.shape}")
-    if len(p) < 4:
-        raise InputError(f"the {name} has {len(p)} points; at least 4 are needed")
-    if not np.all(np.isfinite(p)):
-        raise InputError(f"the {name} points contain NaN or inf")
-    return p
 
 
 # ----------------------------------------------------------------------------- deformation
@@ -499,42 +488,45 @@ class Deformation:
         Exact at the step times; in between it is the piecewise-linear path
         of the integrator (the step size is the flow's own resolution).
         """
-        from corrlib.morph import _stored_trajectory
+        from corrlib.morph import step_interpolator
 
-        return _stored_trajectory(*self.trajectory(points, t_max))
+        return step_interpolator(*self.trajectory(points, t_max))
 
 
 # ----------------------------------------------------------------------------- dense maps
 
 
-def dense_maps(deformation: Deformation, points_x, points_y, w: float, feats_x=None, feats_y=None):
+def dense_maps(frames: Frames, morphed, points_y, w: float, feats_x=None, feats_y=None):
     """Nearest neighbours in the Eq. 10.17 metric between the flowed source and the target.
+
+    Parameters
+    ----------
+    frames : Frames
+    morphed : (n_x, 3) float
+        The source flowed to t = 1 (target coordinates).
+    points_y : (n_y, 3) float
+    w : float
+        Feature factor of the metric.
+    feats_x, feats_y : (n_x, f), (n_y, f) float, optional
 
     Returns
     -------
     map_xy : (n_x,) int
     map_yx : (n_y,) int
-    morphed : (n_x, 3) float
-        The source at t = 1 (target coordinates).
     """
     from corrlib.methods.baselines import nearest_rows
 
-    morphed = deformation.positions(points_x, 1.0)
-    frames = deformation.frames
     ux = frames.target_to_cube(morphed)
     uy = frames.target_to_cube(points_y)
     if feats_x is not None and w > 0:
         ux = np.hstack([ux, math.sqrt(w) * feats_x])
         uy = np.hstack([uy, math.sqrt(w) * feats_y])
-    return nearest_rows(ux, uy), nearest_rows(uy, ux), morphed
+    return nearest_rows(ux, uy), nearest_rows(uy, ux)
 
 
 def divergence_free(source, target, params: DivergenceFreeParams, token=None):
     """Registered solver: fit, dense maps, deformation record (generator returning a MatchResult)."""
     watch = Stopwatch()
-    for mesh, name in ((source, "source"), (target, "target")):
-        if mesh.n_vertices < 4:
-            raise InputError(f"the {name} has {mesh.n_vertices} vertices; at least 4 are needed")
     feats_x = feats_y = None
     if params.features == "shot":
         yield Progress("features", 0.0, "SHOT on both shapes")
@@ -547,11 +539,11 @@ def divergence_free(source, target, params: DivergenceFreeParams, token=None):
                             watch=watch)
     deformation = Deformation(fitted.basis, fitted.coeffs, fitted.frames, params.n_steps)
     yield Progress("dense map", 0.95, f"flowing {source.n_vertices} vertices")
-    with watch("dense map"):
-        map_xy, map_yx, morphed = dense_maps(deformation, source.vertices, target.vertices, fitted.feature_factor,
-                                             feats_x, feats_y)
-    with watch("trajectory"):
+    with watch("trajectory"):  # every RK2 step up to SEQUENCE_T_MAX; step T is t = 1 (same step size)
         traj_times, traj = deformation.trajectory(source.vertices, SEQUENCE_T_MAX)
+    morphed = traj[params.n_steps]
+    with watch("dense map"):
+        map_xy, map_yx = dense_maps(fitted.frames, morphed, target.vertices, fitted.feature_factor, feats_x, feats_y)
     extras = {
         "coefficients": fitted.coeffs,
         "trajectory": traj.astype(np.float32),
@@ -570,15 +562,9 @@ def divergence_free(source, target, params: DivergenceFreeParams, token=None):
     return MatchResult("divergence-free", map_xy, map_yx, fitted.energy_trace[-1], watch.times, extras=extras)
 
 
-def solve_divergence_free(source, target, params: DivergenceFreeParams, token=None):
-    if params.n_fields < 1 or params.n_steps < 1 or params.sigma2 <= 0:
-        raise ParameterError("n_fields and n_steps must be ≥ 1 and sigma2 > 0")
-    return (yield from divergence_free(source, target, params, token))
-
-
 register(MethodSpec(
     name="divergence-free", label="Divergence-free deformation", inputs=("mesh", "mesh"),
-    params=DivergenceFreeParams, solve=solve_divergence_free, rank=15,
+    params=DivergenceFreeParams, solve=divergence_free, rank=15,
     description="Volume-preserving deformation of the source into the target by the flow of a divergence-free "
                 "field (closed-form curl basis on the unit cube), fitted jointly with soft correspondences by EM; "
                 "the flow gives interpolation and extrapolation sequences at any resolution.",

@@ -120,7 +120,7 @@ def refine(fx: pm.Factor, fy: pm.Factor, ix, iy, target_points: np.ndarray, para
     with watch("global"):
         coeffs = pm.diffuse(_match_density_coeffs(ix, iy, fx, fy), fx, fy, params.t_global)
         map_xy, map_yx = _extract(coeffs, fx, fy, params.extraction, token)
-    history = [map_xy.copy()]
+    global_map_xy = map_xy.copy()
     band_sizes = []
     match_keys = ix * fy.n + iy
     t_local = params.t_local
@@ -160,10 +160,9 @@ def refine(fx: pm.Factor, fy: pm.Factor, ix, iy, target_points: np.ndarray, para
             winners = np.flatnonzero(density >= col_best[pairs[:, 1]])
             map_yx[pairs[winners, 1]] = pairs[winners, 0]
         band_sizes.append(len(pairs))
-        history.append(map_xy.copy())
         t_local *= 0.5
     extras = {"band_sizes": np.asarray(band_sizes), "n_matches": int(ix.size),
-              "global_map_xy": history[0]}
+              "global_map_xy": global_map_xy}
     if bands:  # the last band: its product vertices, the density on it and its first harmonics
         extras.update(band_pairs=pairs, band_density=density, band_harmonics=basis[:, :6])
     else:

@@ -135,5 +135,12 @@ def geodesic_errors(map_xy, target, gt_source, gt_target, *, gt_target_sym=None,
         gt_target_sym = _check_indices("gt_target_sym", gt_target_sym, n_y)
         if gt_target_sym.shape != gt_target.shape:
             raise InputError("mirrored ground truth has a different number of rows")
-        errors_sym = np.minimum(errors, solver.pair_distances(predicted, gt_target_sym, method=method) / norm)
+        # The straight line is a lower bound of the geodesic: a mirrored partner farther away in space
+        # than the direct error cannot lower it, so only the others are measured.
+        chord = np.linalg.norm(target.vertices[predicted] - target.vertices[gt_target_sym], axis=1) / norm
+        closer = np.flatnonzero(chord < errors)
+        errors_sym = errors.copy()
+        if closer.size:
+            mirrored = solver.pair_distances(predicted[closer], gt_target_sym[closer], method=method) / norm
+            errors_sym[closer] = np.minimum(errors[closer], mirrored)
     return ErrorReport(errors=errors, errors_sym=errors_sym, normalization=norm)

@@ -102,8 +102,14 @@ def _read_off(path: Path) -> tuple[np.ndarray, np.ndarray]:
         raise FileFormatError(f"{path}: a vertex line does not hold 3 numbers") from None
     if coords.shape != (n_v, 3) and n_v:
         raise FileFormatError(f"{path}: a vertex line does not hold 3 numbers")
+    face_lines = lines[first + n_v:first + n_v + n_f]
+    if all(len(ln) == 4 and ln[0] == "3" for ln in face_lines):  # the common all-triangle file
+        try:
+            return coords.reshape(n_v, 3), np.array([ln[1:] for ln in face_lines], dtype=np.int64).reshape(-1, 3)
+        except ValueError:
+            pass  # the loop below names the bad face
     faces = []
-    for index, ln in enumerate(lines[first + n_v:first + n_v + n_f]):
+    for index, ln in enumerate(face_lines):
         try:
             k = int(ln[0])
             poly = [int(v) for v in ln[1:1 + k]]

@@ -73,3 +73,26 @@ def test_mesh_descriptors_dispatch(wolf_pair):
     assert mesh_descriptors(wolf, "shot").shape == (wolf.n_vertices, 352)
     with pytest.raises(ParameterError, match="unknown descriptor"):
         mesh_descriptors(wolf, "sift")
+
+
+def test_descriptors_are_cached_by_mesh_content(wolf_pair, tmp_path, monkeypatch):
+    import corrlib.descriptors.shot as shot_module
+    from corrlib.shapes import TriMesh
+
+    monkeypatch.setenv("CORRLIB_CACHE_DIR", str(tmp_path))
+    wolf = wolf_pair[0]
+    first_shot, first_wks = mesh_descriptors(wolf, "shot"), mesh_descriptors(wolf, "wks")
+    assert len(list((tmp_path / "descriptors").glob("*.npz"))) == 2
+
+    def not_again(*args, **kwargs):
+        raise AssertionError("SHOT recomputed although cached")
+
+    monkeypatch.setattr(shot_module, "shot", not_again)
+    copy = TriMesh(wolf.vertices.copy(), wolf.faces.copy())  # same content, another object
+    assert np.array_equal(mesh_descriptors(copy, "shot"), first_shot)
+    assert np.array_equal(mesh_descriptors(copy, "wks"), first_wks)
+    # different content or parameters are different entries
+    moved = TriMesh(wolf.vertices * 1.01, wolf.faces)
+    with pytest.raises(AssertionError, match="recomputed"):
+        mesh_descriptors(moved, "shot")
+    assert mesh_descriptors(copy, "wks", n_scales=20).shape == (wolf.n_vertices, 20)

@@ -92,3 +92,27 @@ def test_voronoi_cells_match_brute_force(wolf_pair):
     assert np.array_equal(labels[seeds], np.arange(30))
     with pytest.raises(InputError, match="distinct"):
         voronoi_cells(wolf, [1, 1])
+
+
+def test_astar_paths_equal_dijkstra_and_exact_equals_potpourri(wolf_pair):
+    import potpourri3d as pp3d
+
+    from corrlib.geometry.geodesics import _astar_paths
+
+    mesh = wolf_pair[1]
+    adj = mesh.adjacency
+    rng = np.random.default_rng(4)
+    a, b = rng.integers(0, mesh.n_vertices, 60), rng.integers(0, mesh.n_vertices, 60)
+    lengths, offsets, flat = _astar_paths(mesh.vertices.astype(np.float64), adj.indptr.astype(np.int64),
+                                          adj.indices.astype(np.int64), adj.data, a, b)
+    # independent implementation: scipy's Dijkstra
+    assert np.allclose(lengths, dijkstra(adj, directed=False, indices=a)[np.arange(60), b], rtol=1e-12)
+    for i in range(60):  # each path is a chain of mesh edges from a to b whose edge lengths sum to its length
+        path = flat[offsets[i]:offsets[i + 1]]
+        assert path[0] == a[i] and path[-1] == b[i]
+        steps = np.asarray(adj[path[:-1], path[1:]]).ravel()
+        assert np.all(steps > 0) and steps.sum() == pytest.approx(lengths[i], rel=1e-12)
+    flip = pp3d.EdgeFlipGeodesicSolver(mesh.vertices, mesh.faces)
+    reference = np.array([0.0 if x == y else np.linalg.norm(np.diff(flip.find_geodesic_path(int(x), int(y)), axis=0),
+                                                             axis=1).sum() for x, y in zip(a, b)])
+    assert np.allclose(GeodesicSolver(mesh).pair_distances(a, b, "exact"), reference, rtol=1e-9)

@@ -205,20 +205,57 @@ def test_eigensolver_retries_with_regularised_shift(monkeypatch):
     calls = []
     original = spectrum._ShiftInvert.run
 
-    def flaky(self, k, sigma, ncv=None):
+    def flaky(self, k, sigma, ncv=None, tol=0.0):
         calls.append(sigma)
         if len(calls) == 1:
             raise spla.ArpackNoConvergence("no convergence", np.zeros(0), np.zeros((0, 0)))
-        return original(self, k, sigma, ncv)
+        return original(self, k, sigma, ncv, tol)
 
     monkeypatch.setattr(spectrum._ShiftInvert, "run", flaky)
     evals, _ = eigenpairs(stiff, mass, 10, method="eigsh")
     assert len(calls) == 2 and calls[1] < calls[0] < 0
     assert evals[0] == pytest.approx(0, abs=1e-9) and evals[1] > 0
 
-    def broken(self, k, sigma, ncv=None):
+    def broken(self, k, sigma, ncv=None, tol=0.0):
         raise RuntimeError("factor is exactly singular")
 
     monkeypatch.setattr(spectrum._ShiftInvert, "run", broken)
     with pytest.raises(spectrum.SolverError, match="eigensolver failed"):
         eigenpairs(stiff, mass, 10, method="eigsh")
+
+
+def test_cholesky_solver_equals_superlu_and_rejects_indefinite_matrices(cat_pair):
+    import scipy.sparse.linalg as spla
+
+    from corrlib.errors import SolverError
+    from corrlib.geometry.cholesky import CholeskySolver, nested_dissection
+
+    stiff, mass = mesh_laplacian(cat_pair[0])
+    spd = (stiff + 1e-3 * mass).tocsc()
+    perm = nested_dissection(spd)
+    assert np.array_equal(np.sort(perm), np.arange(spd.shape[0]))  # a permutation
+    rhs = np.random.default_rng(0).standard_normal((spd.shape[0], 3))
+    x = CholeskySolver(spd).solve(rhs)
+    assert np.allclose(x, spla.splu(spd).solve(rhs), rtol=1e-8, atol=1e-10 * np.abs(x).max())
+    assert CholeskySolver(spd).solve(rhs[:, 0]).shape == (spd.shape[0],)
+    with pytest.raises(SolverError, match="not positive definite"):
+        CholeskySolver((stiff - 1e-3 * mass).tocsc())
+
+
+@pytest.mark.parametrize("mass_kind", ["lumped", "consistent"])
+def test_cholesky_shift_invert_equals_superlu_shift_invert(cat_pair, monkeypatch, mass_kind):
+    import corrlib.geometry.spectrum as spectrum
+
+    stiff, mass = mesh_laplacian(cat_pair[0], mass=mass_kind)
+    w_lu, v_lu = eigenpairs(stiff, mass, 60, method="eigsh")
+    monkeypatch.setattr(spectrum, "CHOLESKY_MIN_ROWS", 1000)  # the 5k cat takes the Cholesky path
+    factored = []
+    original = spectrum._ShiftInvert._opinv
+    monkeypatch.setattr(spectrum._ShiftInvert, "_opinv",
+                        lambda self, sigma: factored.append(original(self, sigma)) or factored[-1])
+    w_ch, v_ch = eigenpairs(stiff, mass, 60, method="eigsh")
+    assert factored and factored[0] is not None
+    assert np.allclose(w_ch, w_lu, rtol=1e-9, atol=1e-12)
+    overlap = np.abs(np.einsum("ij,ij->j", v_lu, mass @ v_ch))
+    simple = np.minimum(np.diff(w_lu, prepend=-1), np.diff(w_lu, append=1e9)) > 1e-6 * w_lu[-1]
+    assert np.all(overlap[simple] > 1 - 1e-6)

@@ -8,12 +8,18 @@ Three methods, from fast/approximate to slow/exact:
 * ``"graph"``: Dijkstra on the edge graph (scipy); an upper bound of the
   geodesic distance (metrication error up to ~10 % on irregular meshes).
 * ``"exact"``: potpourri3d's edge-flip geodesic path (Sharp & Crane 2020),
-  which shortens the Dijkstra path to a locally shortest geodesic; exact in
-  practice. Only for point pairs (:meth:`GeodesicSolver.pair_distances`).
+  which shortens the shortest edge path to a locally shortest geodesic; exact
+  in practice. Only for point pairs (:meth:`GeodesicSolver.pair_distances`).
+  The edge paths come from a batched A* search (numba, Euclidean heuristic),
+  which visits a corridor instead of the Dijkstra ball potpourri3d searches;
+  the flips then start from the same path, so the distances are identical.
 """
 
 from __future__ import annotations
 
+import heapq
+
+import numba
 import numpy as np
 from scipy.sparse.csgraph import dijkstra
 
@@ -29,6 +35,72 @@ def _check_sources(sources, n: int, name: str) -> np.ndarray:
     if idx.min() < 0 or idx.max() >= n:
         raise InputError(f"{name}: source vertex index out of range [0, {n - 1}]")
     return idx.astype(np.int64)
+
+
+@numba.njit(cache=True, nogil=True)
+def _astar_paths(vertices, indptr, indices, weights, starts, ends):
+    """Shortest edge paths for vertex pairs by A* with the Euclidean heuristic.
+
+    The straight-line distance is a consistent lower bound of every edge path,
+    so A* returns a shortest path (the same length as Dijkstra's).
+
+    Returns
+    -------
+    lengths : (p,) float
+        Edge-path lengths.
+    offsets : (p + 1,) int
+        Path ``i`` is ``flat[offsets[i]:offsets[i + 1]]``, from ``starts[i]`` to ``ends[i]``.
+    flat : (sum of path sizes,) int
+    """
+    n = vertices.shape[0]
+    n_pairs = starts.shape[0]
+    dist = np.full(n, np.inf)
+    pred = np.full(n, -1, dtype=np.int64)
+    stamp = np.full(n, -1, dtype=np.int64)  # query that last touched the vertex (no per-query reset)
+    done = np.full(n, -1, dtype=np.int64)
+    lengths = np.zeros(n_pairs)
+    offsets = np.zeros(n_pairs + 1, dtype=np.int64)
+    chunks = []
+    for q in range(n_pairs):
+        s, t = starts[q], ends[q]
+        target = vertices[t]
+        stamp[s] = q
+        dist[s] = 0.0
+        pred[s] = -1
+        heap = [(np.sqrt(np.sum((vertices[s] - target) ** 2)), s)]
+        while heap:
+            _, v = heapq.heappop(heap)
+            if done[v] == q:
+                continue
+            done[v] = q
+            if v == t:
+                break
+            dv = dist[v]
+            for k in range(indptr[v], indptr[v + 1]):
+                u = indices[k]
+                nd = dv + weights[k]
+                if stamp[u] != q or nd < dist[u]:
+                    stamp[u] = q
+                    dist[u] = nd
+                    pred[u] = v
+                    heapq.heappush(heap, (nd + np.sqrt(np.sum((vertices[u] - target) ** 2)), u))
+        lengths[q] = dist[t]
+        count = 1
+        v = t
+        while v != s:
+            v = pred[v]
+            count += 1
+        path = np.empty(count, dtype=np.int64)
+        v = t
+        for i in range(count - 1, -1, -1):
+            path[i] = v
+            v = pred[v]
+        chunks.append(path)
+        offsets[q + 1] = offsets[q] + count
+    flat = np.empty(offsets[n_pairs], dtype=np.int64)
+    for q in range(n_pairs):
+        flat[offsets[q]:offsets[q + 1]] = chunks[q]
+    return lengths, offsets, flat
 
 
 class GeodesicSolver:
@@ -100,7 +172,7 @@ class GeodesicSolver:
         a, b : (p,) int
         method : {"exact", "heat", "graph"}
             ``"exact"`` computes each pair's edge-flip geodesic (cost grows
-            with the distance: ~0.02 ms for nearby pairs, ~1 ms for pairs
+            with the distance: ~5 µs for nearby pairs, ~0.3 ms for pairs
             across a 5k-vertex mesh). The others compute one distance field
             per distinct value of ``b``.
 
@@ -120,10 +192,7 @@ class GeodesicSolver:
         dist = np.zeros(uniq.shape[0])
         todo = np.flatnonzero(uniq[:, 0] != uniq[:, 1])
         if method == "exact":
-            solver = self.flip
-            for t in todo:
-                path = solver.find_geodesic_path(int(uniq[t, 0]), int(uniq[t, 1]))
-                dist[t] = float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
+            dist[todo] = self._exact_pairs(uniq[todo, 0], uniq[todo, 1])
         elif method in {"heat", "graph"}:
             targets = uniq[todo]
             for src in np.unique(targets[:, 1]):
@@ -133,6 +202,28 @@ class GeodesicSolver:
         else:
             raise ParameterError(f"unknown geodesic method {method!r} (use 'exact', 'heat' or 'graph')")
         out[:] = dist[inverse]
+        return out
+
+    def _exact_pairs(self, a: np.ndarray, b: np.ndarray) -> np.ndarray:
+        """(p,) float: edge-flip geodesic lengths of distinct vertex pairs (``a[i] != b[i]``)."""
+        mesh = self.mesh
+        if a.size == 0:
+            return np.zeros(0)
+        adj = mesh.adjacency
+        vertices = np.ascontiguousarray(mesh.vertices, dtype=np.float64)
+        lengths, offsets, flat = _astar_paths(vertices, adj.indptr.astype(np.int64), adj.indices.astype(np.int64),
+                                              adj.data.astype(np.float64), a.astype(np.int64), b.astype(np.int64))
+        if not np.all(np.isfinite(lengths)):
+            raise InputError(f"{mesh.name}: some vertex pairs lie on different connected components "
+                             "(no geodesic between them)")
+        out = lengths.copy()
+        chord = np.linalg.norm(vertices[a] - vertices[b], axis=1)
+        # A path of one edge, or one whose length equals the straight line, is already a geodesic.
+        bent = np.flatnonzero((np.diff(offsets) > 2) & (lengths > chord * (1.0 + 1e-12)))
+        solver = self.flip
+        for i in bent:
+            path = solver.find_geodesic_path_poly(flat[offsets[i]:offsets[i + 1]].tolist())
+            out[i] = float(np.linalg.norm(np.diff(path, axis=0), axis=1).sum())
         return out
 
 

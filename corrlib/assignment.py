@@ -14,6 +14,11 @@ rows or columns, so every element of the smaller side is matched. With a
 ``slack`` value, every row and column may instead stay unmatched at that
 price (thesis Eq. 8.15–8.16): a pair (i, j) is matched only if
 ``score[i, j] >= slack``. Unmatched elements get -1.
+
+Capacities (``capacity[j]`` rows may share column j) turn the assignment
+into a transportation problem with unit supplies; it is solved exactly as
+an assignment on copies of the columns (a column with capacity c appears
+c times), so every backend and the slack padding apply unchanged.
 """
 
 from __future__ import annotations
@@ -97,7 +102,7 @@ def _pad(score: np.ndarray, slack: float | None) -> np.ndarray:
 
 def linear_assignment(score, *, slack: float | None = None, method: str = "auction",
                       eps_final: float | None = None, cancel: np.ndarray | None = None,
-                      prices: np.ndarray | None = None) -> np.ndarray:
+                      prices: np.ndarray | None = None, capacity: np.ndarray | None = None) -> np.ndarray:
     """Maximum-score assignment of rows to columns.
 
     Parameters
@@ -115,6 +120,8 @@ def linear_assignment(score, *, slack: float | None = None, method: str = "aucti
         Warm start of the auction: the column prices of a previous, similar
         problem of the same (padded) size; updated in place. The first ε is
         then 1e-3 of the score range instead of 1/4.
+    capacity : (n_cols,) int, optional
+        How many rows each column may take (≥ 1; default 1 each).
 
     Returns
     -------
@@ -128,6 +135,15 @@ def linear_assignment(score, *, slack: float | None = None, method: str = "aucti
         raise InputError("the score contains NaN or infinite values")
     if s.dtype not in (np.float32, np.float64):
         s = s.astype(np.float64)
+    copies = None
+    if capacity is not None:
+        cap = np.asarray(capacity)
+        if cap.shape != (s.shape[1],) or not np.issubdtype(cap.dtype, np.integer) or cap.min() < 1:
+            raise InputError(f"capacity must hold one integer >= 1 per column ({s.shape[1]}), "
+                             f"got {cap.dtype} {cap.shape}")
+        if np.any(cap > 1):
+            copies = np.repeat(np.arange(s.shape[1]), cap)  # column of every copy
+            s = s[:, copies]
     n_rows, n_cols = s.shape
     padded = np.ascontiguousarray(_pad(s, slack))
     if method == "scipy":
@@ -143,19 +159,27 @@ def linear_assignment(score, *, slack: float | None = None, method: str = "aucti
             eps_final = max(span, 1e-300) * 1e-9 / n
         if eps_final <= 0:
             raise ParameterError(f"eps_final must be positive, got {eps_final}")
-        flag = np.zeros(1, dtype=np.int8) if cancel is None else cancel
+        # a bid below the floating-point resolution of the scores does not move a price: two rows would
+        # outbid each other forever on tied columns (e.g. equal scores, or the copies of a column)
+        eps_final = max(float(eps_final), 16.0 * float(np.spacing(float(np.abs(padded).max()))))
         row_to_col = np.empty(n, dtype=np.int64)
-        if prices is not None and prices.shape == (n,):
-            eps_start = span * 1e-3
+        if span == 0.0:  # all scores equal: every assignment is optimal
+            row_to_col[:] = np.arange(n)
         else:
-            prices = np.zeros(n)
-            eps_start = span / 4.0
-        if not _auction(padded, eps_start, float(eps_final), 5.0, flag, prices, row_to_col):
-            raise Cancelled("the computation was cancelled")
+            flag = np.zeros(1, dtype=np.int8) if cancel is None else cancel
+            if prices is not None and prices.shape == (n,):
+                eps_start = span * 1e-3
+            else:
+                prices = np.zeros(n)
+                eps_start = span / 4.0
+            if not _auction(padded, eps_start, eps_final, 5.0, flag, prices, row_to_col):
+                raise Cancelled("the computation was cancelled")
     else:
         raise ParameterError(f"unknown assignment method {method!r} (use 'auction' or 'scipy')")
     out = row_to_col[:n_rows].copy()
     out[out >= n_cols] = -1
+    if copies is not None:
+        out = np.where(out >= 0, copies[np.clip(out, 0, None)], -1)
     return out
 
 

@@ -40,6 +40,7 @@ def suite_foundation(repeat: int, quick: bool = False) -> None:
     from corrlib.geometry.spectrum import eigenpairs, mesh_spectrum
     from corrlib.io import load_mesh, load_vts
     from corrlib.methods import solve
+    from corrlib.methods.kernel_matching import _score
     from corrlib.resources import resource
 
     cat0 = load_mesh(resource("data/tosca/cat0.off"))
@@ -169,6 +170,7 @@ def suite_kernel(repeat: int, quick: bool = False) -> None:
     from corrlib.geometry.spectrum import mesh_spectrum
     from corrlib.io import load_mesh, load_vts
     from corrlib.methods import solve
+    from corrlib.methods.kernel_matching import _score
     from corrlib.resources import resource
 
     cat0 = load_mesh(resource("data/tosca/cat0.off"))
@@ -200,9 +202,9 @@ def suite_kernel(repeat: int, quick: bool = False) -> None:
         i0 = farthest_point_sampling(cat0.vertices, n)
         i1 = farthest_point_sampling(cat1.vertices, n)
         c = s1.evecs[i1[rng.permutation(n)]].T @ s0.evecs[i0]
-        tau = 0.0259 * cat0.area
-        score = ((s1.evecs[i1] * np.exp(-tau * s1.evals)) @ c).astype(np.float32) @ \
-            (s0.evecs[i0] * np.exp(-tau * s0.evals)).astype(np.float32).T
+        tau = 0.0259  # the first (largest) relative time of the default schedule
+        score = _score(s1.evecs[i1], s0.evecs[i0], c, np.exp(-tau * cat1.area * s1.evals),
+                       np.exp(-tau * cat0.area * s0.evals))
         t_auction, sol = _best_time(lambda: linear_assignment(score), repeat)
         t_exact, ref = _best_time(lambda: linear_assignment(score, method="scipy"), 1)
         gap = (assignment_score(score, ref) - assignment_score(score, sol)) / float(np.ptp(score))

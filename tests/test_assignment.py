@@ -100,3 +100,55 @@ def test_assignment_errors():
     with pytest.raises(Cancelled):
         linear_assignment(np.random.default_rng(0).random((20, 20)), cancel=flag)
     assert list(linear_assignment(np.eye(3), method="scipy")) == [0, 1, 2]
+
+
+def brute_force_capacitated(score, capacity):
+    """Best map of rows to columns with at most capacity[j] rows on column j (every row matched)."""
+    n_rows, n_cols = score.shape
+    best = -np.inf
+    for cols in itertools.product(range(n_cols), repeat=n_rows):
+        if np.all(np.bincount(cols, minlength=n_cols) <= capacity):
+            best = max(best, float(score[np.arange(n_rows), cols].sum()))
+    return best
+
+
+def test_capacities_equal_brute_force_and_replicated_columns():
+    rng = np.random.default_rng(7)
+    for trial in range(60):
+        n_rows, n_cols = int(rng.integers(1, 6)), int(rng.integers(1, 5))
+        capacity = rng.integers(1, 4, n_cols)
+        if capacity.sum() < n_rows:
+            capacity[0] += n_rows - capacity.sum()
+        score = rng.normal(size=(n_rows, n_cols))
+        sol = linear_assignment(score, capacity=capacity)
+        assert np.all(sol >= 0) and np.all(np.bincount(sol, minlength=n_cols) <= capacity)
+        assert assignment_score(score, sol) == pytest.approx(brute_force_capacitated(score, capacity), abs=1e-8)
+    # larger instances: the optimum of scipy's exact solver on explicitly replicated columns
+    for trial in range(20):
+        n_rows, n_cols = int(rng.integers(50, 200)), int(rng.integers(30, 150))
+        capacity = rng.integers(1, 4, n_cols)
+        score = rng.normal(size=(n_rows, n_cols))
+        copies = np.repeat(np.arange(n_cols), capacity)
+        sol = linear_assignment(score, capacity=capacity)
+        assert np.all(np.bincount(sol[sol >= 0], minlength=n_cols) <= capacity)
+        assert (sol >= 0).sum() == min(n_rows, capacity.sum())
+        assert assignment_score(score, sol) == pytest.approx(exact_value(score[:, copies]), abs=1e-8)
+
+
+def test_capacity_errors():
+    with pytest.raises(InputError, match="capacity must hold one integer >= 1 per column"):
+        linear_assignment(np.zeros((3, 2)), capacity=np.array([1, 0]))
+    with pytest.raises(InputError, match="capacity"):
+        linear_assignment(np.zeros((3, 2)), capacity=np.array([1.5, 2.0]))
+
+
+def test_ties_below_the_resolution_of_the_scores_terminate():
+    # equal scores (zero range), and a tiny range on a huge offset: ε would fall below the floating-point
+    # resolution, a bid would not move a price, and tied rows would outbid each other forever
+    sol = linear_assignment(np.ones((4, 4)))
+    assert sorted(sol) == [0, 1, 2, 3]
+    assert sorted(linear_assignment(np.zeros((1, 1)), capacity=np.array([3]))) == [0]
+    rng = np.random.default_rng(3)
+    score = 1e12 + rng.integers(0, 3, size=(40, 40)).astype(float)
+    sol = linear_assignment(score)
+    assert assignment_score(score, sol) == pytest.approx(exact_value(score), rel=1e-15)

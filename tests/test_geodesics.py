@@ -116,3 +116,23 @@ def test_astar_paths_equal_dijkstra_and_exact_equals_potpourri(wolf_pair):
     reference = np.array([0.0 if x == y else np.linalg.norm(np.diff(flip.find_geodesic_path(int(x), int(y)), axis=0),
                                                              axis=1).sum() for x, y in zip(a, b)])
     assert np.allclose(GeodesicSolver(mesh).pair_distances(a, b, "exact"), reference, rtol=1e-9)
+
+
+def test_voronoi_bands_follow_their_definition(wolf_pair):
+    from corrlib.geometry.sampling import voronoi_bands
+
+    wolf = wolf_pair[0]
+    seeds = farthest_point_sampling(wolf.vertices, 9)
+    dist = dijkstra(wolf.adjacency, directed=False, indices=seeds)
+    margin = 0.05 * np.sqrt(wolf.area)
+    labels, members = voronoi_bands(wolf, seeds, margin)
+    np.testing.assert_array_equal(labels, voronoi_cells(wolf, seeds)[0])
+    for c in range(seeds.size):
+        expected = np.flatnonzero(dist[c] <= dist.min(axis=0) + margin)
+        np.testing.assert_array_equal(members[c], expected)
+        assert np.all(np.isin(np.flatnonzero(labels == c), members[c]))  # a band contains its Voronoi cell
+    assert sum(m.size for m in members) > wolf.n_vertices  # the cells overlap
+    _, plain = voronoi_bands(wolf, seeds, 0.0)
+    assert sum(m.size for m in plain) == wolf.n_vertices
+    with pytest.raises(InputError, match="margin"):
+        voronoi_bands(wolf, seeds, -1.0)

@@ -81,12 +81,44 @@ def test_cat_pair_with_symmetric_ground_truth(cat_pair):
     cat0, cat1, gt = cat_pair
     result = solve("kernel-matching", cat0, cat1)
     report = geodesic_errors(result.map_xy, cat1, gt["cat0"], gt["cat1"], gt_target_sym=gt["cat1.sym"]).summary()
-    # cat0/cat1 are remeshed independently and far from isometric (median relative geodesic distortion of
-    # the ground-truth pairs ~9 %, 90th percentile ~28 %). Measured with the defaults: mean 0.046 and 72 % of
-    # points within 0.05 (symmetric); the target of 80 % is NOT reached (see the closing note).
+    # cat0/cat1 are remeshed independently and far from isometric. Measured with the defaults: mean 0.038 and
+    # 77 % of points within 0.05 (symmetric); the target of 80 % is NOT reached. No bijection of the
+    # 3000 seeds can reach it either: the ground truth projected onto the best seed bijection has 85 %.
     assert report["mean_sym"] <= 0.05, report
-    assert report["within_0.05_sym"] >= 0.68, report
-    assert report["within_0.1_sym"] >= 0.85, report
+    assert report["within_0.05_sym"] >= 0.74, report
+    assert report["within_0.1_sym"] >= 0.93, report
+    # the orientation-aware initialisation matches left to left everywhere: without symmetry the mean error is
+    # 0.039 and 77 % lie within 0.05 (without it: 0.12 and 50 %, regions mirrored next to regions not mirrored)
+    assert report["mean"] <= 0.05, report
+    assert report["within_0.05"] >= 0.72, report
+
+
+def test_area_capacities_and_sample_masses(cat_pair):
+    from corrlib.geometry.laplacian import mass_matrix
+    from corrlib.methods.kernel_matching import _capacities, _sample_masses
+
+    cat1 = cat_pair[1]
+    areas = mass_matrix(cat1.vertices, cat1.faces).diagonal()
+    everything = np.random.default_rng(0).permutation(cat1.n_vertices)
+    np.testing.assert_array_equal(_sample_masses(cat1, areas, everything), areas[everything])
+    sample = everything[:700]
+    masses = _sample_masses(cat1, areas, sample)
+    assert masses.sum() == pytest.approx(cat1.area) and np.all(masses > 0)
+    caps = _capacities(1000, masses)
+    share = 1000 * masses / masses.sum()
+    assert np.all(caps >= share - 1e-9) and np.all(caps < share + 1) and np.all(caps >= 1)
+    assert caps.sum() >= 1000
+
+
+def test_bijective_cells_option(wolf_pair):
+    wolf0, wolf1 = wolf_pair
+    fast = dict(n_eigs=150, n_seeds=800, n_times=5, iters_per_time=2)
+    result = solve("kernel-matching", wolf0, wolf1, capacity="one", cell_overlap=0.0, **fast)
+    # a bijection within every cell; a source cell larger than its transferred target cell leaves a few rows to
+    # their best-scoring partner (measured: 97.5 % distinct targets)
+    assert np.unique(result.map_xy).size >= 0.95 * wolf0.n_vertices
+    ident = np.arange(wolf0.n_vertices)
+    assert geodesic_errors(result.map_xy, wolf1, ident, ident).summary()["within_0.05"] > 0.9
 
 
 def test_result_does_not_depend_on_vertex_order(wolf_pair):

@@ -99,3 +99,36 @@ def voronoi_cells(mesh, seeds) -> tuple[np.ndarray, np.ndarray]:
     position = np.full(mesh.n_vertices, -1, dtype=np.int64)
     position[seeds] = np.arange(seeds.size)
     return position[sources], dist
+
+
+def voronoi_bands(mesh, seeds, margin: float) -> tuple[np.ndarray, list[np.ndarray]]:
+    """Geodesic Voronoi cells widened across their borders (overlapping cells).
+
+    Cell ``c`` holds every vertex ``v`` with ``d(v, s_c) <= d(v, nearest seed) + margin``
+    (graph distances): its Voronoi cell plus a band of about ``margin / 2``
+    beyond each border, so neighbouring cells overlap.
+
+    Parameters
+    ----------
+    mesh : TriMesh
+    seeds : (s,) int
+        Distinct seed vertex indices.
+    margin : float
+        Overlap, in the mesh's length unit (0: the plain Voronoi cells).
+
+    Returns
+    -------
+    labels : (n,) int
+        Position in ``seeds`` of the nearest seed (as :func:`voronoi_cells`).
+    members : list of s (m_c,) int arrays
+        The vertices of every widened cell, ascending.
+    """
+    seeds = np.asarray(seeds, dtype=np.int64)
+    if not np.isfinite(margin) or margin < 0:
+        raise InputError(f"voronoi_bands: margin must be a non-negative length, got {margin}")
+    labels, nearest = voronoi_cells(mesh, seeds)
+    if margin == 0 or seeds.size == 1:
+        return labels, [np.flatnonzero(labels == c) for c in range(seeds.size)]
+    dist = dijkstra(mesh.adjacency, directed=False, indices=seeds)  # (s, n)
+    members = [np.flatnonzero(dist[c] <= nearest + margin) for c in range(seeds.size)]
+    return labels, members

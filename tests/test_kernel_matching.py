@@ -201,3 +201,21 @@ def test_fmap_initialisation_and_final_smoothing(wolf_pair):
     smoothed = solve("kernel-matching", wolf0, wolf1, smooth_k=100, **fast)
     assert smoothed.map_xy.min() >= 0 and smoothed.map_yx.min() >= 0
     assert np.mean(smoothed.map_xy != solve("kernel-matching", wolf0, wolf1, **fast).map_xy) > 0.01
+
+
+def test_scores_without_negligible_decays_equal_the_full_product(cat_pair):
+    from corrlib.geometry.spectrum import mesh_spectrum
+    from corrlib.methods.kernel_matching import DECAY_CUTOFF, _score
+
+    cat0, cat1 = cat_pair[0], cat_pair[1]
+    s0, s1 = mesh_spectrum(cat0, 500), mesh_spectrum(cat1, 500)
+    rows, cols = np.arange(0, 5000, 7), np.arange(0, 5000, 5)
+    c = s1.evecs[cols].T @ s0.evecs[cols]
+    d1, d0 = np.exp(-0.0259 * cat1.area * s1.evals), np.exp(-0.0259 * cat0.area * s0.evals)  # the largest time
+    assert np.sum(d1 < DECAY_CUTOFF) > 100  # the cut-off does drop eigenpairs here
+    full = (s1.evecs[rows] * d1) @ c @ (s0.evecs[cols] * d0).T  # float64, every eigenpair
+    fast = _score(s1.evecs[rows], s0.evecs[cols], c, d1, d0)
+    assert fast.dtype == np.float32
+    np.testing.assert_allclose(fast, full, rtol=0, atol=1e-5 * np.abs(full).max())
+    np.testing.assert_allclose(_score(s0.evecs[cols], s1.evecs[rows], c.T, d0, d1), fast.T, rtol=0,
+                               atol=1e-6 * np.abs(full).max())

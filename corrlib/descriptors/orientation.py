@@ -26,6 +26,7 @@ from __future__ import annotations
 import numpy as np
 
 from corrlib.errors import InputError
+from corrlib.geometry.laplacian import mass_matrix
 
 
 def face_gradients(vertices: np.ndarray, faces: np.ndarray, values: np.ndarray) -> np.ndarray:
@@ -86,13 +87,11 @@ def orientation_features(mesh, functions: np.ndarray, pairs=None) -> np.ndarray:
     area = mesh.face_areas
     normal = mesh.face_normals
     form = np.einsum("fk,fpk->fp", normal, np.cross(grads[:, pairs[:, 0]], grads[:, pairs[:, 1]]))
-    weighted = form * area[:, None]
+    weighted = form * (area / 3.0)[:, None]  # a third of every face to each of its corners, as the lumped mass
     out = np.zeros((mesh.n_vertices, pairs.shape[0]))
-    vertex_area = np.zeros(mesh.n_vertices)
     for corner in range(3):
         np.add.at(out, mesh.faces[:, corner], weighted)
-        np.add.at(vertex_area, mesh.faces[:, corner], area)
-    out /= vertex_area[:, None]
+    out /= mass_matrix(mesh.vertices, mesh.faces, "lumped").diagonal()[:, None]
     volume = mesh.enclosed_volume() if mesh.is_closed else None
     sign = -1.0 if volume is not None and volume < 0 else 1.0  # inward-facing normals: flip
     return sign * mesh.area * out

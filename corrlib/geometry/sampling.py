@@ -126,7 +126,7 @@ def voronoi_bands(mesh, seeds, margin: float) -> tuple[np.ndarray, list[np.ndarr
     seeds = np.asarray(seeds, dtype=np.int64)
     if not np.isfinite(margin) or margin < 0:
         raise InputError(f"voronoi_bands: margin must be a non-negative length, got {margin}")
-    labels, nearest = voronoi_cells(mesh, seeds)
+    labels, nearest = voronoi_cells(mesh, seeds)  # validates the seeds
     if margin == 0 or seeds.size == 1:
         return labels, [np.flatnonzero(labels == c) for c in range(seeds.size)]
     dist = dijkstra(mesh.adjacency, directed=False, indices=seeds)  # (s, n)

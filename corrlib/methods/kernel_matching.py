@@ -261,18 +261,20 @@ def _standardised(desc_x: np.ndarray, desc_y: np.ndarray) -> tuple[np.ndarray, n
     return desc_x / scale, desc_y / scale
 
 
-def _descriptors(source, target, spec_x, spec_y, kind: str, orientation: float = 0.0):
-    """Standardised descriptors of both shapes, with the orientation block appended at its weight."""
+def _descriptors(source, target, spec_x, spec_y, kind: str):
+    """Standardised descriptors of both shapes."""
     desc_x = mesh_descriptors(source, kind, spectrum=spec_x) if kind != "shot" else mesh_descriptors(source, kind)
     desc_y = mesh_descriptors(target, kind, spectrum=spec_y) if kind != "shot" else mesh_descriptors(target, kind)
-    desc_x, desc_y = _standardised(desc_x, desc_y)
-    if orientation > 0:
-        or_x, or_y = _standardised(orientation_descriptors(source, spec_x), orientation_descriptors(target, spec_y))
-        # the block's total variance is `orientation` times that of the main descriptor
-        weight = orientation * np.sqrt(desc_x.shape[1] / or_x.shape[1])
-        desc_x = np.hstack([desc_x, weight * or_x])
-        desc_y = np.hstack([desc_y, weight * or_y])
-    return desc_x, desc_y
+    return _standardised(desc_x, desc_y)
+
+
+def _with_orientation(desc_x, desc_y, source, target, spec_x, spec_y, weight: float):
+    """The descriptors with the standardised orientation block appended (total variance ``weight`` × theirs)."""
+    if weight <= 0:
+        return desc_x, desc_y
+    or_x, or_y = _standardised(orientation_descriptors(source, spec_x), orientation_descriptors(target, spec_y))
+    scale = weight * np.sqrt(desc_x.shape[1] / or_x.shape[1])
+    return np.hstack([desc_x, scale * or_x]), np.hstack([desc_y, scale * or_y])
 
 
 def _sample_order(points: np.ndarray, n_seed: int, growth: float) -> np.ndarray:
@@ -438,9 +440,10 @@ def kernel_matching(source, target, params: KernelMatchingParams, token, initial
     else:
         yield Progress("descriptors", 0.05, params.descriptor)
         with watch("descriptors"):
-            desc_x, desc_y = _descriptors(source, target, spec_x, spec_y, params.descriptor, params.orientation)
+            desc_x, desc_y = _descriptors(source, target, spec_x, spec_y, params.descriptor)
+            init_x, init_y = _with_orientation(desc_x, desc_y, source, target, spec_x, spec_y, params.orientation)
         with watch("assignment"):
-            sim = _descriptor_similarity(desc_x[sx], desc_y[sy])
+            sim = _descriptor_similarity(init_x[sx], init_y[sy])
             seed_map = linear_assignment(sim, method=params.backend, cancel=cancel)  # seed x -> seed y
     token.raise_if_cancelled()
 
@@ -450,7 +453,8 @@ def kernel_matching(source, target, params: KernelMatchingParams, token, initial
     if params.mu > 0:
         # the plain descriptor: the orientation features only decide the initial orientation (see the module
         # docstring)
-        desc_x, desc_y = _descriptors(source, target, spec_x, spec_y, params.descriptor)
+        if desc_x is None:
+            desc_x, desc_y = _descriptors(source, target, spec_x, spec_y, params.descriptor)
         desc_block = _descriptor_similarity(desc_x[sx], desc_y[sy])  # (seed x, seed y)
     anchor_c = _alignment(psi[anchors_y], phi[anchors_x]) if anchors_x.size else 0.0
     trace, monotone = [], True

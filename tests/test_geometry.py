@@ -235,23 +235,100 @@ def test_cholesky_solver_equals_superlu_and_rejects_indefinite_matrices(cat_pair
     perm = nested_dissection(spd)
     assert np.array_equal(np.sort(perm), np.arange(spd.shape[0]))  # a permutation
     rhs = np.random.default_rng(0).standard_normal((spd.shape[0], 3))
-    x = CholeskySolver(spd).solve(rhs)
-    assert np.allclose(x, spla.splu(spd).solve(rhs), rtol=1e-8, atol=1e-10 * np.abs(x).max())
-    assert CholeskySolver(spd).solve(rhs[:, 0]).shape == (spd.shape[0],)
+    expected = spla.splu(spd).solve(rhs)
+    for blocks in (True, False):  # supernodal panels, CHOLMOD's own solves
+        solver = CholeskySolver(spd, blocks=blocks)
+        x = solver.solve(rhs)
+        assert np.allclose(x, expected, rtol=1e-8, atol=1e-10 * np.abs(x).max())
+        assert np.allclose(solver.solve(rhs[:, 0]), x[:, 0], rtol=1e-12, atol=1e-12 * np.abs(x).max())
     with pytest.raises(SolverError, match="not positive definite"):
         CholeskySolver((stiff - 1e-3 * mass).tocsc())
 
 
+@pytest.mark.parametrize("block", [1, 3, 8])
+@pytest.mark.parametrize("diagonal_mass", [True, False])
+def test_block_lanczos_equals_a_dense_eigensolver(block, diagonal_mass):
+    """Shift-invert block Lanczos against LAPACK on a sphere Laplacian: degenerate eigenspaces (the
+    multiplets 3, 5, 7, ... of the sphere), identity and consistent-mass inner products."""
+    from corrlib.geometry.lanczos import block_lanczos
+
+    s = trimesh.creation.icosphere(subdivisions=2)
+    stiff, mass = mesh_laplacian(TriMesh(s.vertices, s.faces), mass="lumped" if diagonal_mass else "consistent")
+    sigma = -1e-3
+    if diagonal_mass:  # standard form M^-1/2 S M^-1/2
+        d = mass.diagonal() ** -0.5
+        a = (sp.diags(d) @ stiff @ sp.diags(d)).toarray()
+        inverse = np.linalg.inv(a - sigma * np.eye(a.shape[0]))
+        theta, vecs = block_lanczos(lambda x: inverse @ x, a.shape[0], 30, block=block, tol=1e-12)
+        dense = np.linalg.eigvalsh(a)[:30]
+        metric = np.eye(a.shape[0])
+        residual = a @ vecs - vecs * (sigma + 1 / theta)
+    else:
+        inverse = np.linalg.inv((stiff - sigma * mass).toarray())
+        theta, vecs = block_lanczos(lambda x: inverse @ (mass @ x), stiff.shape[0], 30, mass=mass, block=block,
+                                    tol=1e-12)
+        import scipy.linalg as sla
+
+        dense = sla.eigh(stiff.toarray(), mass.toarray(), eigvals_only=True)[:30]
+        metric = mass.toarray()
+        residual = stiff @ vecs - (mass @ vecs) * (sigma + 1 / theta)
+    evals = sigma + 1 / theta
+    assert np.all(np.diff(theta) <= 0)
+    assert np.allclose(evals, dense, rtol=1e-10, atol=1e-10)
+    assert np.allclose(vecs.T @ metric @ vecs, np.eye(30), atol=1e-10)
+    assert np.abs(residual).max() < 1e-8 * evals.max()
+
+
+def test_block_lanczos_reports_what_did_not_converge():
+    from corrlib.errors import SolverError
+    from corrlib.geometry.lanczos import block_lanczos
+
+    a = np.diag(np.linspace(1.0, 2.0, 700))  # a flat spectrum: far too slow for a small basis
+    with pytest.raises(SolverError, match="have not converged with 96 basis vectors"):
+        block_lanczos(lambda x: a @ x, 700, 40, block=8, max_dim=100, tol=1e-12)
+    with pytest.raises(SolverError, match="need a basis larger"):
+        block_lanczos(lambda x: a @ x, 700, 40, block=8, max_dim=40)
+
+
+def test_cholesky_supernodal_solves_on_a_product_band():
+    """A four-dimensional band (the product of two curves) has large dense supernodes: the BLAS path
+    of the solves is taken, with blocks of right-hand sides and single vectors."""
+    import scipy.sparse.linalg as spla
+
+    from corrlib.geometry import product as pm
+    from corrlib.geometry.cholesky import _BLAS_MIN_WORK, CholeskySolver
+
+    t = np.linspace(0, 2 * np.pi, 160, endpoint=False)
+    fx = pm.curve_factor(np.column_stack([np.cos(t), 0.6 * np.sin(t)]), 10)
+    fy = pm.curve_factor(np.column_stack([1.2 * np.cos(t), np.sin(t)]), 10)
+    width = 30
+    pairs = np.column_stack([np.repeat(np.arange(160), width),
+                             (np.arange(160)[:, None] + np.arange(width) - width // 2).ravel() % 160])
+    stiff, mass = pm.product_operator(fx, fy, pairs)
+    spd = (stiff + 1e-2 * mass).tocsc()
+    solver = CholeskySolver(spd)
+    work = (solver.ends - solver.starts) * (solver.ends - solver.starts + np.diff(solver.row_ptr))
+    assert np.any(work >= _BLAS_MIN_WORK) and np.any(work < _BLAS_MIN_WORK)
+    rhs = np.random.default_rng(1).standard_normal((spd.shape[0], 20))
+    expected = spla.splu(spd).solve(rhs)
+    for x in (solver.solve(rhs), np.column_stack([solver.solve(rhs[:, j]) for j in range(3)])):
+        assert np.allclose(x, expected[:, :x.shape[1]], rtol=1e-8, atol=1e-10 * np.abs(expected).max())
+
+
 @pytest.mark.parametrize("mass_kind", ["lumped", "consistent"])
-def test_cholesky_shift_invert_equals_superlu_shift_invert(cat_pair, monkeypatch, mass_kind):
+@pytest.mark.parametrize("block_lanczos", [False, True])
+def test_cholesky_shift_invert_equals_superlu_shift_invert(cat_pair, monkeypatch, mass_kind, block_lanczos):
+    """The Cholesky path (ARPACK with CHOLMOD's solves, or block Lanczos with the supernodal solves) equals
+    ARPACK with SuperLU, also near the singular shift of a closed surface (λ₀ = 0)."""
     import corrlib.geometry.spectrum as spectrum
 
     stiff, mass = mesh_laplacian(cat_pair[0], mass=mass_kind)
     w_lu, v_lu = eigenpairs(stiff, mass, 60, method="eigsh")
     monkeypatch.setattr(spectrum, "CHOLESKY_MIN_ROWS", 1000)  # the 5k cat takes the Cholesky path
+    monkeypatch.setattr(spectrum, "BLOCK_LANCZOS_MIN_ROWS", 1000 if block_lanczos else 10 ** 9)
     factored = []
-    original = spectrum._ShiftInvert._opinv
-    monkeypatch.setattr(spectrum._ShiftInvert, "_opinv",
+    original = spectrum._ShiftInvert._cholesky
+    monkeypatch.setattr(spectrum._ShiftInvert, "_cholesky",
                         lambda self, sigma: factored.append(original(self, sigma)) or factored[-1])
     w_ch, v_ch = eigenpairs(stiff, mass, 60, method="eigsh")
     assert factored and factored[0] is not None

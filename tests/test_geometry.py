@@ -205,18 +205,18 @@ def test_eigensolver_retries_with_regularised_shift(monkeypatch):
     calls = []
     original = spectrum._ShiftInvert.run
 
-    def flaky(self, k, sigma, ncv=None, tol=0.0):
+    def flaky(self, k, sigma, ncv=None, tol=0.0, blocks=False):
         calls.append(sigma)
         if len(calls) == 1:
             raise spla.ArpackNoConvergence("no convergence", np.zeros(0), np.zeros((0, 0)))
-        return original(self, k, sigma, ncv, tol)
+        return original(self, k, sigma, ncv, tol, blocks)
 
     monkeypatch.setattr(spectrum._ShiftInvert, "run", flaky)
     evals, _ = eigenpairs(stiff, mass, 10, method="eigsh")
     assert len(calls) == 2 and calls[1] < calls[0] < 0
     assert evals[0] == pytest.approx(0, abs=1e-9) and evals[1] > 0
 
-    def broken(self, k, sigma, ncv=None, tol=0.0):
+    def broken(self, k, sigma, ncv=None, tol=0.0, blocks=False):
         raise RuntimeError("factor is exactly singular")
 
     monkeypatch.setattr(spectrum._ShiftInvert, "run", broken)
@@ -325,12 +325,11 @@ def test_cholesky_shift_invert_equals_superlu_shift_invert(cat_pair, monkeypatch
     stiff, mass = mesh_laplacian(cat_pair[0], mass=mass_kind)
     w_lu, v_lu = eigenpairs(stiff, mass, 60, method="eigsh")
     monkeypatch.setattr(spectrum, "CHOLESKY_MIN_ROWS", 1000)  # the 5k cat takes the Cholesky path
-    monkeypatch.setattr(spectrum, "BLOCK_LANCZOS_MIN_ROWS", 1000 if block_lanczos else 10 ** 9)
     factored = []
     original = spectrum._ShiftInvert._cholesky
     monkeypatch.setattr(spectrum._ShiftInvert, "_cholesky",
-                        lambda self, sigma: factored.append(original(self, sigma)) or factored[-1])
-    w_ch, v_ch = eigenpairs(stiff, mass, 60, method="eigsh")
+                        lambda self, sigma, blocks=False: factored.append(original(self, sigma, blocks)) or factored[-1])
+    w_ch, v_ch = eigenpairs(stiff, mass, 60, method="block" if block_lanczos else "eigsh")
     assert factored and factored[0] is not None
     assert np.allclose(w_ch, w_lu, rtol=1e-9, atol=1e-12)
     overlap = np.abs(np.einsum("ij,ij->j", v_lu, mass @ v_ch))

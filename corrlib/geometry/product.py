@@ -35,6 +35,10 @@ from corrlib.errors import InputError, ParameterError
 #: relative accuracy of the localized harmonics' eigenvalues (ARPACK ``tol``); machine precision
 #: costs about 10 % more Lanczos steps on large bands and changes nothing downstream
 HARMONICS_TOL = 1e-8
+#: bands of two surfaces from this many product vertices on use block Lanczos (measured, 200 harmonics
+#: on bands of two 1k-vertex meshes: 1 % band, 10.6k rows, ARPACK 4.7 s against 5.9 s; 2 %, 21k rows,
+#: 11.3 s against 7.7 s; 10 %, 103k rows, 97 s against 52 s)
+BLOCK_LANCZOS_MIN_ROWS = 16000
 
 
 @dataclass(frozen=True)
@@ -50,6 +54,8 @@ class Factor:
         Squared length scale (area of a surface, squared length of a curve):
         ``evals * unit`` are scale-free, so diffusion times can be given
         relative to it.
+    dim : int
+        1 for a curve, 2 for a surface.
     """
 
     stiffness: sp.csr_matrix
@@ -57,6 +63,7 @@ class Factor:
     evals: np.ndarray
     evecs: np.ndarray
     unit: float = 1.0
+    dim: int = 2
 
     @property
     def n(self) -> int:
@@ -75,7 +82,7 @@ def curve_factor(points, k: int, mass: str = "consistent") -> Factor:
     stiff, m = curve_laplacian(points, mass=mass)
     k = min(int(k), stiff.shape[0])
     evals, evecs = eigenpairs(stiff, m, k, name="curve")
-    return Factor(stiff, m, evals, evecs, float(m.sum()) ** 2)
+    return Factor(stiff, m, evals, evecs, float(m.sum()) ** 2, dim=1)
 
 
 def mesh_factor(mesh, k: int) -> Factor:
@@ -312,7 +319,11 @@ def localized_harmonics(fx: Factor, fy: Factor, pairs, k: int, *, potential: flo
                          f"widen it (a larger band fraction) or start from a smoother map")
     if k < 1 or k >= stiff.shape[0]:
         raise ParameterError(f"k = {k} harmonics requested on a band of {stiff.shape[0]} product vertices")
-    return eigenpairs(stiff, mass, k, name="band", check_connected=False, tol=HARMONICS_TOL)
+    # a band of a product of two surfaces is four-dimensional: its Cholesky factor fills in so much
+    # that block solves (block Lanczos) beat ARPACK's single ones from BLOCK_LANCZOS_MIN_ROWS rows on
+    block = fx.dim + fy.dim >= 4 and stiff.shape[0] >= BLOCK_LANCZOS_MIN_ROWS
+    return eigenpairs(stiff, mass, k, name="band", check_connected=False, tol=HARMONICS_TOL,
+                      method="block" if block else "auto")
 
 
 def dilate(fx: Factor, fy: Factor, pairs) -> np.ndarray:

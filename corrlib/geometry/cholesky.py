@@ -213,6 +213,8 @@ class CholeskySolver:
         width = self.ends - self.starts
         n_below = count[self.starts] - width
         self.row_ptr = np.concatenate([[0], np.cumsum(n_below)])
+        from corrlib.geometry.product import _ranges
+
         self.rows = indices[_ranges(indptr[self.starts] + width, indptr[self.starts + 1])].astype(np.int64)
         self.panel_ptr = np.concatenate([[0], np.cumsum(width * (width + n_below))])
         self.panels = np.zeros(int(self.panel_ptr[-1]))
@@ -241,13 +243,6 @@ class CholeskySolver:
         out = np.empty_like(x)
         out[self.perm] = x
         return out.reshape(rhs.shape)
-
-
-def _ranges(starts: np.ndarray, stops: np.ndarray) -> np.ndarray:
-    """Concatenation of ``arange(a, b)`` over the pairs of ``starts`` and ``stops``."""
-    lengths = stops - starts
-    offsets = np.repeat(stops - np.cumsum(lengths), lengths)
-    return np.arange(int(lengths.sum())) + offsets
 
 
 def available() -> bool:

@@ -5,16 +5,23 @@ right-hand side in blocks (:class:`corrlib.geometry.cholesky.CholeskySolver`):
 ARPACK applies the operator to one vector at a time and re-orthogonalises
 every new vector against its whole basis with matrix-vector products, both
 bound by memory traffic. Here the operator ``K = (S - σM)⁻¹ M`` acts on
-blocks of ``b`` vectors, the basis is re-orthogonalised in blocks (classical
-Gram–Schmidt twice, matrix-matrix products) and nothing is restarted: the
-Krylov space grows until the ``k`` wanted Ritz pairs have converged.
+blocks of ``b`` vectors and nothing is restarted: the Krylov space grows
+until the ``k`` wanted Ritz pairs have converged.
 
-With ``Q`` the M-orthonormal basis (``Qᵀ M Q = I``) and ``K Q_j = Q C_j +
-Q_{j+1} R_j``, the projected matrix ``H = Qᵀ M K Q`` is block tridiagonal
-(full re-orthogonalisation keeps the coefficients of older blocks in ``C_j``
-too). A Ritz pair ``(θ, x = Q s)`` has the residual
-``K x - θ x = Q_{j+1} R_j s_j`` (``s_j``: the last block of ``s``), whose
-M-norm ``‖R_j s_j‖`` is the convergence test, relative to ``θ`` as in ARPACK.
+Each step applies the three-term recurrence ``K Q_j = Q_{j-1} R_{j-1}ᵀ +
+Q_j C_j + Q_{j+1} R_j``, then (every ``REORTH_PERIOD`` blocks, and every block
+once a loss of orthogonality above ``DRIFT_LIMIT`` was seen) one classical
+Gram–Schmidt pass against the whole basis in matrix-matrix products, a second
+one only if the first removed much (the DGKS test). Its coefficients are kept,
+so ``H = Qᵀ M K Q`` is the full projection, symmetrised. The new block is
+M-orthonormalised twice (the Gram matrix squares the block's condition
+number). The start block is ``K`` applied to a random block: a random block's
+high frequencies would otherwise stay in the Ritz vectors and be amplified
+by the largest eigenvalue of ``S`` in their residuals.
+
+A Ritz pair ``(θ, x = Q s)`` has the residual ``K x - θ x = W s_j``
+(``W``: the orthogonalised remainder of the last step, ``s_j``: the last block
+of ``s``); its M-norm relative to ``θ`` is the convergence test, as in ARPACK.
 """
 
 from __future__ import annotations

@@ -41,9 +41,9 @@ SLICE_SIZE = 100
 AUTO_SLICING_K = 250
 #: problems with at most this many rows are solved densely
 DENSE_LIMIT = 600
-#: shift-invert runs below zero use a sparse Cholesky factorisation and block Lanczos from this
-#: many rows on (SuperLU and ARPACK are as fast on surface meshes up to here, far slower on product
-#: bands beyond)
+#: shift-invert runs below zero use a sparse Cholesky factorisation from this many rows on (SuperLU
+#: is as fast on surface meshes up to here, far slower on product bands beyond); method="block"
+#: always does
 CHOLESKY_MIN_ROWS = 10000
 #: vectors per block of the block Lanczos runs: k / 12 within these bounds (a larger block makes the
 #: solves cheaper per vector, a smaller one needs fewer vectors: 16 is best for 200 harmonics on a

@@ -172,7 +172,9 @@ class CholeskySolver:
             options["postorder"] = False
             options["nmethods"] = 1
         else:
-            options["postorder"] = True  # CHOLMOD may also prefer AMD's order (it does on 2-D bands)
+            # CHOLMOD may try AMD too and keep the better order (the 5 % contour band: 1.7 s against
+            # 2.2 s with the METIS order forced)
+            options["postorder"] = True
         try:
             factor = cholmod.symbolic(a, p=cvx_matrix(self.perm.tolist()))
             cholmod.numeric(a, factor)
@@ -193,7 +195,7 @@ class CholeskySolver:
         self.nnz = int(values.size)
         # diag(L Lᵀ) = diag(P A Pᵀ): catches a factor of another ordering than ``perm``
         diag_llt = np.bincount(indices, weights=values * values, minlength=self.n)
-        diag_a = sp.csr_matrix(matrix).diagonal()[self.perm]
+        diag_a = matrix.diagonal()[self.perm]
         if not np.allclose(diag_llt, diag_a, rtol=1e-8, atol=1e-12 * np.abs(diag_a).max()):
             raise SolverError("the Cholesky factor does not reproduce the matrix (ordering not applied)")
         self._supernodes(indptr.astype(np.int64), indices, values)

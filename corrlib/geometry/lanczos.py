@@ -30,7 +30,6 @@ from typing import Callable
 
 import numpy as np
 import scipy.linalg as sla
-import scipy.sparse as sp
 
 from corrlib.errors import SolverError
 
@@ -125,7 +124,7 @@ def block_lanczos(apply: Callable[[np.ndarray], np.ndarray], n: int, k: int, *, 
         Vectors per Lanczos block.
     tol : float
         A Ritz pair has converged when its residual's M-norm is at most ``tol * |θ|``
-        (0: square root of the machine precision squared, i.e. 1e-14).
+        (0: 1e-14, near machine precision).
     max_dim : int, optional
         Largest basis before giving up (default: ``max(10 k, 1000)``, at most n; memory is
         taken as the basis grows).
@@ -204,5 +203,4 @@ def block_lanczos(apply: Callable[[np.ndarray], np.ndarray], n: int, k: int, *, 
                 raise SolverError(f"block Lanczos: {int(np.sum(residual > tol * np.abs(theta)))} of {k} "
                                   f"eigenpairs have not converged with {dim} basis vectors")
         q, r = _orthonormal_block(w, basis[:dim].T, mass, scale, rng)
-        basis[dim:dim + block] = q.T
-        h[dim:dim + block, dim - block:dim] = r
+        basis[dim:dim + block] = q.T  # R_j enters H as R_jᵀ, above the diagonal, at the next step

@@ -1,24 +1,33 @@
 """Linear assignment (maximisation) backends and slack padding.
 
-* ``"auction"`` (default): Bertsekas' forward auction with ε-scaling,
-  compiled with numba (Gauss–Seidel bidding, prices kept across phases).
-  The result is within ``n · ε_final`` of the optimum; ``ε_final`` defaults
-  to ``1e-9 × (score range) / n``, so the objective matches the exact
-  optimum to ~1e-9 of the score range. It releases the GIL (cells can be
-  solved in threads) and polls a cancellation flag once per ε phase.
+* ``"auction"`` (default): Bertsekas' auction with ε-scaling, compiled with
+  numba (Gauss–Seidel bidding, prices kept across phases). Rectangular
+  problems are solved as asymmetric assignments (Bertsekas & Castañon 1992):
+  only the rows of the smaller side bid (forward auction), then unassigned
+  columns priced above the cheapest assigned column bid for rows (reverse
+  auction) until every unassigned column is at most that cheap, which makes
+  the ε-complementary slackness conditions sufficient for optimality without
+  dummy rows. Every row keeps a list of its :data:`N_CANDIDATES` best columns
+  and a bound on the value of all others (prices only rise during bidding, and
+  a reverse step's price drop is added to the bounds), so most bids cost
+  O(N_CANDIDATES) instead of a scan of the row. The result is within
+  ``m · ε_final`` of the optimum (``m`` bidding rows); ``ε_final`` defaults to
+  ``1e-9 × (score range) / max(n_rows, n_cols)``, so the objective matches
+  the exact optimum to ~1e-9 of the score range. It releases the GIL (cells
+  can be solved in threads) and polls a cancellation flag once per ε phase.
 * ``"scipy"``: :func:`scipy.optimize.linear_sum_assignment` (exact, slow on
   smooth kernel scores: ~15 s at n = 3.4k here).
 
-Rectangular problems (``n_rows != n_cols``) are padded with constant dummy
-rows or columns, so every element of the smaller side is matched. With a
-``slack`` value, every row and column may instead stay unmatched at that
-price (thesis Eq. 8.15–8.16): a pair (i, j) is matched only if
+Rectangular problems (``n_rows != n_cols``): every element of the smaller
+side is matched. With a ``slack`` value, every row and column may instead
+stay unmatched at that price (thesis Eq. 8.15–8.16; the rows of the smaller
+side get one slack column each): a pair (i, j) is matched only if
 ``score[i, j] >= slack``. Unmatched elements get -1.
 
 Capacities (``capacity[j]`` rows may share column j) turn the assignment
 into a transportation problem with unit supplies; it is solved exactly as
 an assignment on copies of the columns (a column with capacity c appears
-c times), so every backend and the slack padding apply unchanged.
+c times), so every backend and the slack columns apply unchanged.
 """
 
 from __future__ import annotations
@@ -28,45 +37,106 @@ import numpy as np
 
 from corrlib.errors import Cancelled, InputError, ParameterError
 
+#: length of every row's list of best columns in the auction
+N_CANDIDATES = 16
+
 
 @numba.njit(cache=True, nogil=True)
-def _auction(benefit, eps_start, eps_final, factor, cancel, prices, row_to_col):
-    """Forward auction with ε-scaling on a square benefit matrix (maximisation).
+def _best_of_row(row, prices, n_keep, best_v, best_j):
+    """The ``n_keep`` largest values ``row[j] - prices[j]``, descending, into ``best_v``/``best_j`` (n_keep,)."""
+    count = 0
+    last = n_keep - 1
+    for j in range(row.shape[0]):
+        v = row[j] - prices[j]
+        if count < n_keep:
+            p = count
+            count += 1
+        elif v > best_v[last]:
+            p = last
+        else:
+            continue
+        while p > 0 and best_v[p - 1] < v:  # insertion into the sorted buffer
+            best_v[p] = best_v[p - 1]
+            best_j[p] = best_j[p - 1]
+            p -= 1
+        best_v[p] = v
+        best_j[p] = j
 
-    ``prices`` (n,) is the starting price vector and is updated in place, so a
-    sequence of similar problems can be warm-started.
+
+@numba.njit(cache=True, nogil=True)
+def _auction(benefit, benefit_t, eps_start, eps_final, factor, cancel, prices, row_to_col, n_cand):
+    """Forward–reverse auction with ε-scaling (maximisation), ``m <= n``.
+
+    Parameters
+    ----------
+    benefit : (m, n) float
+    benefit_t : (n, m) float
+        The transposed benefit (C order), read by the reverse steps; any array if ``m == n``.
+    prices : (n,) float
+        Starting prices, updated in place (warm start of a similar problem).
+    row_to_col : (m,) int
+        Output: the column of every row.
+    n_cand : int
+        Candidate list length (< 2: plain scans).
+
+    Returns
+    -------
+    bool
+        False if cancelled.
     """
-    n = benefit.shape[0]
+    m, n = benefit.shape
     col_to_row = np.empty(n, dtype=np.int64)
+    profit = np.zeros(m)  # π_i = value of row i's column at the current prices, within ε of its best
     eps = max(eps_start, eps_final)
-    stack = np.empty(n, dtype=np.int64)
+    stack = np.empty(max(m, n), dtype=np.int64)
+    n_list = min(n_cand, n - 1)
+    use_lists = n_list >= 2
+    cand = np.empty((m, max(n_list, 1)), dtype=np.int64)
+    # bound[i]: largest value of a column outside row i's list when it was built (inf: no list yet);
+    # values outside the list can only have risen by the reverse steps' price drops since then
+    bound = np.full(m, np.inf)
+    drop_at = np.zeros(m)
+    drop = 0.0
+    n_keep = min(max(n_list + 1, 2), n)  # values kept by a full scan: the list, its bound, at least the top two
+    best_v = np.empty(max(n_keep, 2))
+    best_j = np.empty(max(n_keep, 2), dtype=np.int64)
     while True:
         if cancel[0] != 0:
             return False
         row_to_col[:] = -1
         col_to_row[:] = -1
-        top = 0
-        for i in range(n - 1, -1, -1):
-            stack[top] = i
-            top += 1
+        stack[:m] = np.arange(m - 1, -1, -1)  # row 0 bids first
+        top = m
+        # forward auction: unassigned rows bid until every row holds a column
         while top > 0:
             top -= 1
             i = stack[top]
+            row = benefit[i]
+            listed = False
             best = -np.inf
             second = -np.inf
             jbest = 0
-            row = benefit[i]
-            for j in range(n):
-                v = row[j] - prices[j]
-                if v > best:
-                    second = best
-                    best = v
-                    jbest = j
-                elif v > second:
-                    second = v
-            if second == -np.inf:  # a 1 x 1 problem
-                second = best
+            if use_lists and bound[i] < np.inf:
+                for q in range(n_list):
+                    j = cand[i, q]
+                    v = row[j] - prices[j]
+                    if v > best:
+                        second = best
+                        best = v
+                        jbest = j
+                    elif v > second:
+                        second = v
+                listed = second >= bound[i] + (drop - drop_at[i])
+            if not listed:
+                _best_of_row(row, prices, n_keep, best_v, best_j)
+                if use_lists:
+                    cand[i, :] = best_j[:n_list]
+                    bound[i] = best_v[n_list]
+                    drop_at[i] = drop
+                best, jbest = best_v[0], best_j[0]
+                second = best_v[1] if n_keep >= 2 else best  # a single column: the bid is ε
             prices[jbest] += best - second + eps
+            profit[i] = second - eps
             prev = col_to_row[jbest]
             if prev >= 0:
                 row_to_col[prev] = -1
@@ -74,35 +144,96 @@ def _auction(benefit, eps_start, eps_final, factor, cancel, prices, row_to_col):
                 top += 1
             col_to_row[jbest] = i
             row_to_col[i] = jbest
+        if n > m:
+            # reverse auction: unassigned columns priced above λ (the cheapest assigned column) bid for rows,
+            # until no unassigned column is dearer than an assigned one
+            lam = np.inf
+            for j in range(n):
+                if col_to_row[j] >= 0 and prices[j] < lam:
+                    lam = prices[j]
+            top = 0
+            for j in range(n):
+                if col_to_row[j] < 0 and prices[j] > lam:
+                    stack[top] = j
+                    top += 1
+            while top > 0:
+                top -= 1
+                j = stack[top]
+                col = benefit_t[j]
+                _best_of_row(col, profit, min(2, m), best_v, best_j)
+                beta, ibest = best_v[0], best_j[0]
+                omega = best_v[1] if m >= 2 else -np.inf
+                old = prices[j]
+                if lam >= beta - eps:
+                    prices[j] = lam
+                else:
+                    prices[j] = max(lam, omega - eps)
+                    profit[ibest] = col[ibest] - prices[j]
+                    k = row_to_col[ibest]
+                    col_to_row[k] = -1
+                    row_to_col[ibest] = j
+                    col_to_row[j] = ibest
+                    if prices[k] > lam:
+                        stack[top] = k
+                        top += 1
+                drop += old - prices[j]
         if eps <= eps_final:
             return True
         eps = max(eps / factor, eps_final)
 
 
-def _pad(score: np.ndarray, slack: float | None) -> np.ndarray:
-    n_rows, n_cols = score.shape
-    if slack is None:
-        if n_rows == n_cols:
-            return score
-        n = max(n_rows, n_cols)
-        fill = score.min() if score.size else 0.0
-        out = np.full((n, n), fill, dtype=score.dtype)
-        out[:n_rows, :n_cols] = score
-        return out
-    # rows = real rows + one dummy row per column; cols = real cols + one dummy col per row:
-    # a real row left unmatched takes a dummy column at slack/2, a real column a dummy row at slack/2,
-    # and each matched pair frees one dummy row and one dummy column that pair up at 0
-    n = n_rows + n_cols
-    out = np.zeros((n, n), dtype=score.dtype)
-    out[:n_rows, :n_cols] = score
-    out[:n_rows, n_cols:] = slack / 2.0
-    out[n_rows:, :n_cols] = slack / 2.0
+def _with_slack_columns(base: np.ndarray, slack: float) -> np.ndarray:
+    """(r, c + r): the score with one slack column per bidding row (thesis Eq. 8.15–8.16).
+
+    Leaving row i and column j unmatched scores ``slack / 2`` each, so a matched pair gains
+    ``score[i, j] - slack`` over leaving both unmatched: up to a constant, the partial matching is the
+    assignment of every row to a real column at ``score[i, j]`` or to its own slack column at ``slack``.
+    The other rows' slack columns score far below every alternative (they are never taken).
+    """
+    r, c = base.shape
+    lo, hi = min(float(base.min()), slack), max(float(base.max()), slack)
+    gap = hi - lo if hi > lo else max(abs(lo), 1.0)
+    out = np.empty((r, c + r), dtype=np.result_type(base.dtype, np.float32))
+    out[:, :c] = base
+    out[:, c:] = lo - gap
+    out[np.arange(r), c + np.arange(r)] = slack
     return out
 
 
+def _auction_solve(s: np.ndarray, eps_final: float | None, eps_start: float | None, cancel, prices) -> np.ndarray:
+    """(m,) int: column of every row of ``s`` (m, n), m <= n, by the forward–reverse auction."""
+    m, n = s.shape
+    span = float(s.max() - s.min())
+    if eps_final is None:
+        eps_final = max(span, 1e-300) * 1e-9 / n
+    if eps_final <= 0:
+        raise ParameterError(f"eps_final must be positive, got {eps_final}")
+    # a bid below the floating-point resolution of the scores does not move a price: two rows would
+    # outbid each other forever on tied columns (e.g. equal scores, or the copies of a column)
+    eps_final = max(float(eps_final), 16.0 * float(np.spacing(float(np.abs(s).max()))))
+    row_to_col = np.empty(m, dtype=np.int64)
+    if span == 0.0:  # all scores equal: every assignment is optimal
+        row_to_col[:] = np.arange(m)
+        return row_to_col
+    flag = np.zeros(1, dtype=np.int8) if cancel is None else cancel
+    warm = prices is not None and prices.shape == (n,) and bool(np.any(prices != prices[0]))
+    if prices is None or prices.shape != (n,):
+        prices = np.zeros(n)
+    if eps_start is None:
+        eps_start = 1e-3 if warm else 0.25
+    if not 0 < eps_start <= 1:
+        raise ParameterError(f"eps_start must lie in (0, 1] (a fraction of the score range), got {eps_start}")
+    eps_start *= span
+    s_t = np.ascontiguousarray(s.T) if n > m else s
+    if not _auction(s, s_t, eps_start, eps_final, 5.0, flag, prices, row_to_col, N_CANDIDATES):
+        raise Cancelled("the computation was cancelled")
+    return row_to_col
+
+
 def linear_assignment(score, *, slack: float | None = None, method: str = "auction",
-                      eps_final: float | None = None, cancel: np.ndarray | None = None,
-                      prices: np.ndarray | None = None, capacity: np.ndarray | None = None) -> np.ndarray:
+                      eps_final: float | None = None, eps_start: float | None = None,
+                      cancel: np.ndarray | None = None, prices: np.ndarray | None = None,
+                      capacity: np.ndarray | None = None) -> np.ndarray:
     """Maximum-score assignment of rows to columns.
 
     Parameters
@@ -113,13 +244,18 @@ def linear_assignment(score, *, slack: float | None = None, method: str = "aucti
         Score of leaving an element unmatched (partial matching).
     method : {"auction", "scipy"}
     eps_final : float, optional
-        Final ε of the auction (default ``1e-9 × range / n``).
+        Final ε of the auction (default ``1e-9 × range / max(n_rows, n_cols)``).
+    eps_start : float, optional
+        First ε of the auction as a fraction of the score range (default 1/4, or 1e-3 with warm prices; a
+        warm start from a less similar problem is faster with a larger one).
     cancel : (1,) int8, optional
         Cancellation flag polled by the auction.
     prices : (n,) float, optional
         Warm start of the auction: the column prices of a previous, similar
-        problem of the same (padded) size; updated in place. The first ε is
-        then 1e-3 of the score range instead of 1/4.
+        problem of the same size (``n``: the columns of the problem the
+        auction solves — the larger side, plus the smaller one with slack);
+        updated in place. Prices that are all equal (e.g. the zeros of a
+        first call) count as a cold start.
     capacity : (n_cols,) int, optional
         How many rows each column may take (≥ 1; default 1 each).
 
@@ -145,42 +281,30 @@ def linear_assignment(score, *, slack: float | None = None, method: str = "aucti
             copies = np.repeat(np.arange(s.shape[1]), cap)  # column of every copy
             s = s[:, copies]
     n_rows, n_cols = s.shape
-    padded = np.ascontiguousarray(_pad(s, slack))
+    # the auction's bidders are the rows of the smaller side
+    transposed = n_rows > n_cols
+    base = np.ascontiguousarray(s.T if transposed else s)
+    problem = base if slack is None else _with_slack_columns(base, float(slack))
     if method == "scipy":
         from scipy.optimize import linear_sum_assignment
 
-        rows, cols = linear_sum_assignment(padded, maximize=True)
-        row_to_col = np.empty(padded.shape[0], dtype=np.int64)
-        row_to_col[rows] = cols
+        rows, cols = linear_sum_assignment(problem, maximize=True)
+        small_to_large = np.empty(problem.shape[0], dtype=np.int64)
+        small_to_large[rows] = cols
     elif method == "auction":
-        n = padded.shape[0]
-        span = float(padded.max() - padded.min())
-        if eps_final is None:
-            eps_final = max(span, 1e-300) * 1e-9 / n
-        if eps_final <= 0:
-            raise ParameterError(f"eps_final must be positive, got {eps_final}")
-        # a bid below the floating-point resolution of the scores does not move a price: two rows would
-        # outbid each other forever on tied columns (e.g. equal scores, or the copies of a column)
-        eps_final = max(float(eps_final), 16.0 * float(np.spacing(float(np.abs(padded).max()))))
-        row_to_col = np.empty(n, dtype=np.int64)
-        if span == 0.0:  # all scores equal: every assignment is optimal
-            row_to_col[:] = np.arange(n)
-        else:
-            flag = np.zeros(1, dtype=np.int8) if cancel is None else cancel
-            if prices is not None and prices.shape == (n,):
-                eps_start = span * 1e-3
-            else:
-                prices = np.zeros(n)
-                eps_start = span / 4.0
-            if not _auction(padded, eps_start, eps_final, 5.0, flag, prices, row_to_col):
-                raise Cancelled("the computation was cancelled")
+        small_to_large = _auction_solve(problem, eps_final, eps_start, cancel, prices)
     else:
         raise ParameterError(f"unknown assignment method {method!r} (use 'auction' or 'scipy')")
-    out = row_to_col[:n_rows].copy()
-    out[out >= n_cols] = -1
+    small_to_large[small_to_large >= base.shape[1]] = -1  # slack columns: unmatched
+    if transposed:
+        row_to_col = -np.ones(n_rows, dtype=np.int64)
+        matched = np.flatnonzero(small_to_large >= 0)
+        row_to_col[small_to_large[matched]] = matched
+    else:
+        row_to_col = small_to_large
     if copies is not None:
-        out = np.where(out >= 0, copies[np.clip(out, 0, None)], -1)
-    return out
+        row_to_col = np.where(row_to_col >= 0, copies[np.clip(row_to_col, 0, None)], -1)
+    return row_to_col
 
 
 def assignment_score(score: np.ndarray, row_to_col: np.ndarray) -> float:

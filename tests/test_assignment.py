@@ -72,6 +72,22 @@ def test_slack_matches_brute_force():
         value = assignment_score(score, sol) + slack / 2 * ((n - matched.sum()) + (m - matched.sum()))
         assert value == pytest.approx(brute_force_partial(score, slack), abs=1e-8)
     assert list(linear_assignment(np.array([[5.0, 0.0], [0.0, 1.0]]), slack=2.0)) == [0, -1]
+    # larger instances against scipy on the textbook padding: one dummy row per column, one dummy column per
+    # row, each worth slack/2, dummy pairs worth 0
+    for n, m, dtype in ((60, 90, np.float64), (90, 60, np.float64), (70, 70, np.float32), (40, 45, np.float64)):
+        score = rng.normal(size=(n, m)).astype(dtype)
+        if dtype == np.float64 and n == 40:
+            score = np.round(score)  # ties
+        slack = float(np.quantile(score.max(axis=1), 0.3))
+        padded = np.zeros((n + m, n + m))
+        padded[:n, :m] = score
+        padded[:n, m:] = padded[n:, :m] = slack / 2
+        sol = linear_assignment(score, slack=slack)
+        matched = sol >= 0
+        assert np.unique(sol[matched]).size == matched.sum()
+        value = assignment_score(score, sol) + slack / 2 * ((n - matched.sum()) + (m - matched.sum()))
+        assert value == pytest.approx(exact_value(padded), abs=1e-6 * float(np.ptp(score)))
+        assert np.all(score[matched, sol[matched]] >= slack - 1e-6)
 
 
 def test_rectangular_matches_scipy_and_warm_start():
@@ -152,3 +168,25 @@ def test_ties_below_the_resolution_of_the_scores_terminate():
     score = 1e12 + rng.integers(0, 3, size=(40, 40)).astype(float)
     sol = linear_assignment(score)
     assert assignment_score(score, sol) == pytest.approx(exact_value(score), rel=1e-15)
+
+
+def test_asymmetric_auction_with_duplicate_columns_and_warm_prices():
+    # rectangular problems run the reverse auction; duplicated columns (capacities) make long runs of ties
+    # in the candidate lists; prices of another problem as a warm start must not change the optimum
+    rng = np.random.default_rng(11)
+    for trial in range(30):
+        m = int(rng.integers(20, 120))
+        base = rng.normal(size=(m, int(rng.integers(10, 80))))
+        if trial % 2:  # smooth, kernel-like rows
+            x = np.sort(rng.random(m))[:, None]
+            y = np.sort(rng.random(base.shape[1]))[None, :]
+            base = np.exp(-((x - y) ** 2) / 0.01)
+        cols = rng.integers(0, base.shape[1], m + int(rng.integers(0, 3 * m)))
+        score = base[:, cols]
+        prices = rng.random(score.shape[1]) * np.ptp(score) if trial % 3 == 0 else None
+        sol = linear_assignment(score, prices=prices)
+        assert np.all(sol >= 0) and np.unique(sol).size == m
+        assert abs(assignment_score(score, sol) - exact_value(score)) <= 1e-8 * np.ptp(score)
+        tall = linear_assignment(np.ascontiguousarray(score.T))
+        assert (tall >= 0).sum() == m
+        assert abs(assignment_score(score.T, tall) - exact_value(score)) <= 1e-8 * np.ptp(score)

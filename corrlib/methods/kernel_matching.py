@@ -485,7 +485,10 @@ def kernel_matching(source, target, params: KernelMatchingParams, token, initial
                 if desc_block is not None:
                     g = g / np.float32(kernel_scale) + np.float32(params.mu) * desc_block
             with watch("assignment"):
-                new_map = linear_assignment(g, method=params.backend, cancel=cancel, prices=prices)
+                # the first score of a new time is further from the last one: a larger first ε (measured on
+                # the cats: 1.1 s instead of 3.3 s for the first change of time, no cost later)
+                new_map = linear_assignment(g, method=params.backend, cancel=cancel, prices=prices,
+                                            eps_start=1e-2 if it == 0 and t_index > 0 else None)
             changed = int(np.sum(new_map != seed_map))
             c_new = _alignment(psi_s[new_map], phi_s) + anchor_c
             after = objective(new_map, c_new, kernel_scale)

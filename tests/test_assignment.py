@@ -112,6 +112,10 @@ def test_assignment_errors():
         linear_assignment(np.zeros((0, 3)))
     with pytest.raises(ParameterError, match="unknown assignment method"):
         linear_assignment(np.eye(3), method="hungarian-magic")
+    with pytest.raises(ParameterError, match="eps_start must lie in"):
+        linear_assignment(np.eye(3), eps_start=2.0)
+    with pytest.raises(ParameterError, match="eps_final must be positive"):
+        linear_assignment(np.eye(3), eps_final=-1.0)
     flag = np.ones(1, dtype=np.int8)
     with pytest.raises(Cancelled):
         linear_assignment(np.random.default_rng(0).random((20, 20)), cancel=flag)

@@ -1,4 +1,4 @@
-"""Linear assignment (maximisation) backends and slack padding.
+"""Linear assignment (maximisation) backends, slack columns and capacities.
 
 * ``"auction"`` (default): Bertsekas' auction with ε-scaling, compiled with
   numba (Gauss–Seidel bidding, prices kept across phases). Rectangular

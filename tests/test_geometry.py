@@ -243,6 +243,8 @@ def test_cholesky_solver_equals_superlu_and_rejects_indefinite_matrices(cat_pair
         assert np.allclose(solver.solve(rhs[:, 0]), x[:, 0], rtol=1e-12, atol=1e-12 * np.abs(x).max())
     with pytest.raises(SolverError, match="not positive definite"):
         CholeskySolver((stiff - 1e-3 * mass).tocsc())
+    with pytest.raises(SolverError, match="square symmetric matrix"):
+        CholeskySolver(sp.triu(spd).tocsc())
 
 
 def test_multifrontal_factor_equals_dense_cholesky():

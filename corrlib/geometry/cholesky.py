@@ -349,11 +349,16 @@ class CholeskySolver:
     Raises
     ------
     SolverError
-        If the matrix is not positive definite.
+        If the matrix is not symmetric or not positive definite.
     """
 
     def __init__(self, matrix: sp.spmatrix, *, blocks: bool = True):
         self.n = int(matrix.shape[0])
+        square = matrix.shape == (self.n, self.n)
+        asymmetry = abs(matrix - matrix.T).max() if square and matrix.nnz else 0.0
+        if not square or asymmetry > 1e-12 * abs(matrix).max():
+            raise SolverError(f"the Cholesky factorisation needs a square symmetric matrix "
+                              f"(shape {matrix.shape}, largest asymmetry {asymmetry:.3g})")
         self.perm = nested_dissection(matrix)
         self._factor = None
         if blocks:

@@ -271,6 +271,8 @@ def linear_assignment(score, *, slack: float | None = None, method: str = "aucti
         raise InputError("the score contains NaN or infinite values")
     if s.dtype not in (np.float32, np.float64):
         s = s.astype(np.float64)
+    if slack is not None and not np.isfinite(slack):
+        raise InputError(f"the slack must be a finite number, got {slack}")
     copies = None
     if capacity is not None:
         cap = np.asarray(capacity)

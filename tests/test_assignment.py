@@ -112,6 +112,8 @@ def test_assignment_errors():
         linear_assignment(np.zeros((0, 3)))
     with pytest.raises(ParameterError, match="unknown assignment method"):
         linear_assignment(np.eye(3), method="hungarian-magic")
+    with pytest.raises(InputError, match="slack must be a finite number"):
+        linear_assignment(np.eye(3), slack=float("nan"))
     with pytest.raises(ParameterError, match="eps_start must lie in"):
         linear_assignment(np.eye(3), eps_start=2.0)
     with pytest.raises(ParameterError, match="eps_final must be positive"):

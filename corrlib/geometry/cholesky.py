@@ -190,13 +190,18 @@ def _supernode_rows(col_ptr, rows_a, starts, ends, parent, row_ptr):
 
 
 @numba.njit(cache=True)
-def _multifrontal(col_ptr, rows_a, values, starts, ends, row_ptr, rows, child_ptr, children, panel_ptr, panels):
+def _multifrontal(col_ptr, rows_a, values, starts, ends, row_ptr, rows, child_ptr, children, panel_ptr, panels,
+                  chars, scalars, dims):
     """Numeric factorisation into the supernodes' panels (layout of :func:`_supernodal_solve`).
 
     Supernode s's front (its columns, then its rows below) is assembled from A's lower triangle and its
     children's update matrices (extend-add), then ``L11 = chol(F11)``, ``L21 = F21 L11⁻ᵀ`` and the update
     ``F22 - L21 L21ᵀ`` for its parent. The fronts are C-ordered lower triangles, i.e. upper triangles for
     the column-major LAPACK/BLAS calls.
+
+    ``chars`` (b"LUTN" as uint8), ``scalars`` ([1.0, -1.0]) and ``dims`` ((4,) int32: w, r, f, info) hold
+    the by-address arguments of the LAPACK/BLAS calls; the caller owns them (numba may free an array it
+    created after its last use in the code, before the foreign call has read it).
 
     Returns
     -------
@@ -206,9 +211,10 @@ def _multifrontal(col_ptr, rows_a, values, starts, ends, row_ptr, rows, child_pt
     n = ends[-1]
     pos = np.empty(n, dtype=np.int64)
     fronts = [np.empty((0, 0)) for _ in range(starts.size)]
-    chars = np.array([ord("L"), ord("U"), ord("T"), ord("N")], dtype=np.uint8)
-    scalars = np.array([1.0, -1.0])
-    dims = np.zeros(4, dtype=np.int32)  # w, r, f, info
+    side, upper, trans, nonunit = chars.ctypes.data, chars.ctypes.data + 1, chars.ctypes.data + 2, \
+        chars.ctypes.data + 3
+    one, minus_one = scalars.ctypes.data, scalars.ctypes.data + 8
+    w_p, r_p, f_p, info_p = dims.ctypes.data, dims.ctypes.data + 4, dims.ctypes.data + 8, dims.ctypes.data + 12
     for s in range(starts.size):
         c0, c1 = starts[s], ends[s]
         w = c1 - c0
@@ -234,12 +240,6 @@ def _multifrontal(col_ptr, rows_a, values, starts, ends, row_ptr, rows, child_pt
                     front[ia, pos[rows_t[b]]] += update[wt + a, wt + b]
             fronts[t] = np.empty((0, 0))
         dims[0], dims[1], dims[2] = w, r, f
-        # the arguments' addresses, taken where the arrays are still in use (numba may free an array
-        # after its last use)
-        side, upper, trans, nonunit = chars.ctypes.data, chars.ctypes.data + 1, chars.ctypes.data + 2, \
-            chars.ctypes.data + 3
-        one, minus_one = scalars.ctypes.data, scalars.ctypes.data + 8
-        w_p, r_p, f_p, info_p = dims.ctypes.data, dims.ctypes.data + 4, dims.ctypes.data + 8, dims.ctypes.data + 12
         base = front.ctypes.data
         _dpotrf(upper, w_p, base, f_p, info_p)
         if dims[3] != 0:
@@ -253,8 +253,6 @@ def _multifrontal(col_ptr, rows_a, values, starts, ends, row_ptr, rows, child_pt
         for i in range(f):
             for j in range(min(i + 1, w)):
                 panel[i, j] = front[i, j]
-        if chars[0] != ord("L") or scalars[0] != 1.0:  # keeps the argument arrays alive up to here
-            return -2
     return -1
 
 
@@ -267,7 +265,7 @@ def _supernodal_solve(starts, ends, row_ptr, rows, panel_ptr, panels, x):
     panel: its lower-triangular diagonal block ``D``, then the block ``B`` below
     it. Forward: ``x_s ← D⁻¹ x_s``, ``x_R -= B x_s``; backward:
     ``x_s ← D⁻ᵀ (x_s − Bᵀ x_R)``. Small supernodes are solved by substitution;
-    large ones hold ``D⁻¹`` instead of ``D`` (see :meth:`CholeskySolver._supernodes`)
+    large ones hold ``D⁻¹`` instead of ``D`` (see :meth:`CholeskySolver._multifrontal`)
     and multiply by it in BLAS.
     """
     m = x.shape[1]
@@ -418,7 +416,9 @@ class CholeskySolver:
         self.panel_ptr = np.concatenate([[0], np.cumsum(width * (width + n_below))]).astype(np.int64)
         self.panels = np.empty(int(self.panel_ptr[-1]))
         failed = _multifrontal(col_ptr, rows_a, by_cols.data.astype(np.float64), self.starts, self.ends,
-                               self.row_ptr, self.rows, child_ptr, children, self.panel_ptr, self.panels)
+                               self.row_ptr, self.rows, child_ptr, children, self.panel_ptr, self.panels,
+                               np.frombuffer(b"LUTN", dtype=np.uint8).copy(), np.array([1.0, -1.0]),
+                               np.zeros(4, dtype=np.int32))
         if failed >= 0:
             raise SolverError(f"the matrix is not positive definite (pivot failure in columns "
                               f"{self.starts[failed]}..{self.ends[failed] - 1} of its Cholesky factor)")

@@ -36,8 +36,8 @@ from corrlib.errors import InputError, ParameterError
 #: costs about 10 % more Lanczos steps on large bands and changes nothing downstream
 HARMONICS_TOL = 1e-8
 #: bands of two surfaces from this many product vertices on use block Lanczos (measured, 200 harmonics
-#: on bands of two 1k-vertex meshes: 1 % band, 10.6k rows, ARPACK 4.7 s against 5.9 s; 2 %, 21k rows,
-#: 11.3 s against 7.7 s; 10 %, 103k rows, 97 s against 52 s)
+#: on bands of two 1k-vertex meshes, ARPACK against block Lanczos: 1 % band, 10.6k rows, 4.5 s against
+#: 5.4 s; 2 %, 21k rows, 10.1 s against 7.6 s; 10 %, 103k rows, 97 s against 37-41 s)
 BLOCK_LANCZOS_MIN_ROWS = 16000
 
 

@@ -19,6 +19,7 @@ def warm_up() -> None:
     from corrlib.descriptors.shot import shot
     from corrlib.geometry.cholesky import CholeskySolver
     from corrlib.geometry.cyclic_paths import ProductGraph, branch_and_bound
+    from corrlib.geometry.sampling import farthest_point_sampling
     from corrlib.methods.contour3d import node_costs
     from corrlib.progress import run
 
@@ -33,5 +34,6 @@ def warm_up() -> None:
     sphere_v = np.array([[0, 0, 1], [1, 0, 0], [0, 1, 0], [-1, 0, 0], [0, -1, 0], [0, 0, -1]], float)
     sphere_f = np.array([[0, 1, 2], [0, 2, 3], [0, 3, 4], [0, 4, 1], [5, 2, 1], [5, 3, 2], [5, 4, 3], [5, 1, 4]])
     shot(sphere_v, sphere_f, radius=2.0, min_neighbors=1)
+    farthest_point_sampling(rng.random((6, 3)), 3)
     path_graph = sp.diags([-1.0, 2.5, -1.0], [-1, 0, 1], shape=(8, 8), format="csc")
     CholeskySolver(path_graph).solve(rng.random((8, 2)))

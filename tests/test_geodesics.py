@@ -8,7 +8,7 @@ from scipy.sparse.csgraph import dijkstra
 from conftest import grid_mesh
 from corrlib.errors import InputError, ParameterError
 from corrlib.geometry.geodesics import GeodesicSolver, geodesic_diameter
-from corrlib.geometry.sampling import farthest_point_sampling, voronoi_cells
+from corrlib.geometry.sampling import farthest_point_sampling, surface_farthest_points, voronoi_cells
 from corrlib.shapes import TriMesh
 
 
@@ -80,6 +80,61 @@ def test_farthest_point_sampling(wolf_pair):
         farthest_point_sampling(wolf.vertices, wolf.n_vertices + 1)
     with pytest.raises(InputError, match="needs the mesh"):
         farthest_point_sampling(wolf.vertices, 3, metric="geodesic")
+
+
+def test_farthest_points_in_two_dimensions_equal_a_brute_force_greedy():
+    points = np.random.default_rng(3).random((700, 2))
+    samples = farthest_point_sampling(points, 120, start=5)
+    cover = np.linalg.norm(points - points[5], axis=1)
+    for i in range(1, 120):
+        assert samples[i] == np.argmax(cover)  # first maximum, as np.argmax
+        cover = np.minimum(cover, np.linalg.norm(points - points[samples[i]], axis=1))
+
+
+def warped_square():
+    """The unit square meshed with vertices crowded towards x = 0 (x = u³, 41 × 41 grid)."""
+    uv, faces = grid_mesh(40, 40)
+    return TriMesh(np.column_stack([uv[:, 0] ** 3, uv[:, 1], np.zeros(len(uv))]), faces, name="warped")
+
+
+def test_surface_farthest_points_follow_the_area_not_the_vertices():
+    mesh = warped_square()
+    n = 1300  # 77 % of the vertices
+    sample = surface_farthest_points(mesh, n)
+    assert len(sample) == n and sample.points.shape == (n, 3)
+    assert np.all(sample.barycentric >= 0) and np.allclose(sample.barycentric.sum(axis=1), 1)
+    np.testing.assert_allclose(sample.interpolate(mesh, mesh.vertices), sample.points, atol=1e-12)
+    corners = sample.nearest_corners(mesh)
+    assert np.all(np.isin(corners, mesh.faces[sample.faces]))
+    # 78 % of the vertices lie in the left half; a vertex sample of this size follows them (measured: 72 %),
+    # the surface sample follows the area (52 %)
+    vertex_sample = farthest_point_sampling(mesh.vertices, n)
+    assert np.mean(mesh.vertices[vertex_sample, 0] < 0.5) > 0.65
+    assert abs(np.mean(sample.points[:, 0] < 0.5) - 0.5) < 0.05
+    # well spread: no two samples closer than half the spacing of a uniform sample, no point of the square
+    # farther than 1.2 spacings from the sample
+    spacing = np.sqrt(mesh.area / n)
+    gaps = np.linalg.norm(sample.points[:, None] - sample.points[None], axis=2) + np.eye(n)
+    assert gaps.min() > 0.5 * spacing
+    probes = np.column_stack([np.random.default_rng(0).random((4000, 2)), np.zeros(4000)])
+    assert np.linalg.norm(probes[:, None] - sample.points[None], axis=2).min(axis=1).max() < 1.2 * spacing
+
+
+def test_surface_farthest_points_do_not_depend_on_the_element_order():
+    mesh = warped_square()
+    rng = np.random.default_rng(1)
+    perm = rng.permutation(mesh.n_vertices)
+    inv = np.argsort(perm)
+    faces = inv[mesh.faces][rng.permutation(mesh.n_faces)]
+    faces = np.roll(faces, 1, axis=1)  # other first corners, same orientation
+    shuffled = TriMesh(mesh.vertices[perm], faces, name="shuffled")
+    a, b = surface_farthest_points(mesh, 300), surface_farthest_points(shuffled, 300)
+    np.testing.assert_allclose(a.points, b.points, atol=1e-9)
+    np.testing.assert_allclose(b.interpolate(shuffled, shuffled.vertices[:, :2]), a.points[:, :2], atol=1e-9)
+    with pytest.raises(ParameterError, match="positive integer"):
+        surface_farthest_points(mesh, 0)
+    with pytest.raises(ParameterError, match="oversample"):
+        surface_farthest_points(mesh, 10, oversample=0.5)
 
 
 def test_voronoi_cells_match_brute_force(wolf_pair):

@@ -77,8 +77,8 @@ def farthest_point_sampling(points, n_samples: int, *, metric: str = "euclidean"
 def _fps_kernel(coords, n_samples, start):  # pragma: no cover - compiled
     """Greedy farthest points of ``coords`` (dim, n) (coordinate-major, so that the loops vectorise)."""
     dim, n = coords.shape
-    dist = np.full(n, np.inf)
-    step = np.empty(n)
+    dist = np.full(n, np.inf, dtype=coords.dtype)
+    step = np.empty(n, dtype=coords.dtype)
     samples = np.empty(n_samples, dtype=np.int64)
     nxt = start
     for k in range(n_samples):

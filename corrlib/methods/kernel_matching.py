@@ -37,12 +37,18 @@ Initial alignment (``init_fraction``): even so, the initial assignment on
 thin parts is close to a coin flip (the cats' front legs: 31 % of the seeds
 nearer the true partner, 39 % nearer the mirrored one), and a DC iteration
 from the whole initial map keeps such a local majority: the front legs ended
-swapped (cats: 77 % within 0.05 without symmetry, 84 % with). The first
-kernel score is therefore formed from only the most similar initial matches
-(default 30 %); at the largest time it spreads their alignment over the
-whole shape, and the legs follow the body across the shoulders (87 % and
-87 %). Measured on the cats: fractions from 0.1 to 0.5 give 86.5–87.1 %,
-0.03 (90 matches) is too few (34 %), 1 is the plain DC start.
+swapped (cats: 77 % within 0.05 without symmetry, 84 % with). A second start
+is therefore formed from only the most similar initial matches (default
+30 %): their kernel score at the largest time spreads their alignment over
+the whole shape, and the legs follow the body across the shoulders (87 % and
+87 %; fractions from 0.1 to 0.6 give the same, 0.03 is too few, 0.7 keeps the
+swap). Both starts run the DC iterations of the first time, and the one with
+the higher objective goes on — a multi-start of the same DC problem, so no
+start is trusted blindly: on a partial wolf (60 % of wolf1 against wolf0) the
+aligned start is worse (39 % within 0.1 against 64 %) and loses. With
+landmarks as the initialisation, the second start is the landmarks' kernel
+score alone (instead of every seed taking its nearest landmark's partner):
+15 random landmarks on the wolves, 99.5 % within 0.05 instead of 83 %.
 
 Seeds: farthest points of the surfaces, not of their vertices
 (:func:`~corrlib.geometry.sampling.surface_farthest_points`; eigenfunctions
@@ -134,8 +140,10 @@ class KernelMatchingParams:
                                     "the main descriptor (1: as much variance); 0: off (left and right may then "
                                     "be matched differently in different regions).")
     init_fraction: float = param(0.3, label="Initial alignment fraction", low=0.01, high=1.0,
-                                 help="The first kernel score (largest time) is formed from only this fraction of "
-                                      "the initial descriptor matches, the most similar pairs; 1: all of them.")
+                                 help="Second start of the DC iterations: the kernel score of the largest time from "
+                                      "only this fraction of the initial descriptor matches (the most similar "
+                                      "pairs); the start with the higher objective after the first time goes on. "
+                                      "1: no second start.")
     mu: float = param(0.1, label="Descriptor weight μ", low=0.0, high=1e6,
                       help="Weight of the descriptor term F_Y F_Xᵀ in the score (relative to the kernel "
                            "term, both scaled to unit maximum).")
@@ -493,12 +501,13 @@ def kernel_matching(source, target, params: KernelMatchingParams, token, initial
                                             seeds_y.interpolate(target, desc_y))  # (seed x, seed y)
     anchor_c = _alignment(psi[anchors_y], phi[anchors_x]) if anchors_x.size else 0.0
     trace, monotone = [], True
-    prices = np.zeros(n_seed)  # auction prices carried from one assignment to the next (warm start)
-    total_steps = len(taus) * params.iters_per_time
+    landmarks_only = initial is not None and initial.map_xy is None
+    aligned = (confidence is not None and params.init_fraction < 1) or landmarks_only
+    total_steps = (len(taus) + aligned) * params.iters_per_time
     step = 0
     seed_cols = np.arange(n_seed)
 
-    def objective(mapping, c_mat, scale):
+    def objective(mapping, c_mat, scale, decay_y, decay_x):
         # the function the DC steps maximise at this time: ½ kernel term (its gradient is K_Y Π K_X)
         # plus μ × descriptor similarity, with the kernel term scaled by a constant of this time
         value = 0.5 * kernel_energy(c_mat, decay_y, decay_x) / scale
@@ -506,23 +515,16 @@ def kernel_matching(source, target, params: KernelMatchingParams, token, initial
             value += params.mu * float(desc_block[seed_cols, mapping].sum())
         return value
 
-    aligned = confidence is not None and params.init_fraction < 1
-    if aligned:
-        # initial alignment: the score of the largest time from the most similar initial matches only (see the
-        # module docstring), a starting point for the DC iterations
-        keep = np.argsort(-confidence, kind="stable")[:max(1, int(round(params.init_fraction * n_seed)))]
-        yield Progress("initial alignment", 0.1, f"kernel score of the {keep.size} most similar initial matches")
-        decay_y, decay_x = decays(taus[0])
-        with watch("kernels"):
-            g = _score(phi_s, psi_s, (_alignment(psi_s[seed_map[keep]], phi_s[keep]) + anchor_c).T, decay_x, decay_y)
-            if desc_block is not None:
-                g = g / np.float32(max(float(np.abs(g).max()), 1e-30)) + np.float32(params.mu) * desc_block
-        with watch("assignment"):
-            seed_map = linear_assignment(g, method=params.backend, cancel=cancel, prices=prices)
+    def dc_iterations(seed_map, prices, t_index, kernel_scale, warm_first):
+        """DC iterations at one time (a generator: yields progress, returns the map and the time's state).
 
-    for t_index, tau in enumerate(taus):
+        ``prices`` (the auction's warm start) is updated in place; ``kernel_scale`` None: set from the first
+        score; ``warm_first``: the first score is far from the last one (a larger first ε).
+        """
+        nonlocal step, monotone
+        tau = taus[t_index]
         decay_y, decay_x = decays(tau)
-        kernel_scale = None
+        entries, value = [], None
         for it in range(params.iters_per_time):
             token.raise_if_cancelled()
             with watch("kernels"):
@@ -530,7 +532,7 @@ def kernel_matching(source, target, params: KernelMatchingParams, token, initial
                 g = _score(phi_s, psi_s, c.T, decay_x, decay_y)  # (seed x, seed y): the assignment's rows are x
                 if kernel_scale is None:
                     kernel_scale = max(float(np.abs(g).max()), 1e-30)
-                before = objective(seed_map, c, kernel_scale)
+                before = objective(seed_map, c, kernel_scale, decay_y, decay_x)
                 if desc_block is not None:
                     g = g / np.float32(kernel_scale) + np.float32(params.mu) * desc_block
             with watch("assignment"):
@@ -538,22 +540,52 @@ def kernel_matching(source, target, params: KernelMatchingParams, token, initial
                 # larger first ε (measured on the cats: 1.1 s instead of 3.3 s for the first change of time,
                 # 0.85 s instead of 5.1 s after the initial alignment, no cost later)
                 new_map = linear_assignment(g, method=params.backend, cancel=cancel, prices=prices,
-                                            eps_start=1e-2 if it == 0 and (t_index > 0 or aligned) else None)
+                                            eps_start=1e-2 if it == 0 and warm_first else None)
             changed = int(np.sum(new_map != seed_map))
-            c_new = _alignment(psi_s[new_map], phi_s) + anchor_c
-            after = objective(new_map, c_new, kernel_scale)
+            value = objective(new_map, _alignment(psi_s[new_map], phi_s) + anchor_c, kernel_scale, decay_y, decay_x)
             # the DC guarantee holds from a permutation (a given initial map may map seeds together)
-            if np.unique(seed_map).size == seed_map.size and after < before - 1e-5 * abs(before):
+            if np.unique(seed_map).size == seed_map.size and value < before - 1e-5 * abs(before):
                 monotone = False
             seed_map = new_map
-            trace.append({"tau": float(tau), "iteration": it, "energy": after, "changed": changed})
+            entries.append({"tau": float(tau), "iteration": it, "energy": value, "changed": changed})
             step += 1
             yield Progress("kernel matching", 0.1 + 0.6 * step / total_steps,
-                           f"time {t_index + 1}/{len(taus)}, iteration {it + 1}: energy {after:.6g}, "
+                           f"time {t_index + 1}/{len(taus)}, iteration {it + 1}: energy {value:.6g}, "
                            f"{changed} changed")
             if changed == 0:
                 step += params.iters_per_time - it - 1
                 break
+        return seed_map, kernel_scale, entries, value
+
+    # ---- coarse scale, first time: DC from the initial map, and (descriptor initialisation) DC from the initial
+    # alignment; the start that ends with the higher objective goes on (see the module docstring)
+    prices = np.zeros(n_seed)  # auction prices carried from one assignment to the next (warm start)
+    start_map = seed_map
+    seed_map, kernel_scale, entries, value = yield from dc_iterations(start_map, prices, 0, None, False)
+    dc_start = "initial map"
+    if aligned:
+        if landmarks_only:
+            keep = np.zeros(0, dtype=np.int64)  # the landmarks (anchors) alone
+            yield Progress("initial alignment", 0.1, f"kernel score of the {anchors_x.size} landmarks")
+        else:
+            keep = np.argsort(-confidence, kind="stable")[:max(1, int(round(params.init_fraction * n_seed)))]
+            yield Progress("initial alignment", 0.1, f"kernel score of the {keep.size} most similar initial matches")
+        decay_y, decay_x = decays(taus[0])
+        with watch("kernels"):
+            g = _score(phi_s, psi_s, (_alignment(psi_s[start_map[keep]], phi_s[keep]) + anchor_c).T, decay_x, decay_y)
+            if desc_block is not None:
+                g = g / np.float32(max(float(np.abs(g).max()), 1e-30)) + np.float32(params.mu) * desc_block
+        other_prices = np.zeros(n_seed)
+        with watch("assignment"):
+            other_start = linear_assignment(g, method=params.backend, cancel=cancel, prices=other_prices)
+        other = yield from dc_iterations(other_start, other_prices, 0, kernel_scale, True)
+        if other[3] > value:
+            seed_map, _, entries, value = other
+            prices, dc_start = other_prices, "initial alignment"
+    trace.extend(entries)
+    for t_index in range(1, len(taus)):
+        seed_map, _, entries, _ = yield from dc_iterations(seed_map, prices, t_index, None, True)
+        trace.extend(entries)
 
     # ---- finer scales: grow the vertex sample, solve Voronoi cells with all current matches as anchors; there
     # is always at least one (the seeds are surface points, the last scale is every vertex)
@@ -621,7 +653,7 @@ def kernel_matching(source, target, params: KernelMatchingParams, token, initial
         "energy_trace": np.array([e["energy"] for e in trace]),
         "changed_trace": np.array([e["changed"] for e in trace]),
         "tau_trace": np.array([e["tau"] for e in trace]),
-        "monotone": monotone, "unmatched_x": int(np.sum(full_map_xy < 0)),
+        "monotone": monotone, "start": dc_start, "unmatched_x": int(np.sum(full_map_xy < 0)),
         "unmatched_y": int(np.sum(full_map_yx < 0)), "n_eigs": k, "n_seeds": n_seed,
         "seeds_x": seed_vertices_x, "seeds_matched_y": seed_vertices_y,
         "energy_meaning": "QAP kernel energy <Π, K_Y Π K_X> at the smallest time (higher is better); "

@@ -557,8 +557,8 @@ def kernel_matching(source, target, params: KernelMatchingParams, token, initial
                 break
         return seed_map, kernel_scale, entries, value
 
-    # ---- coarse scale, first time: DC from the initial map, and (descriptor initialisation) DC from the initial
-    # alignment; the start that ends with the higher objective goes on (see the module docstring)
+    # ---- coarse scale, first time: DC from the initial map, and (descriptor or landmark initialisation) DC from
+    # the initial alignment; the start that ends with the higher objective goes on (see the module docstring)
     prices = np.zeros(n_seed)  # auction prices carried from one assignment to the next (warm start)
     start_map = seed_map
     seed_map, kernel_scale, entries, value = yield from dc_iterations(start_map, prices, 0, None, False)

@@ -53,13 +53,13 @@ def farthest_point_sampling(points, n_samples: int, *, metric: str = "euclidean"
         start = int(np.random.default_rng(seed).integers(n))
     if not 0 <= start < n:
         raise ParameterError(f"start index {start} out of range [0, {n - 1}]")
-    samples = np.empty(n_samples, dtype=np.int64)
-    samples[0] = start
     if metric == "euclidean":
-        samples = _euclidean_fps(p, n_samples, start)
-    elif metric == "geodesic":
+        return _euclidean_fps(p, n_samples, start)
+    if metric == "geodesic":
         if mesh is None:
             raise InputError("geodesic farthest-point sampling needs the mesh")
+        samples = np.empty(n_samples, dtype=np.int64)
+        samples[0] = start
         graph = mesh.adjacency
         dist = dijkstra(graph, directed=False, indices=start)
         for i in range(1, n_samples):
@@ -68,17 +68,16 @@ def farthest_point_sampling(points, n_samples: int, *, metric: str = "euclidean"
             # only vertices closer to nxt than their current distance change: prune the search there
             d_new = dijkstra(graph, directed=False, indices=nxt, limit=float(dist[nxt]))
             np.minimum(dist, d_new, out=dist)
-    else:
-        raise ParameterError(f"unknown metric {metric!r} (use 'euclidean' or 'geodesic')")
-    return samples
+        return samples
+    raise ParameterError(f"unknown metric {metric!r} (use 'euclidean' or 'geodesic')")
 
 
 @numba.njit(cache=True)
 def _fps_kernel(coords, n_samples, start):  # pragma: no cover - compiled
-    """Greedy farthest points of ``coords`` (dim, n) (coordinate-major, so that the loops vectorise)."""
+    """Greedy farthest points of ``coords`` (dim, n) float64 (coordinate-major: contiguous inner loops)."""
     dim, n = coords.shape
-    dist = np.full(n, np.inf, dtype=coords.dtype)
-    step = np.empty(n, dtype=coords.dtype)
+    dist = np.full(n, np.inf)
+    step = np.empty(n)
     samples = np.empty(n_samples, dtype=np.int64)
     nxt = start
     for k in range(n_samples):

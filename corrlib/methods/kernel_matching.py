@@ -320,8 +320,10 @@ def _sample_order(points: np.ndarray, n_seed: int, growth: float) -> np.ndarray:
     """Vertex order whose prefixes are the samples of the successive scales.
 
     Farthest-point order for the first ``n_seed × growth²`` vertices (the
-    seeds and the first finer scales); the rest follow in a fixed random order
-    (they only enter the last, dense scales).
+    first finer scales; the seeds themselves are surface points, see
+    :func:`~corrlib.geometry.sampling.surface_farthest_points`); the rest
+    follow ordered by their distance from the centroid (they only enter the
+    last, dense scales).
     """
     n = points.shape[0]
     n_fps = int(min(n, n_seed * growth ** 2))
@@ -515,6 +517,18 @@ def kernel_matching(source, target, params: KernelMatchingParams, token, initial
             value += params.mu * float(desc_block[seed_cols, mapping].sum())
         return value
 
+    def seed_score(c, decay_y, decay_x, kernel_scale):
+        """(n_seed, n_seed) float32 score (seed x, seed y) of the alignment ``c``, and the time's kernel scale.
+
+        The kernel term is divided by ``kernel_scale`` (None: its own maximum) before μ × descriptor term is added.
+        """
+        g = _score(phi_s, psi_s, c.T, decay_x, decay_y)  # the assignment's rows are the x seeds
+        if kernel_scale is None:
+            kernel_scale = max(float(np.abs(g).max()), 1e-30)
+        if desc_block is not None:
+            g = g / np.float32(kernel_scale) + np.float32(params.mu) * desc_block
+        return g, kernel_scale
+
     def dc_iterations(seed_map, prices, t_index, kernel_scale, warm_first):
         """DC iterations at one time (a generator: yields progress, returns the map and the time's state).
 
@@ -529,12 +543,8 @@ def kernel_matching(source, target, params: KernelMatchingParams, token, initial
             token.raise_if_cancelled()
             with watch("kernels"):
                 c = _alignment(psi_s[seed_map], phi_s) + anchor_c
-                g = _score(phi_s, psi_s, c.T, decay_x, decay_y)  # (seed x, seed y): the assignment's rows are x
-                if kernel_scale is None:
-                    kernel_scale = max(float(np.abs(g).max()), 1e-30)
+                g, kernel_scale = seed_score(c, decay_y, decay_x, kernel_scale)
                 before = objective(seed_map, c, kernel_scale, decay_y, decay_x)
-                if desc_block is not None:
-                    g = g / np.float32(kernel_scale) + np.float32(params.mu) * desc_block
             with watch("assignment"):
                 # the first score of a new time, or after the initial alignment, is further from the last one: a
                 # larger first ε (measured on the cats: 1.1 s instead of 3.3 s for the first change of time,
@@ -570,11 +580,8 @@ def kernel_matching(source, target, params: KernelMatchingParams, token, initial
         else:
             keep = np.argsort(-confidence, kind="stable")[:max(1, int(round(params.init_fraction * n_seed)))]
             yield Progress("initial alignment", 0.1, f"kernel score of the {keep.size} most similar initial matches")
-        decay_y, decay_x = decays(taus[0])
         with watch("kernels"):
-            g = _score(phi_s, psi_s, (_alignment(psi_s[start_map[keep]], phi_s[keep]) + anchor_c).T, decay_x, decay_y)
-            if desc_block is not None:
-                g = g / np.float32(max(float(np.abs(g).max()), 1e-30)) + np.float32(params.mu) * desc_block
+            g, _ = seed_score(_alignment(psi_s[start_map[keep]], phi_s[keep]) + anchor_c, *decays(taus[0]), None)
         other_prices = np.zeros(n_seed)
         with watch("assignment"):
             other_start = linear_assignment(g, method=params.backend, cancel=cancel, prices=other_prices)

@@ -66,8 +66,11 @@ class Dataset:
         return not self.gt
 
 
-def load_dataset(folder, pairs_file=None) -> Dataset:
-    """Discover a dataset (see the module docstring for the layouts)."""
+def load_dataset(folder, pairs_file=None, *, require_pairs: bool = True) -> Dataset:
+    """Discover a dataset (see the module docstring for the layouts).
+
+    ``require_pairs=False`` accepts a single shape (benchmarks that match a shape with itself).
+    """
     root = Path(folder)
     if not root.is_dir():
         raise FileFormatError(f"{root}: not a folder")
@@ -103,7 +106,7 @@ def load_dataset(folder, pairs_file=None) -> Dataset:
     else:
         names = list(shapes)
         pairs = [(a, b) for a in names for b in names if a != b]
-    if not pairs:
+    if not pairs and require_pairs:
         raise FileFormatError(f"{root}: no pairs to run")
     return Dataset(root, shapes, pairs, gt, gt_sym)
 

@@ -294,6 +294,27 @@ def cmd_bench_retrieval(args) -> int:
     return 0 if summary["failed"] == 0 else 1
 
 
+def cmd_bench_contour(args) -> int:
+    from corrlib.contour_bench import contour_benchmark
+
+    params = _parse_overrides(args.param or [])
+    if args.n_contour is not None:
+        params["n_contour"] = args.n_contour
+    planes = [p.strip() for p in args.planes.split(",") if p.strip()]
+
+    def progress(done, total, row):
+        if args.quiet or row["status"] == "skipped":
+            return
+        what = (f"mean error {row['mean_error']:.3f}, coverage {row['coverage']:.2f}, {row['seconds']:.1f} s"
+                if row["status"] == "ok" else f"FAILED: {row['error']}")
+        print(f"  [{done}/{total}] {row['query']} -> {row['target']}: {what}", file=sys.stderr)
+
+    summary = contour_benchmark(args.datasets, args.output, planes=planes, params=params, jobs=args.jobs,
+                                scheduler=args.scheduler, pictures=not args.no_pictures, callback=progress)
+    print((Path(args.output) / "contour_summary.md").read_text())
+    return 0 if summary["all"]["failed"] == 0 else 1
+
+
 def cmd_morph(args) -> int:
     from corrlib.methods import get_method, solve
     from corrlib.morph import export_sequence, frame_positions, has_deformation
@@ -558,6 +579,20 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("-o", "--output", default="retrieval_output", help="output folder")
     p.add_argument("-q", "--quiet", action="store_true")
     p.set_defaults(func=cmd_bench_retrieval)
+
+    p = sub.add_parser("bench-contour", help="2D-to-3D benchmark: plane-section queries with ground truth matched "
+                                             "to their mesh and to the other poses of its class")
+    p.add_argument("datasets", nargs="+", help="dataset folders (the layouts of 'corr bench'; the class of a mesh "
+                                                "is its name without a trailing number)")
+    p.add_argument("--planes", default="main,symmetry",
+                   help="comma-separated section planes: main, symmetry, cross (default: main,symmetry)")
+    p.add_argument("--n-contour", dest="n_contour", type=int, help="contour points (default: the method's 200)")
+    p.add_argument("--param", action="append", metavar="KEY=VALUE", help="a contour3d parameter (repeatable)")
+    p.add_argument("--no-pictures", action="store_true", help="do not write a picture per query")
+    _add_scale_out(p)
+    p.add_argument("-o", "--output", default="contour_bench_output", help="output folder")
+    p.add_argument("-q", "--quiet", action="store_true")
+    p.set_defaults(func=cmd_bench_contour)
 
     p = sub.add_parser("refine", help="refine an initial map or landmarks into a dense map")
     p.add_argument("source")

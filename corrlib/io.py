@@ -60,6 +60,28 @@ def atomic_write(path, mode: str = "w"):
         raise
 
 
+def ensure_output_folder(path) -> Path:
+    """Create ``path`` (with parents) and check that files can be written in it, before any work.
+
+    Raises
+    ------
+    InputError
+        Naming the folder: it is a file, lies under a file, or is not writable.
+    """
+    if str(path) == "":
+        raise InputError("the output folder is an empty path")
+    folder = Path(path)
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
+        fd, probe = tempfile.mkstemp(dir=folder, prefix=".write-check.")
+        os.close(fd)
+        os.unlink(probe)
+    except OSError as exc:
+        reason = "it is a file" if folder.is_file() else (exc.strerror or str(exc)).lower()
+        raise InputError(f"{folder}: cannot write output there ({reason})") from None
+    return folder
+
+
 def _require_file(path) -> Path:
     path = Path(path)
     if not path.exists():

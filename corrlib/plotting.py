@@ -221,3 +221,49 @@ def save_torus_pictures(path, result) -> Path:
     ax.set_axis_off()
     ax.set_title("product torus A × B")
     return _save_figure(fig, path)
+
+
+def save_curve_comparison(path, contour_points: np.ndarray, mesh, path_vertices: np.ndarray,
+                          path_contour_index: np.ndarray, gt_vertices: np.ndarray, *, title: str = "") -> Path:
+    """PNG: the query contour, and the matched and ground-truth curves over two projections of the mesh.
+
+    The mesh is drawn as a faint cloud of its vertices, so neither curve is
+    hidden behind the surface; the matched curve and the query are coloured
+    by contour position, the ground truth is black and dashed.
+
+    Parameters
+    ----------
+    contour_points : (m, 2) float
+    mesh : TriMesh
+    path_vertices, path_contour_index : (p,) int
+        Mesh vertex and contour point of every step of the matched path.
+    gt_vertices : (m,) int
+        Ground-truth vertex of every contour point.
+    """
+    plt = _pyplot()
+    from matplotlib import cm
+
+    m = contour_points.shape[0]
+    hue = cm.hsv(np.arange(m) / m)[:, :3]
+    fig, axs = plt.subplots(1, 3, figsize=(15, 5), dpi=90)
+    closed = np.vstack([contour_points, contour_points[:1]])
+    axs[0].fill(closed[:, 0], closed[:, 1], color="0.9")
+    axs[0].scatter(contour_points[:, 0], contour_points[:, 1], c=hue, s=10)
+    axs[0].set_title("query contour")
+    axes = _view_axes(mesh.vertices)
+    v = (mesh.vertices - mesh.vertices.mean(axis=0)) @ axes.T
+    curve = v[path_vertices]
+    gt = v[np.r_[gt_vertices, gt_vertices[:1]]]
+    for ax, (a, b), label in ((axs[1], (0, 2), "side view"), (axs[2], (0, 1), "top view")):
+        ax.scatter(v[:, a], v[:, b], s=0.3, color="0.8")
+        ax.plot(gt[:, a], gt[:, b], color="black", lw=1.0, ls="--", label="ground truth")
+        for k in range(len(curve) - 1):
+            ax.plot(curve[k:k + 2, a], curve[k:k + 2, b], color=hue[path_contour_index[k] % m], lw=2.5)
+        ax.set_title(f"{mesh.name}: {label}")
+        ax.legend(loc="lower right")
+    for ax in axs:
+        ax.set_aspect("equal")
+        ax.set_axis_off()
+    if title:
+        fig.suptitle(title)
+    return _save_figure(fig, path)

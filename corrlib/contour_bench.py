@@ -1,0 +1,425 @@
+"""2D-to-3D benchmark with ground truth: plane-section queries (thesis §7.6), ``corr bench-contour``.
+
+A query is built from a mesh as in the thesis: the mesh is cut with a plane
+through its centroid, the longest section loop is kept and its in-plane
+coordinates are the 2D contour. Every point of that contour lies on a mesh
+edge, so its ground-truth vertex on the mesh it was cut from is known; the
+ground truth is carried to the other meshes of the class through the
+dataset's correspondences (``.vts`` rows or identical connectivity, the
+layouts of :func:`corrlib.bench.load_dataset`).
+
+Two planes are offered:
+
+* ``main``: spanned by the two principal axes of largest variance (normal:
+  the axis of smallest variance);
+* ``symmetry``: the principal plane across which the mesh is most nearly
+  mirror-symmetric (smallest mean distance from the reflected vertices to the
+  surface's vertices; for bilateral shapes the sagittal plane). Where it is
+  the ``main`` plane (most quadrupeds) the query is skipped, not counted twice;
+* ``cross``: spanned by the first and third principal axes (for a quadruped
+  the horizontal section of the torso).
+
+The length of the ground-truth curve on another pose is the section's length
+scaled by the square root of the area ratio (the deformations are nearly
+isometric; a polygon through the transferred ground-truth vertices would
+zig-zag and overstate it).
+
+Every query is matched to the mesh it was cut from and to the other meshes of
+its class. Per match: mean geodesic error / √area and the fractions within
+0.05 and 0.1; **coverage**, the length of the matched closed curve on the
+mesh divided by the length of the ground-truth curve (a collapsed optimum has
+a small coverage); the number of distinct vertices the curve visits; energy,
+optimality gap and runtime.
+"""
+
+from __future__ import annotations
+
+import json
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+from scipy.spatial import cKDTree
+
+from corrlib.errors import CorrError, InputError, ParameterError
+from corrlib.shapes import Contour2D, TriMesh
+
+PLANES = ("main", "symmetry", "cross")
+DEFAULT_PLANES = ("main", "symmetry")
+COLLAPSE_COVERAGE = 0.7  # a matched curve shorter than this fraction of the ground truth counts as collapsed
+
+
+@dataclass
+class CutQuery:
+    """A plane-section query with point-wise ground truth on the mesh it was cut from.
+
+    Attributes
+    ----------
+    mesh_name : str
+    plane : str
+        ``"main"`` or ``"symmetry"``.
+    contour : Contour2D
+        The section loop in the plane's (u, v) coordinates (mesh units).
+    points_3d : (p, 3) float
+        The same loop on the mesh surface.
+    edges : (p, 2) int
+        Mesh edge each loop point lies on.
+    """
+
+    mesh_name: str
+    plane: str
+    contour: Contour2D
+    points_3d: np.ndarray
+    edges: np.ndarray
+
+    @property
+    def name(self) -> str:
+        return f"{self.mesh_name}-{self.plane}"
+
+    @property
+    def length_3d(self) -> float:
+        """Length of the section curve on the mesh it was cut from."""
+        return float(np.linalg.norm(np.roll(self.points_3d, -1, axis=0) - self.points_3d, axis=1).sum())
+
+    def ground_truth(self, points_2d: np.ndarray, mesh_vertices: np.ndarray) -> np.ndarray:
+        """Ground-truth vertex of arbitrary points on the contour.
+
+        Each point is projected onto the nearest segment of the closed section
+        polygon; the surface point at the same position between the two loop
+        points is assigned the nearest endpoint of their two mesh edges.
+
+        Parameters
+        ----------
+        points_2d : (m, 2) float
+            Points on (or next to) the contour, e.g. a resampling of it.
+        mesh_vertices : (n, 3) float
+            Vertices of the mesh the query was cut from.
+
+        Returns
+        -------
+        (m,) int
+        """
+        p2 = self.contour.points
+        a, b = p2, np.roll(p2, -1, axis=0)
+        ab = b - a
+        rel = np.asarray(points_2d, dtype=np.float64)[:, None, :] - a[None]
+        t = np.clip(np.einsum("mpk,pk->mp", rel, ab) / np.maximum(np.sum(ab * ab, axis=1), 1e-300), 0.0, 1.0)
+        dist2 = np.sum((rel - t[..., None] * ab[None]) ** 2, axis=2)
+        seg = np.argmin(dist2, axis=1)
+        u = t[np.arange(len(seg)), seg]
+        nxt = (seg + 1) % len(p2)
+        surface = (1 - u)[:, None] * self.points_3d[seg] + u[:, None] * self.points_3d[nxt]
+        candidates = np.hstack([self.edges[seg], self.edges[nxt]])  # (m, 4)
+        d = np.linalg.norm(mesh_vertices[candidates] - surface[:, None, :], axis=2)
+        return candidates[np.arange(len(seg)), np.argmin(d, axis=1)]
+
+
+def principal_frame(mesh: TriMesh) -> tuple[np.ndarray, np.ndarray]:
+    """Area-weighted centroid (3,) and principal axes (3, 3), rows by decreasing variance."""
+    from corrlib.geometry.laplacian import mass_matrix
+
+    weights = mass_matrix(mesh.vertices, mesh.faces).diagonal()
+    centre = weights @ mesh.vertices / weights.sum()
+    centred = (mesh.vertices - centre) * np.sqrt(weights / weights.sum())[:, None]
+    _, _, vt = np.linalg.svd(centred, full_matrices=False)
+    return centre, vt
+
+
+def symmetry_normal(mesh: TriMesh) -> np.ndarray:
+    """Normal (3,) of the principal plane across which the mesh is most nearly mirror-symmetric."""
+    centre, axes = principal_frame(mesh)
+    tree = cKDTree(mesh.vertices)
+    scores = []
+    for normal in axes:
+        reflected = mesh.vertices - 2.0 * ((mesh.vertices - centre) @ normal)[:, None] * normal[None]
+        scores.append(tree.query(reflected)[0].mean())
+    return axes[int(np.argmin(scores))]
+
+
+def cut_query(mesh: TriMesh, plane: str = "main") -> CutQuery:
+    """The longest section loop of ``mesh`` with a principal plane through its centroid.
+
+    Raises
+    ------
+    ParameterError
+        Unknown plane.
+    InputError
+        The plane does not cut a closed loop of at least 10 points.
+    """
+    from corrlib.geometry.sections import plane_section
+
+    if plane not in PLANES:
+        raise ParameterError(f"plane must be one of {', '.join(PLANES)}, got {plane!r}")
+    centre, axes = principal_frame(mesh)
+    normal = {"main": axes[2], "cross": axes[1]}.get(plane)
+    if normal is None:
+        normal = symmetry_normal(mesh)
+    loops = plane_section(mesh, centre, normal)
+    if not loops or len(loops[0].points) < 10:
+        raise InputError(f"{mesh.name}: the {plane} plane does not cut a closed section loop of 10 or more points")
+    loop = loops[0]
+    contour = Contour2D(loop.points_2d, name=f"{mesh.name}-{plane}", validate=False)
+    # the contour drops (near-)duplicate points: keep the loop points it kept, in order
+    position = {tuple(p): i for i, p in enumerate(loop.points_2d)}
+    kept = np.array([position[tuple(p)] for p in contour.points])
+    return CutQuery(mesh.name, plane, contour, loop.points[kept], loop.edges[kept])
+
+
+def _vts_transfer(source_vertices: np.ndarray, rows_source: np.ndarray, rows_target: np.ndarray):
+    """Vertex map source -> target through corresponding ``.vts`` rows (nearest row on the source)."""
+    tree = cKDTree(source_vertices[rows_source])
+
+    def transfer(vertices: np.ndarray) -> np.ndarray:
+        return rows_target[tree.query(source_vertices[vertices])[1]]
+
+    return transfer
+
+
+def score_curve(map_xy: np.ndarray, path_vertices: np.ndarray, gt: np.ndarray, target: TriMesh,
+                gt_length: float) -> dict:
+    """Accuracy and coverage of a matched closed curve.
+
+    Parameters
+    ----------
+    map_xy : (m,) int
+        Matched vertex of every contour point.
+    path_vertices : (p,) int
+        The closed path on the mesh (first = last).
+    gt : (m,) int
+        Ground-truth vertex of every contour point.
+    target : TriMesh
+    gt_length : float
+        Length of the ground-truth curve on the target.
+
+    Returns
+    -------
+    dict
+        ``mean_error``, ``median_error`` (geodesic / √area), ``within_005``,
+        ``within_01``, ``coverage`` (path length / ``gt_length``),
+        ``distinct_vertices`` of the path and ``gt_distinct_vertices``.
+    """
+    from corrlib.geometry.geodesics import GeodesicSolver
+
+    errors = GeodesicSolver(target).pair_distances(map_xy, gt) / np.sqrt(target.area)
+    length = np.linalg.norm(np.diff(target.vertices[path_vertices], axis=0), axis=1).sum()
+    return {"n_points": int(len(map_xy)), "mean_error": float(errors.mean()), "median_error": float(np.median(errors)),
+            "within_005": float(np.mean(errors <= 0.05)), "within_01": float(np.mean(errors <= 0.1)),
+            "coverage": float(length / gt_length), "distinct_vertices": int(len(np.unique(path_vertices))),
+            "gt_distinct_vertices": int(len(np.unique(gt)))}
+
+
+def match_cut_query(source_path, target_path, plane: str, params: dict, *, gt_rows=None,
+                    picture: str | None = None) -> dict:
+    """Cut a query from the source mesh, match it to the target and score it (one benchmark job).
+
+    Parameters
+    ----------
+    source_path, target_path : path
+        Mesh files; equal for the query's own mesh.
+    plane : str
+    params : dict
+        Parameters of the ``contour3d`` method.
+    gt_rows : (rows_source, rows_target), optional
+        Corresponding ``.vts`` rows (0-based); ``None``: identity (the same
+        connectivity) when source and target differ.
+    picture : path, optional
+        PNG of the query and the matched curve.
+
+    Returns
+    -------
+    dict
+        One row of the results (see the module docstring); ``status`` is
+        ``"ok"`` or ``"failed"`` with ``error``.
+    """
+    from corrlib.io import load_mesh
+    from corrlib.methods import solve
+
+    row = {"query": f"{Path(source_path).stem}-{plane}", "target": Path(target_path).stem, "plane": plane,
+           "self": Path(source_path).resolve() == Path(target_path).resolve(), "status": "ok", "error": ""}
+    try:
+        source = load_mesh(source_path)
+        target = source if row["self"] else load_mesh(target_path)
+        if plane == "symmetry" and abs(symmetry_normal(source) @ principal_frame(source)[1][2]) > 0.99:
+            row.update(status="skipped", error="the symmetry plane is the main plane")
+            return row
+        query = cut_query(source, plane)
+        if row["self"]:
+            transfer = None
+        elif gt_rows is not None:
+            transfer = _vts_transfer(source.vertices, *gt_rows)
+        elif source.n_vertices == target.n_vertices:
+            transfer = None  # same connectivity: vertex i is vertex i
+        else:
+            raise InputError(f"no ground truth from {source.name} ({source.n_vertices} vertices) to "
+                             f"{target.name} ({target.n_vertices} vertices)")
+        start = time.perf_counter()
+        result = solve("contour3d", query.contour, target, **params)
+        seconds = time.perf_counter() - start
+        extras = result.extras
+        gt = query.ground_truth(extras["contour_points"], source.vertices)
+        if transfer is not None:
+            gt = transfer(gt)
+        path = np.asarray(extras["path_vertices"])
+        row.update(score_curve(result.map_xy, path, gt, target, query.length_3d * np.sqrt(target.area / source.area)))
+        row.update(energy=float(result.energy), gap=float(extras["upper_bound"] - extras["lower_bound"]),
+                   optimal=bool(extras["optimal"]), iterations=int(extras["iterations"]), seconds=seconds)
+        if picture is not None:
+            from corrlib.plotting import save_curve_comparison
+
+            save_curve_comparison(picture, extras["contour_points"], target, path, extras["path_contour_index"], gt,
+                                  title=f"{row['query']} -> {row['target']}: mean error {row['mean_error']:.3f}, "
+                                        f"coverage {row['coverage']:.2f}")
+    except CorrError as exc:
+        row.update(status="failed", error=str(exc))
+    return row
+
+
+@dataclass
+class ContourJob:
+    source: Path
+    target: Path
+    plane: str
+    gt_rows: tuple | None
+
+
+def contour_jobs(datasets, planes=DEFAULT_PLANES) -> list[ContourJob]:
+    """Every (query mesh, plane, target) of the datasets: the query's own mesh and the others of its class.
+
+    Parameters
+    ----------
+    datasets : list of path
+        Folders in the layouts of :func:`corrlib.bench.load_dataset`.
+    planes : sequence of str
+    """
+    from corrlib.bench import load_dataset
+    from corrlib.io import load_vts
+    from corrlib.retrieval import class_of
+
+    for plane in planes:
+        if plane not in PLANES:
+            raise ParameterError(f"plane must be one of {', '.join(PLANES)}, got {plane!r}")
+    jobs = []
+    for folder in datasets:
+        data = load_dataset(folder, require_pairs=False)
+        rows = {name: load_vts(path) - 1 for name, path in data.gt.items()}
+        for name, path in data.shapes.items():
+            for plane in planes:
+                jobs.append(ContourJob(path, path, plane, None))
+                for other, other_path in data.shapes.items():
+                    if other == name or class_of(other) != class_of(name):
+                        continue
+                    gt_rows = (rows[name], rows[other]) if rows else None
+                    jobs.append(ContourJob(path, other_path, plane, gt_rows))
+    return jobs
+
+
+def _summary(rows: list[dict]) -> dict:
+    rows = [r for r in rows if r["status"] != "skipped"]
+
+    def block(selected):
+        ok = [r for r in selected if r["status"] == "ok"]
+        if not ok:
+            return {"queries": len(selected), "failed": len(selected)}
+        col = lambda key: np.array([r[key] for r in ok], dtype=np.float64)  # noqa: E731
+        return {"queries": len(selected), "failed": len(selected) - len(ok),
+                "mean_error": float(col("mean_error").mean()), "worst_mean_error": float(col("mean_error").max()),
+                "within_005": float(col("within_005").mean()), "within_01": float(col("within_01").mean()),
+                "mean_coverage": float(col("coverage").mean()), "min_coverage": float(col("coverage").min()),
+                "collapsed": int(np.sum(col("coverage") < COLLAPSE_COVERAGE)),
+                "optimal": int(sum(r["optimal"] for r in ok)),
+                "median_seconds": float(np.median(col("seconds"))), "max_seconds": float(col("seconds").max())}
+
+    return {"all": block(rows), "same mesh": block([r for r in rows if r["self"]]),
+            "other pose": block([r for r in rows if not r["self"]])}
+
+
+def _markdown(summary: dict, rows: list[dict]) -> str:
+    def fmt(value, spec=".3f"):
+        return "–" if value is None else format(value, spec)
+
+    lines = ["| queries | n | failed | mean error | worst mean | ≤0.05 | ≤0.1 | coverage | min coverage | "
+             f"collapsed (<{COLLAPSE_COVERAGE}) | optimal | median s | max s |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    for label, s in summary.items():
+        g = s.get
+        lines.append(f"| {label} | {s['queries']} | {s['failed']} | {fmt(g('mean_error'))} | "
+                     f"{fmt(g('worst_mean_error'))} | {fmt(g('within_005'))} | {fmt(g('within_01'))} | "
+                     f"{fmt(g('mean_coverage'), '.2f')} | {fmt(g('min_coverage'), '.2f')} | {g('collapsed', '–')} | "
+                     f"{g('optimal', '–')} | {fmt(g('median_seconds'), '.2f')} | {fmt(g('max_seconds'), '.2f')} |")
+    lines += ["", "| query | target | mean error | ≤0.05 | ≤0.1 | coverage | distinct vertices (gt) | energy | gap | "
+                  "s | error |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        if r["status"] == "skipped":
+            continue
+        if r["status"] != "ok":
+            lines.append(f"| {r['query']} | {r['target']} | | | | | | | | | {r['error']} |")
+            continue
+        lines.append(f"| {r['query']} | {r['target']} | {r['mean_error']:.3f} | {r['within_005']:.2f} | "
+                     f"{r['within_01']:.2f} | {r['coverage']:.2f} | {r['distinct_vertices']} "
+                     f"({r['gt_distinct_vertices']}) | {r['energy']:.4g} | {r['gap']:.2g} | {r['seconds']:.2f} | |")
+    return "\n".join(lines) + "\n"
+
+
+COLUMNS = ("query", "target", "plane", "self", "status", "n_points", "mean_error", "median_error", "within_005",
+           "within_01", "coverage", "distinct_vertices", "gt_distinct_vertices", "energy", "gap", "optimal",
+           "iterations", "seconds", "error")
+
+
+def contour_benchmark(datasets, out, *, planes=DEFAULT_PLANES, params: dict | None = None, jobs: int | None = 1,
+                      scheduler: str | None = None, pictures: bool = True, callback=None) -> dict:
+    """Run the plane-section benchmark; write ``contour_bench.csv``, ``contour_summary.{json,md}``, pictures.
+
+    Parameters
+    ----------
+    datasets : list of path
+    out : path
+        Output folder (created; checked for writing before any work).
+    planes : sequence of str
+    params : dict, optional
+        ``contour3d`` parameters (validated before any work).
+    jobs, scheduler
+        See :func:`corrlib.parallel.job_executor`.
+    pictures : bool
+        One PNG per match in ``out/pictures``.
+    callback : callable(done, total, row), optional
+
+    Returns
+    -------
+    dict
+        The summary: ``{"all" | "same mesh" | "other pose": {...}}``.
+    """
+    from corrlib.bench import _csv
+    from corrlib.io import atomic_write, ensure_output_folder
+    from corrlib.methods import get_method, make_params
+    from corrlib.parallel import job_executor
+
+    params = dict(params or {})
+    make_params(get_method("contour3d").params, **params)  # named errors before any work
+    todo = contour_jobs(datasets, planes)
+    out = ensure_output_folder(out)
+    if pictures:
+        ensure_output_folder(out / "pictures")
+    rows = []
+    with job_executor(jobs, scheduler) as pool:
+        futures = []
+        for job in todo:
+            picture = None
+            if pictures:
+                picture = str(out / "pictures" / f"{job.source.stem}-{job.plane}__{job.target.stem}.png")
+            futures.append(pool.submit(match_cut_query, str(job.source), str(job.target), job.plane, params,
+                                       gt_rows=job.gt_rows, picture=picture))
+        for number, future in enumerate(futures, 1):
+            rows.append(future.result())
+            if callback is not None:
+                callback(number, len(futures), rows[-1])
+    summary = _summary(rows)
+    with atomic_write(out / "contour_bench.csv") as fh:
+        fh.write(",".join(COLUMNS) + "\n")
+        for r in rows:
+            fh.write(",".join(_csv(r.get(c, "")) for c in COLUMNS) + "\n")
+    with atomic_write(out / "contour_summary.json") as fh:
+        json.dump({"summary": summary, "params": params, "planes": list(planes), "rows": rows}, fh, indent=1)
+    with atomic_write(out / "contour_summary.md") as fh:
+        fh.write(_markdown(summary, rows))
+    return summary

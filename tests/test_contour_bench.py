@@ -1,0 +1,141 @@
+"""The 2D-to-3D benchmark: plane-section queries, their ground truth, scoring and the command."""
+
+import json
+import shutil
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+import trimesh
+from scipy.sparse.csgraph import dijkstra
+
+from _data import TOSCA
+from corrlib.cli import main
+from corrlib.contour_bench import (contour_benchmark, contour_jobs, cut_query, principal_frame, score_curve,
+                                   symmetry_normal)
+from corrlib.errors import InputError, ParameterError
+from corrlib.geometry.sections import plane_basis
+from corrlib.io import load_mesh
+from corrlib.shapes import TriMesh
+
+
+def ellipsoid_with_bump():
+    """Axes 3 > 2 > 1 along x, y, z; a bump on +z keeps the mirror symmetry across y = 0 only."""
+    sphere = trimesh.creation.icosphere(subdivisions=4)
+    v = sphere.vertices * [3.0, 2.0, 1.0]
+    v[:, 2] += 0.6 * np.exp(-((v[:, 0] - 1.0) ** 2 + v[:, 1] ** 2) / 0.5) * (v[:, 2] > 0)
+    return TriMesh(v, sphere.faces, name="bumpy")
+
+
+def test_planes_of_a_shape_with_one_mirror_symmetry():
+    mesh = ellipsoid_with_bump()
+    centre, axes = principal_frame(mesh)
+    assert abs(axes[2] @ [0, 0, 1]) > 0.99  # main plane: spanned by (nearly) x and y
+    assert abs(symmetry_normal(mesh) @ [0, 1, 0]) > 0.999  # mirror plane y = 0
+    for plane, normal in (("main", axes[2]), ("symmetry", symmetry_normal(mesh)), ("cross", axes[1])):
+        query = cut_query(mesh, plane)
+        # the loop lies in its plane through the centroid
+        assert np.allclose((query.points_3d - centre) @ normal, 0.0, atol=1e-9), plane
+        assert query.contour.n_points > 50
+
+
+def test_ground_truth_of_an_equator_cut_is_the_vertex_at_the_same_angle():
+    sphere = trimesh.creation.icosphere(subdivisions=4)
+    mesh = TriMesh(sphere.vertices * [2.0, 1.5, 1.0], sphere.faces, name="ellipsoid")
+    query = cut_query(mesh, "main")
+    centre, axes = principal_frame(mesh)
+    _, u, v = plane_basis(axes[2])
+    # arbitrary points along the contour: a resampling at 97 points
+    points = query.contour.ccw().resample(97).points
+    gt = query.ground_truth(points, mesh.vertices)
+    rebuilt = np.column_stack([(mesh.vertices[gt] - centre) @ u, (mesh.vertices[gt] - centre) @ v])
+    # within one edge length of the point (the nearer end of the edges the point lies between)
+    assert np.max(np.linalg.norm(rebuilt - points, axis=1)) < mesh.edge_lengths.max()
+    # and the ground-truth vertices lie next to the plane
+    assert np.max(np.abs((mesh.vertices[gt] - centre) @ axes[2])) < 0.1
+
+
+def test_score_of_the_ground_truth_is_perfect_and_of_a_collapsed_curve_is_not():
+    wolf = load_mesh(TOSCA / "wolf0.off")
+    query = cut_query(wolf, "main")
+    points = query.contour.resample(150).points
+    gt = query.ground_truth(points, wolf.vertices)
+    # the ground truth as a closed edge path: shortest graph paths between consecutive ground-truth vertices
+    e = wolf.edges
+    graph = sp.coo_matrix((wolf.edge_lengths, (e[:, 0], e[:, 1])), shape=(wolf.n_vertices,) * 2).tocsr()
+    _, pred = dijkstra(graph, directed=False, indices=gt, return_predecessors=True)
+    path = [gt[0]]
+    for k, b in enumerate(np.r_[gt[1:], gt[:1]]):
+        hops = []
+        while b != gt[k]:
+            hops.append(b)
+            b = pred[k, b]
+        path += hops[::-1]
+    perfect = score_curve(gt, np.array(path), gt, wolf, query.length_3d)
+    assert perfect["mean_error"] == 0.0 and perfect["within_005"] == 1.0
+    assert 0.9 < perfect["coverage"] < 1.6
+    # a curve that runs back and forth on a short stretch: large error, small coverage
+    short = np.r_[gt[:10], gt[9::-1]]
+    collapsed_map = np.resize(short, len(gt))
+    bad = score_curve(collapsed_map, short, gt, wolf, query.length_3d)
+    assert bad["mean_error"] > 0.2 and bad["coverage"] < 0.3 and bad["distinct_vertices"] <= 10
+
+
+def test_jobs_pair_each_mesh_with_itself_and_its_class(tmp_path):
+    for name in ("wolf0", "wolf1", "cat0"):
+        shutil.copy(TOSCA / f"{name}.off", tmp_path / f"{name}.off")
+    jobs = contour_jobs([tmp_path], planes=("main",))
+    pairs = sorted((j.source.stem, j.target.stem) for j in jobs)
+    assert pairs == [("cat0", "cat0"), ("wolf0", "wolf0"), ("wolf0", "wolf1"), ("wolf1", "wolf0"), ("wolf1", "wolf1")]
+    with pytest.raises(ParameterError, match="plane"):
+        contour_jobs([tmp_path], planes=("diagonal",))
+
+
+def test_benchmark_end_to_end_with_vts_ground_truth(tmp_path):
+    data = tmp_path / "cats"
+    data.mkdir()
+    for name in ("cat0", "cat1"):
+        shutil.copy(TOSCA / f"{name}.off", data / f"{name}.off")
+        shutil.copy(TOSCA / f"{name}.vts", data / f"{name}.vts")
+    out = tmp_path / "out"
+    rows = []
+    summary = contour_benchmark([data], out, planes=("main",), params={"n_contour": 60, "eps": 0.05}, jobs=1,
+                                callback=lambda done, total, row: rows.append(row))
+    assert len(rows) == 4 and all(r["status"] == "ok" for r in rows)
+    assert summary["same mesh"]["queries"] == 2 and summary["other pose"]["queries"] == 2
+    for r in rows:
+        assert 0 <= r["mean_error"] < 1 and r["coverage"] > 0 and r["distinct_vertices"] > 1
+        assert r["n_points"] == 60 and r["gap"] >= 0
+    written = json.loads((out / "contour_summary.json").read_text())
+    assert written["summary"]["all"]["queries"] == 4
+    assert len((out / "contour_bench.csv").read_text().splitlines()) == 5
+    assert len(list((out / "pictures").glob("*.png"))) == 4
+    assert "| other pose |" in (out / "contour_summary.md").read_text()
+
+
+def test_command_and_its_errors(tmp_path, capsys):
+    data = tmp_path / "wolves"
+    data.mkdir()
+    shutil.copy(TOSCA / "wolf0.off", data / "wolf0.off")
+    assert main(["bench-contour", str(data), "--planes", "main", "--n-contour", "40", "--param", "eps=0.1",
+                 "--jobs", "1", "--no-pictures", "-q", "-o", str(tmp_path / "out")]) == 0
+    assert "| same mesh | 1 | 0 |" in capsys.readouterr().out
+    assert not (tmp_path / "out" / "pictures").exists()
+    # bad input: named errors, exit 2, before any work
+    blocker = tmp_path / "file"
+    blocker.write_text("x")
+    assert main(["bench-contour", str(data), "-o", str(blocker / "out")]) == 2
+    assert "cannot write output" in capsys.readouterr().err
+    assert main(["bench-contour", str(data), "--planes", "oblique", "-o", str(tmp_path / "o2")]) == 2
+    assert "plane must be one of" in capsys.readouterr().err
+    assert main(["bench-contour", str(data), "--param", "k=-3", "-o", str(tmp_path / "o3")]) == 2
+    assert "k" in capsys.readouterr().err
+    assert not (tmp_path / "o2").exists() and not (tmp_path / "o3").exists()
+
+
+def test_a_plane_that_cuts_nothing_closed_is_a_named_error():
+    # an open strip: its sections are open chains, not loops
+    grid = trimesh.creation.box(extents=[4.0, 1.0, 0.2])
+    strip = TriMesh(grid.vertices, grid.faces[grid.face_normals[:, 2] > 0.5], validate=False, name="strip")
+    with pytest.raises(InputError, match="strip.*closed section loop"):
+        cut_query(strip, "main")

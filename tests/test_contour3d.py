@@ -268,3 +268,32 @@ def test_bad_inputs(wolf_pair):
     broken = TriMesh(two.vertices, two.faces, validate=False, name="two-parts")
     with pytest.raises(InputError, match="two-parts.*disconnected"):
         solve("contour3d", Contour2D(np.column_stack([np.cos(t), np.sin(t)])), broken, n_contour=20)
+
+
+def test_energy_is_invariant_to_the_mirror_image_and_orientation_of_the_sketch(wolf_pair):
+    """A silhouette has no front and back: the mirrored sketch matches the same closed curve, traversed the
+    other way, with the same energy (the features are intrinsic and the edge costs symmetric), so trying
+    both is unnecessary; the orientation of the input is irrelevant (it is made counter-clockwise)."""
+    wolf0, wolf1 = wolf_pair
+    contour, _, _ = silhouette_with_ground_truth(wolf0, resolution=200)
+    base = solve("contour3d", contour, wolf1, n_contour=60)
+    mirrored = solve("contour3d", Contour2D(contour.points * [-1.0, 1.0]), wolf1, n_contour=60)
+    assert mirrored.energy == pytest.approx(base.energy, rel=1e-9)
+    assert set(mirrored.extras["path_vertices"]) == set(base.extras["path_vertices"])
+    order = np.r_[0, np.arange(contour.n_points - 1, 0, -1)]  # clockwise, same first point
+    reversed_ = solve("contour3d", Contour2D(contour.points[order]), wolf1, n_contour=60)
+    assert reversed_.energy == base.energy and np.array_equal(reversed_.map_xy, base.map_xy)
+
+
+def test_too_few_eigenpairs_is_a_named_error():
+    t = np.linspace(0, 2 * np.pi, 12, endpoint=False)
+    circle = Contour2D(np.column_stack([np.cos(t), np.sin(t)]), name="tiny-circle")
+    ico = trimesh.creation.icosphere(0)
+    with pytest.raises(InputError, match="ico12: 12 vertices are too few for k=25"):
+        solve("contour3d", circle, TriMesh(ico.vertices, ico.faces, name="ico12"), n_contour=40)
+    sphere = trimesh.creation.icosphere(3)
+    with pytest.raises(ContourError, match="tiny-circle: the filled silhouette has .* too few for k=25"):
+        solve("contour3d", circle, TriMesh(sphere.vertices, sphere.faces), n_contour=10)
+    # with fewer eigenpairs both are accepted
+    result = solve("contour3d", circle, TriMesh(sphere.vertices, sphere.faces), n_contour=10, k=8)
+    assert np.isfinite(result.energy)

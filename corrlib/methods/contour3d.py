@@ -170,8 +170,10 @@ def prepare_query(contour: Contour2D, params: Contour3DParams) -> PreparedQuery:
     canonical = Contour2D(rotated, name=contour.name, validate=False, labels=resampled.labels)
     filled = fill_contour(canonical, density=params.fill_density)
     stiffness, mass = mesh_laplacian(filled)
-    k = min(params.k, filled.n_vertices - 1)
-    evals, evecs = eigenpairs(stiffness, mass, k, name=contour.name)
+    if filled.n_vertices <= params.k:
+        raise ContourError(f"{contour.name}: the filled silhouette has {filled.n_vertices} vertices, too few for "
+                           f"k={params.k} eigenpairs; raise n_contour or fill_density, or lower k")
+    evals, evecs = eigenpairs(stiffness, mass, params.k, name=contour.name)
     feats = paper_features(evals, evecs, mass.diagonal(), params.n_scales, params.wks_variance)
     m = canonical.n_points
     return PreparedQuery(canonical.points, feats[:m], resampled.labels, resampled)
@@ -181,7 +183,10 @@ def prepare_mesh(mesh: TriMesh, params: Contour3DParams) -> tuple[np.ndarray, np
     """Mesh vertices scaled to unit area and their features ((n, 3), (n, d))."""
     if not isinstance(mesh, TriMesh):
         raise InputError(f"the target must be a TriMesh, got {type(mesh).__name__}")
-    spectrum = mesh_spectrum(mesh, min(params.k, mesh.n_vertices - 1))
+    if mesh.n_vertices <= params.k:
+        raise InputError(f"{mesh.name}: {mesh.n_vertices} vertices are too few for k={params.k} Laplace–Beltrami "
+                         f"eigenpairs (at most {mesh.n_vertices - 1}); lower k or use a finer mesh")
+    spectrum = mesh_spectrum(mesh, params.k)
     # eigenvalues of the mesh scaled to unit area (see the module docstring)
     feats = paper_features(spectrum.evals * mesh.area, spectrum.evecs, spectrum.mass.diagonal(), params.n_scales,
                            params.wks_variance)

@@ -58,7 +58,7 @@ class CutQuery:
     ----------
     mesh_name : str
     plane : str
-        ``"main"`` or ``"symmetry"``.
+        One of :data:`PLANES`.
     contour : Contour2D
         The section loop in the plane's (u, v) coordinates (mesh units).
     points_3d : (p, 3) float
@@ -72,10 +72,6 @@ class CutQuery:
     contour: Contour2D
     points_3d: np.ndarray
     edges: np.ndarray
-
-    @property
-    def name(self) -> str:
-        return f"{self.mesh_name}-{self.plane}"
 
     @property
     def length_3d(self) -> float:
@@ -137,6 +133,16 @@ def symmetry_normal(mesh: TriMesh) -> np.ndarray:
     return axes[int(np.argmin(scores))]
 
 
+def section_plane(mesh: TriMesh, plane: str) -> tuple[np.ndarray, np.ndarray]:
+    """Centroid (3,) and unit normal (3,) of a named section plane (see the module docstring)."""
+    if plane not in PLANES:
+        raise ParameterError(f"plane must be one of {', '.join(PLANES)}, got {plane!r}")
+    centre, axes = principal_frame(mesh)
+    if plane == "symmetry":
+        return centre, symmetry_normal(mesh)
+    return centre, axes[2] if plane == "main" else axes[1]
+
+
 def cut_query(mesh: TriMesh, plane: str = "main") -> CutQuery:
     """The longest section loop of ``mesh`` with a principal plane through its centroid.
 
@@ -149,12 +155,7 @@ def cut_query(mesh: TriMesh, plane: str = "main") -> CutQuery:
     """
     from corrlib.geometry.sections import plane_section
 
-    if plane not in PLANES:
-        raise ParameterError(f"plane must be one of {', '.join(PLANES)}, got {plane!r}")
-    centre, axes = principal_frame(mesh)
-    normal = {"main": axes[2], "cross": axes[1]}.get(plane)
-    if normal is None:
-        normal = symmetry_normal(mesh)
+    centre, normal = section_plane(mesh, plane)
     loops = plane_section(mesh, centre, normal)
     if not loops or len(loops[0].points) < 10:
         raise InputError(f"{mesh.name}: the {plane} plane does not cut a closed section loop of 10 or more points")
@@ -240,7 +241,7 @@ def match_cut_query(source_path, target_path, plane: str, params: dict, *, gt_ro
     try:
         source = load_mesh(source_path)
         target = source if row["self"] else load_mesh(target_path)
-        if plane == "symmetry" and abs(symmetry_normal(source) @ principal_frame(source)[1][2]) > 0.99:
+        if plane == "symmetry" and abs(section_plane(source, "symmetry")[1] @ section_plane(source, "main")[1]) > 0.99:
             row.update(status="skipped", error="the symmetry plane is the main plane")
             return row
         query = cut_query(source, plane)
@@ -270,8 +271,8 @@ def match_cut_query(source_path, target_path, plane: str, params: dict, *, gt_ro
             save_curve_comparison(picture, extras["contour_points"], target, path, extras["path_contour_index"], gt,
                                   title=f"{row['query']} -> {row['target']}: mean error {row['mean_error']:.3f}, "
                                         f"coverage {row['coverage']:.2f}")
-    except CorrError as exc:
-        row.update(status="failed", error=str(exc))
+    except Exception as exc:  # a failing match is recorded (with its type if unexpected); the others go on
+        row.update(status="failed", error=str(exc) if isinstance(exc, CorrError) else f"{type(exc).__name__}: {exc}")
     return row
 
 
@@ -302,7 +303,7 @@ def contour_jobs(datasets, planes=DEFAULT_PLANES) -> list[ContourJob]:
     jobs = []
     for folder in datasets:
         data = load_dataset(folder, require_pairs=False)
-        rows = {name: load_vts(path) - 1 for name, path in data.gt.items()}
+        rows = {name: load_vts(path) for name, path in data.gt.items()}
         for name, path in data.shapes.items():
             for plane in planes:
                 jobs.append(ContourJob(path, path, plane, None))
@@ -397,11 +398,12 @@ def contour_benchmark(datasets, out, *, planes=DEFAULT_PLANES, params: dict | No
     params = dict(params or {})
     make_params(get_method("contour3d").params, **params)  # named errors before any work
     todo = contour_jobs(datasets, planes)
+    executor = job_executor(jobs, scheduler)
     out = ensure_output_folder(out)
     if pictures:
         ensure_output_folder(out / "pictures")
     rows = []
-    with job_executor(jobs, scheduler) as pool:
+    with executor as pool:
         futures = []
         for job in todo:
             picture = None

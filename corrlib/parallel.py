@@ -10,7 +10,7 @@ import multiprocessing
 import os
 from concurrent.futures import ProcessPoolExecutor
 
-from corrlib.errors import CorrError
+from corrlib.errors import CorrError, ParameterError
 
 
 def _limit_threads():
@@ -42,6 +42,9 @@ class job_executor:
     """
 
     def __init__(self, jobs: int | None, scheduler: str | None):
+        if jobs is not None and (isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 0):
+            raise ParameterError(f"jobs must be a whole number of worker processes (0 or none: all cores), "
+                                 f"got {jobs!r}")
         self.jobs, self.scheduler = jobs, scheduler
         self.client = None
 

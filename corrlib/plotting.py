@@ -122,6 +122,16 @@ def save_error_curves(path, curves: dict, thresholds: np.ndarray, *, title: str 
     return _save_figure(fig, path)
 
 
+def _draw_query(ax, contour_points: np.ndarray, hue: np.ndarray) -> None:
+    """The filled query contour with its points coloured by contour position."""
+    closed = np.vstack([contour_points, contour_points[:1]])
+    ax.fill(closed[:, 0], closed[:, 1], color="0.9")
+    ax.scatter(contour_points[:, 0], contour_points[:, 1], c=hue, s=10)
+    ax.set_aspect("equal")
+    ax.set_axis_off()
+    ax.set_title("query contour")
+
+
 def save_contour_match(path, contour_points: np.ndarray, mesh, path_vertices: np.ndarray,
                        path_contour_index: np.ndarray, *, title: str = "") -> Path:
     """PNG: the query contour (left) and the mesh with the matched closed curve (right).
@@ -144,13 +154,7 @@ def save_contour_match(path, contour_points: np.ndarray, mesh, path_vertices: np
     m = contour_points.shape[0]
     hue = cm.hsv(np.arange(m) / m)[:, :3]
     fig = plt.figure(figsize=(11, 5), dpi=100)
-    ax1 = fig.add_subplot(1, 2, 1)
-    closed = np.vstack([contour_points, contour_points[:1]])
-    ax1.fill(closed[:, 0], closed[:, 1], color="0.9")
-    ax1.scatter(contour_points[:, 0], contour_points[:, 1], c=hue, s=10)
-    ax1.set_aspect("equal")
-    ax1.set_axis_off()
-    ax1.set_title("query contour")
+    _draw_query(fig.add_subplot(1, 2, 1), contour_points, hue)
     ax2 = fig.add_subplot(1, 2, 2, projection="3d")
     axes = _view_axes(mesh.vertices)
     draw_mesh(ax2, mesh.vertices, mesh.faces, np.full((mesh.n_vertices, 3), 0.8), f"{mesh.name}: matched curve")
@@ -245,11 +249,10 @@ def save_curve_comparison(path, contour_points: np.ndarray, mesh, path_vertices:
 
     m = contour_points.shape[0]
     hue = cm.hsv(np.arange(m) / m)[:, :3]
+    from matplotlib.collections import LineCollection
+
     fig, axs = plt.subplots(1, 3, figsize=(15, 5), dpi=90)
-    closed = np.vstack([contour_points, contour_points[:1]])
-    axs[0].fill(closed[:, 0], closed[:, 1], color="0.9")
-    axs[0].scatter(contour_points[:, 0], contour_points[:, 1], c=hue, s=10)
-    axs[0].set_title("query contour")
+    _draw_query(axs[0], contour_points, hue)
     axes = _view_axes(mesh.vertices)
     v = (mesh.vertices - mesh.vertices.mean(axis=0)) @ axes.T
     curve = v[path_vertices]
@@ -257,11 +260,10 @@ def save_curve_comparison(path, contour_points: np.ndarray, mesh, path_vertices:
     for ax, (a, b), label in ((axs[1], (0, 2), "side view"), (axs[2], (0, 1), "top view")):
         ax.scatter(v[:, a], v[:, b], s=0.3, color="0.8")
         ax.plot(gt[:, a], gt[:, b], color="black", lw=1.0, ls="--", label="ground truth")
-        for k in range(len(curve) - 1):
-            ax.plot(curve[k:k + 2, a], curve[k:k + 2, b], color=hue[path_contour_index[k] % m], lw=2.5)
+        segments = np.stack([curve[:-1][:, [a, b]], curve[1:][:, [a, b]]], axis=1)
+        ax.add_collection(LineCollection(segments, colors=hue[np.asarray(path_contour_index[:-1]) % m], lw=2.5))
         ax.set_title(f"{mesh.name}: {label}")
         ax.legend(loc="lower right")
-    for ax in axs:
         ax.set_aspect("equal")
         ax.set_axis_off()
     if title:

@@ -11,8 +11,8 @@ from scipy.sparse.csgraph import dijkstra
 
 from _data import TOSCA
 from corrlib.cli import main
-from corrlib.contour_bench import (contour_benchmark, contour_jobs, cut_query, principal_frame, score_curve,
-                                   symmetry_normal)
+from corrlib.contour_bench import (_vts_transfer, contour_benchmark, contour_jobs, cut_query, principal_frame,
+                                   score_curve, symmetry_normal)
 from corrlib.errors import InputError, ParameterError
 from corrlib.geometry.sections import plane_basis
 from corrlib.io import load_mesh
@@ -91,6 +91,22 @@ def test_jobs_pair_each_mesh_with_itself_and_its_class(tmp_path):
         contour_jobs([tmp_path], planes=("diagonal",))
 
 
+def test_vts_ground_truth_carries_the_section_to_the_other_pose(tmp_path):
+    """The section of cat0 carried to cat1 through the .vts rows stays a coherent curve of about its length."""
+    for name in ("cat0", "cat1"):
+        shutil.copy(TOSCA / f"{name}.off", tmp_path / f"{name}.off")
+        shutil.copy(TOSCA / f"{name}.vts", tmp_path / f"{name}.vts")
+    job = next(j for j in contour_jobs([tmp_path], planes=("cross",)) if (j.source.stem, j.target.stem) ==
+               ("cat0", "cat1"))
+    cat0, cat1 = load_mesh(job.source), load_mesh(job.target)
+    query = cut_query(cat0, "cross")
+    gt0 = query.ground_truth(query.contour.resample(200).points, cat0.vertices)
+    gt1 = _vts_transfer(cat0.vertices, *job.gt_rows)(gt0)
+    length1 = np.linalg.norm(np.roll(cat1.vertices[gt1], -1, axis=0) - cat1.vertices[gt1], axis=1).sum()
+    expected = query.length_3d * np.sqrt(cat1.area / cat0.area)
+    assert 0.8 * expected < length1 < 1.5 * expected, (length1, expected)
+
+
 def test_benchmark_end_to_end_with_vts_ground_truth(tmp_path):
     data = tmp_path / "cats"
     data.mkdir()
@@ -130,7 +146,9 @@ def test_command_and_its_errors(tmp_path, capsys):
     assert "plane must be one of" in capsys.readouterr().err
     assert main(["bench-contour", str(data), "--param", "k=-3", "-o", str(tmp_path / "o3")]) == 2
     assert "k" in capsys.readouterr().err
-    assert not (tmp_path / "o2").exists() and not (tmp_path / "o3").exists()
+    assert main(["bench-contour", str(data), "--jobs", "-1", "-o", str(tmp_path / "o4")]) == 2
+    assert "jobs must be a whole number" in capsys.readouterr().err
+    assert not any((tmp_path / name).exists() for name in ("o2", "o3", "o4"))
 
 
 def test_a_plane_that_cuts_nothing_closed_is_a_named_error():

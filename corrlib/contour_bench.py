@@ -19,6 +19,12 @@ Two planes are offered:
 * ``cross``: spanned by the first and third principal axes (for a quadruped
   the horizontal section of the torso).
 
+A dataset folder may also hold maps between shapes of different classes,
+one 0-based target vertex per line for every source vertex, named
+``<source>__<target>.txt`` or ``<source>2<target>`` (as the Sumner lion → cat
+map is shipped); a name may be a shape or a class with a single shape. Such
+a pair is matched with that (possibly approximate) ground truth too.
+
 The length of the ground-truth curve on another pose is the section's length
 scaled by the square root of the area ratio (the deformations are nearly
 isometric; a polygon through the transferred ground-truth vertices would
@@ -210,7 +216,7 @@ def score_curve(map_xy: np.ndarray, path_vertices: np.ndarray, gt: np.ndarray, t
             "gt_distinct_vertices": int(len(np.unique(gt)))}
 
 
-def match_cut_query(source_path, target_path, plane: str, params: dict, *, gt_rows=None,
+def match_cut_query(source_path, target_path, plane: str, params: dict, *, gt_rows=None, gt_map=None,
                     picture: str | None = None) -> dict:
     """Cut a query from the source mesh, match it to the target and score it (one benchmark job).
 
@@ -222,8 +228,10 @@ def match_cut_query(source_path, target_path, plane: str, params: dict, *, gt_ro
     params : dict
         Parameters of the ``contour3d`` method.
     gt_rows : (rows_source, rows_target), optional
-        Corresponding ``.vts`` rows (0-based); ``None``: identity (the same
-        connectivity) when source and target differ.
+        Corresponding ``.vts`` rows (0-based).
+    gt_map : (n_source,) int, optional
+        Target vertex of every source vertex. Without ``gt_rows`` and
+        ``gt_map``, source and target must share their connectivity.
     picture : path, optional
         PNG of the query and the matched curve.
 
@@ -236,8 +244,11 @@ def match_cut_query(source_path, target_path, plane: str, params: dict, *, gt_ro
     from corrlib.io import load_mesh
     from corrlib.methods import solve
 
+    from corrlib.retrieval import class_of
+
     row = {"query": f"{Path(source_path).stem}-{plane}", "target": Path(target_path).stem, "plane": plane,
-           "self": Path(source_path).resolve() == Path(target_path).resolve(), "status": "ok", "error": ""}
+           "self": Path(source_path).resolve() == Path(target_path).resolve(),
+           "other_class": class_of(source_path) != class_of(target_path), "status": "ok", "error": ""}
     try:
         source = load_mesh(source_path)
         target = source if row["self"] else load_mesh(target_path)
@@ -249,6 +260,8 @@ def match_cut_query(source_path, target_path, plane: str, params: dict, *, gt_ro
             transfer = None
         elif gt_rows is not None:
             transfer = _vts_transfer(source.vertices, *gt_rows)
+        elif gt_map is not None:
+            transfer = gt_map.__getitem__
         elif source.n_vertices == target.n_vertices:
             transfer = None  # same connectivity: vertex i is vertex i
         else:
@@ -281,7 +294,35 @@ class ContourJob:
     source: Path
     target: Path
     plane: str
-    gt_rows: tuple | None
+    gt_rows: tuple | None = None
+    gt_map: np.ndarray | None = None
+
+
+def _shape_maps(folder: Path, shapes: dict) -> list[tuple[str, str, Path]]:
+    """(source, target, file) of the cross-class map files of a dataset folder (see the module docstring)."""
+    from corrlib.retrieval import class_of
+
+    def resolve(name):
+        if name in shapes:
+            return name
+        members = [s for s in shapes if class_of(s) == name]
+        return members[0] if len(members) == 1 else None
+
+    found = []
+    for path in sorted(folder.iterdir()):
+        if not path.is_file():
+            continue
+        stem = path.stem if path.suffix == ".txt" else path.name if not path.suffix else None
+        if stem is None:
+            continue
+        for sep in ("__", "2"):
+            if sep in stem:
+                a, b = stem.split(sep, 1)
+                a, b = resolve(a), resolve(b)
+                if a and b and a != b:
+                    found.append((a, b, path))
+                    break
+    return found
 
 
 def contour_jobs(datasets, planes=DEFAULT_PLANES) -> list[ContourJob]:
@@ -294,7 +335,7 @@ def contour_jobs(datasets, planes=DEFAULT_PLANES) -> list[ContourJob]:
     planes : sequence of str
     """
     from corrlib.bench import load_dataset
-    from corrlib.io import load_vts
+    from corrlib.io import load_map, load_mesh, load_vts
     from corrlib.retrieval import class_of
 
     for plane in planes:
@@ -304,14 +345,19 @@ def contour_jobs(datasets, planes=DEFAULT_PLANES) -> list[ContourJob]:
     for folder in datasets:
         data = load_dataset(folder, require_pairs=False)
         rows = {name: load_vts(path) for name, path in data.gt.items()}
+        maps = _shape_maps(data.folder, data.shapes)
         for name, path in data.shapes.items():
             for plane in planes:
-                jobs.append(ContourJob(path, path, plane, None))
+                jobs.append(ContourJob(path, path, plane))
                 for other, other_path in data.shapes.items():
                     if other == name or class_of(other) != class_of(name):
                         continue
-                    gt_rows = (rows[name], rows[other]) if rows else None
-                    jobs.append(ContourJob(path, other_path, plane, gt_rows))
+                    jobs.append(ContourJob(path, other_path, plane, gt_rows=(rows[name], rows[other]) if rows else None))
+        for name, other, map_path in maps:
+            source, target = load_mesh(data.shapes[name]), load_mesh(data.shapes[other])
+            gt_map = load_map(map_path, n_target=target.n_vertices, n_source=source.n_vertices)
+            for plane in planes:
+                jobs.append(ContourJob(data.shapes[name], data.shapes[other], plane, gt_map=gt_map))
     return jobs
 
 
@@ -332,7 +378,8 @@ def _summary(rows: list[dict]) -> dict:
                 "median_seconds": float(np.median(col("seconds"))), "max_seconds": float(col("seconds").max())}
 
     return {"all": block(rows), "same mesh": block([r for r in rows if r["self"]]),
-            "other pose": block([r for r in rows if not r["self"]])}
+            "other pose": block([r for r in rows if not r["self"] and not r["other_class"]]),
+            "other class": block([r for r in rows if r["other_class"]])}
 
 
 def _markdown(summary: dict, rows: list[dict]) -> str:
@@ -362,7 +409,7 @@ def _markdown(summary: dict, rows: list[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
-COLUMNS = ("query", "target", "plane", "self", "status", "n_points", "mean_error", "median_error", "within_005",
+COLUMNS = ("query", "target", "plane", "self", "other_class", "status", "n_points", "mean_error", "median_error", "within_005",
            "within_01", "coverage", "distinct_vertices", "gt_distinct_vertices", "energy", "gap", "optimal",
            "iterations", "seconds", "error")
 
@@ -388,7 +435,7 @@ def contour_benchmark(datasets, out, *, planes=DEFAULT_PLANES, params: dict | No
     Returns
     -------
     dict
-        The summary: ``{"all" | "same mesh" | "other pose": {...}}``.
+        The summary: ``{"all" | "same mesh" | "other pose" | "other class": {...}}``.
     """
     from corrlib.bench import _csv
     from corrlib.io import atomic_write, ensure_output_folder
@@ -410,7 +457,7 @@ def contour_benchmark(datasets, out, *, planes=DEFAULT_PLANES, params: dict | No
             if pictures:
                 picture = str(out / "pictures" / f"{job.source.stem}-{job.plane}__{job.target.stem}.png")
             futures.append(pool.submit(match_cut_query, str(job.source), str(job.target), job.plane, params,
-                                       gt_rows=job.gt_rows, picture=picture))
+                                       gt_rows=job.gt_rows, gt_map=job.gt_map, picture=picture))
         for number, future in enumerate(futures, 1):
             rows.append(future.result())
             if callback is not None:

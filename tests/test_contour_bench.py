@@ -11,8 +11,8 @@ from scipy.sparse.csgraph import dijkstra
 
 from _data import TOSCA
 from corrlib.cli import main
-from corrlib.contour_bench import (_vts_transfer, contour_benchmark, contour_jobs, cut_query, principal_frame,
-                                   score_curve, symmetry_normal)
+from corrlib.contour_bench import (_vts_transfer, contour_benchmark, contour_jobs, cut_query, match_cut_query,
+                                   principal_frame, score_curve, symmetry_normal)
 from corrlib.errors import InputError, ParameterError
 from corrlib.geometry.sections import plane_basis
 from corrlib.io import load_mesh
@@ -157,3 +157,29 @@ def test_a_plane_that_cuts_nothing_closed_is_a_named_error():
     strip = TriMesh(grid.vertices, grid.faces[grid.face_normals[:, 2] > 0.5], validate=False, name="strip")
     with pytest.raises(InputError, match="strip.*closed section loop"):
         cut_query(strip, "main")
+
+
+def test_cross_class_map_files_add_pairs_with_their_ground_truth(tmp_path, capsys):
+    """``<a>2<b>`` (as the Sumner lion -> cat map is shipped) or ``<a>__<b>.txt``, by shape or by class."""
+    shutil.copy(TOSCA / "wolf0.off", tmp_path / "wolf0.off")
+    shutil.copy(TOSCA / "wolf1.off", tmp_path / "dog-7.off")  # another 'class' with the wolf's connectivity
+    n = load_mesh(TOSCA / "wolf0.off").n_vertices
+    reversed_map = np.arange(n)[::-1]
+    np.savetxt(tmp_path / "wolf2dog", reversed_map, fmt="%d")
+    jobs = contour_jobs([tmp_path], planes=("main",))
+    cross = [j for j in jobs if (j.source.stem, j.target.stem) == ("wolf0", "dog-7")]
+    assert len(cross) == 1 and np.array_equal(cross[0].gt_map, reversed_map)
+    # the identity map, through the benchmark: the same figures as the identical-connectivity pair
+    np.savetxt(tmp_path / "wolf2dog", np.arange(n), fmt="%d")
+    summary = contour_benchmark([tmp_path], tmp_path / "out", planes=("main",), params={"n_contour": 40, "eps": 0.1},
+                                jobs=1, pictures=False)
+    rows = json.loads((tmp_path / "out" / "contour_summary.json").read_text())["rows"]
+    cross_row = next(r for r in rows if r["other_class"])
+    assert summary["other class"]["queries"] == 1 and cross_row["status"] == "ok"
+    direct = match_cut_query(str(tmp_path / "wolf0.off"), str(tmp_path / "dog-7.off"), "main",
+                             {"n_contour": 40, "eps": 0.1})  # no map: identical connectivity
+    assert direct["status"] == "ok" and cross_row["mean_error"] == pytest.approx(direct["mean_error"], rel=1e-12)
+    # a map of the wrong length is a named error naming the file
+    np.savetxt(tmp_path / "wolf2dog", np.arange(n - 5), fmt="%d")
+    with pytest.raises(InputError, match="wolf2dog.*entries"):
+        contour_jobs([tmp_path], planes=("main",))

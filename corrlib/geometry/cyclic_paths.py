@@ -44,8 +44,13 @@ from corrlib.progress import CancelToken, Progress
 
 @numba.njit(cache=True, nogil=True)
 def _layered_dijkstra(cost, step2, graph_points, indptr, indices, edge_len, source_mask, target_mask,
-                      upper, heuristic, cancel, dist, pred, origin):
+                      upper, heuristic, cancel, dist, pred, origin, stretch):
     """Multi-source shortest paths through all layers; returns (best end vertex, its cost).
+
+    ``stretch`` adds ``stretch * |b - a|`` to every edge, ``a`` and ``b`` its
+    lengths along the curve and in the graph (0: the paper's energy; the
+    second-order energy of :mod:`corrlib.geometry.elastic_paths` uses this
+    first-order part as its admissible heuristic).
 
     ``dist``/``pred``/``origin`` (L, n) are overwritten: distance, predecessor
     (``j`` within the layer, ``n + j`` from vertex j of the previous layer,
@@ -84,14 +89,15 @@ def _layered_dijkstra(cost, step2, graph_points, indptr, indices, edge_len, sour
                 if dj == inf:
                     continue
                 cj = cost[i - 1, j]
-                nd = dj + 0.5 * (cj + cost[i, j]) * step
+                nd = dj + (0.5 * (cj + cost[i, j]) + stretch) * step
                 if nd < d[j] and nd + h[j] < upper:
                     d[j] = nd
                     p[j] = n + j
                     o[j] = oprev[j]
                 for e in range(indptr[j], indptr[j + 1]):
                     k = indices[e]
-                    nd = dj + 0.5 * (cj + cost[i, k]) * np.sqrt(s2 + edge_len[e] * edge_len[e])
+                    nd = (dj + 0.5 * (cj + cost[i, k]) * np.sqrt(s2 + edge_len[e] * edge_len[e])
+                          + stretch * abs(edge_len[e] - step))
                     if nd < d[k] and nd + h[k] < upper:
                         d[k] = nd
                         p[k] = n + j
@@ -107,7 +113,7 @@ def _layered_dijkstra(cost, step2, graph_points, indptr, indices, edge_len, sour
             cj = cost[i, j]
             for e in range(indptr[j], indptr[j + 1]):
                 k = indices[e]
-                nd = dj + 0.5 * (cj + cost[i, k]) * edge_len[e]
+                nd = dj + (0.5 * (cj + cost[i, k]) + stretch) * edge_len[e]
                 if nd < d[k] and nd + h[k] < upper:
                     d[k] = nd
                     p[k] = j
@@ -169,10 +175,13 @@ class ProductGraph:
         Coordinates of the graph vertices.
     adjacency : (n, n) sparse
         Symmetric graph adjacency (non-zero pattern = edges).
+    stretch : float
+        Weight of the stretching term ``|b - a|`` per edge (graph length
+        against curve length); 0 is the paper's energy.
     """
 
     def __init__(self, node_cost, curve_points, graph_points, adjacency, *, directed: bool = False,
-                 closing_shift: int = 0, n_starts: int | None = None):
+                 closing_shift: int = 0, n_starts: int | None = None, stretch: float = 0.0):
         cost = np.asarray(node_cost, dtype=np.float64)
         curve = np.asarray(curve_points, dtype=np.float64)
         pts = np.asarray(graph_points, dtype=np.float64)
@@ -186,6 +195,9 @@ class ProductGraph:
         if not directed:
             adj = (adj + adj.T).tocsr()
         self.m, self.n = m, n
+        if not (np.isfinite(stretch) and stretch >= 0):
+            raise ParameterError(f"stretch must be finite and non-negative, got {stretch}")
+        self.stretch = float(stretch)
         # a closed path starts at (0, s) and ends at (m, s + closing_shift), s < n_starts
         self.closing_shift = int(closing_shift)
         self.n_starts = int(n_starts if n_starts is not None else n)
@@ -232,7 +244,7 @@ class ProductGraph:
         t, _ = _layered_dijkstra(np.ascontiguousarray(self.cost[::-1]), np.ascontiguousarray(self.step2[::-1]),
                                  self.graph_points, indptr, indices, edge_len, everything,
                                  everything, np.inf, np.zeros((self.m + 1, self.n)), flag, self.dist, self.pred,
-                                 self.origin)
+                                 self.origin, self.stretch)
         self.runs += 1
         self.run_seconds += time.perf_counter() - start
         if t == -2:
@@ -262,7 +274,7 @@ class ProductGraph:
         start = time.perf_counter()
         t, c = _layered_dijkstra(self.cost, self.step2, self.graph_points, self.indptr, self.indices,
                                  self.edge_len, sources, targets, float(upper), self.heuristic, flag,
-                                 self.dist, self.pred, self.origin)
+                                 self.dist, self.pred, self.origin, self.stretch)
         self.runs += 1
         self.run_seconds += time.perf_counter() - start
         if t == -2:
@@ -332,10 +344,10 @@ class ProductGraph:
         total = 0.0
         for a in range(len(path.vertices) - 1):
             i0, j0, i1, j1 = path.layers[a], path.vertices[a], path.layers[a + 1], path.vertices[a + 1]
-            d2 = np.sum((self.graph_points[j1] - self.graph_points[j0]) ** 2)
-            if i1 == i0 + 1:
-                d2 += self.step2[i0]
-            total += 0.5 * (self.cost[i0, j0] + self.cost[i1, j1]) * np.sqrt(d2)
+            b2 = np.sum((self.graph_points[j1] - self.graph_points[j0]) ** 2)
+            a2 = self.step2[i0] if i1 == i0 + 1 else 0.0
+            total += 0.5 * (self.cost[i0, j0] + self.cost[i1, j1]) * np.sqrt(a2 + b2)
+            total += self.stretch * abs(np.sqrt(b2) - np.sqrt(a2))
         return float(total)
 
 

@@ -276,12 +276,12 @@ def cmd_bench(args) -> int:
 
 
 def cmd_bench_retrieval(args) -> int:
-    from dataclasses import replace
-
     from corrlib.bench import retrieval_benchmark
-    from corrlib.methods.contour3d import Contour3DParams
+    from corrlib.methods import get_method, make_params
 
-    params = replace(Contour3DParams(), eps=args.eps, n_contour=args.n_contour)
+    overrides = _parse_overrides(args.param or [])
+    overrides.update(eps=args.eps, n_contour=args.n_contour)
+    params = make_params(get_method("contour3d").params, **overrides)  # named errors before any work
 
     def progress(done, total, row):
         if not args.quiet:
@@ -576,6 +576,7 @@ def build_parser() -> argparse.ArgumentParser:
     _add_scale_out(p)
     p.add_argument("--eps", type=float, default=0.05, help="approximation factor (default 0.05)")
     p.add_argument("--n-contour", dest="n_contour", type=int, default=100, help="contour resampling (default 100)")
+    p.add_argument("--param", action="append", metavar="KEY=VALUE", help="another contour3d parameter (repeatable)")
     p.add_argument("-o", "--output", default="retrieval_output", help="output folder")
     p.add_argument("-q", "--quiet", action="store_true")
     p.set_defaults(func=cmd_bench_retrieval)

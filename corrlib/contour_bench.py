@@ -377,9 +377,15 @@ def _summary(rows: list[dict]) -> dict:
                 "optimal": int(sum(r["optimal"] for r in ok)),
                 "median_seconds": float(np.median(col("seconds"))), "max_seconds": float(col("seconds").max())}
 
-    return {"all": block(rows), "same mesh": block([r for r in rows if r["self"]]),
-            "other pose": block([r for r in rows if not r["self"] and not r["other_class"]]),
-            "other class": block([r for r in rows if r["other_class"]])}
+    other_pose = [r for r in rows if not r["self"] and not r["other_class"]]
+    summary = {"all": block(rows), "same mesh": block([r for r in rows if r["self"]]),
+               "other pose": block(other_pose), "other class": block([r for r in rows if r["other_class"]])}
+    planes = sorted({r["plane"] for r in rows})
+    if len(planes) > 1:  # the planes are different kinds of query (whole outline or a part of the shape)
+        for plane in planes:
+            summary[f"{plane} plane"] = block([r for r in rows if r["plane"] == plane])
+            summary[f"{plane} plane, other pose"] = block([r for r in other_pose if r["plane"] == plane])
+    return summary
 
 
 def _markdown(summary: dict, rows: list[dict]) -> str:

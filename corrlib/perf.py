@@ -121,8 +121,9 @@ def suite_contour3d(repeat: int, quick: bool = False) -> None:
     print(f"machine: {os.cpu_count()} cores; query: silhouette of wolf0 ({query.n_points} outline pixels)")
     params = Contour3DParams(n_contour=200)
     prepared = prepare_query(query, params)
-    verts, feats = prepare_mesh(cat1, params)
-    graph = ProductGraph(node_costs(prepared.features, feats), prepared.points, verts, cat1.adjacency)
+    target = prepare_mesh(cat1, params)
+    graph = ProductGraph(node_costs(prepared.features, target.features), prepared.points, target.vertices,
+                         cat1.adjacency)
     everything = np.ones(cat1.n_vertices, dtype=bool)
     t_run = _best_time(lambda: graph.shortest(everything, everything), repeat)[0]
     _line(f"one layered Dijkstra, 200 x {cat1.n_vertices}, all starts, unpruned", t_run)

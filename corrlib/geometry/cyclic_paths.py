@@ -362,11 +362,16 @@ class BranchAndBoundResult:
     iterations: int
     dijkstra_runs: int
     seconds_per_run: float
+    graph_index: int = 0
 
 
 def branch_and_bound(graph: ProductGraph, *, eps: float = 0.0, token: CancelToken | None = None,
-                     max_iterations: int = 100_000):
+                     max_iterations: int = 100_000, limit: float = np.inf):
     """Globally optimal (``eps = 0``) or ``(1 + eps)``-approximate closed path (generator).
+
+    ``limit`` is the energy of a closed path known elsewhere: only paths below
+    it are sought, everything that cannot beat it is pruned from the start,
+    and the result is None when no closed path of this graph is below it.
 
     Yields
     ------
@@ -375,61 +380,97 @@ def branch_and_bound(graph: ProductGraph, *, eps: float = 0.0, token: CancelToke
 
     Returns
     -------
-    BranchAndBoundResult
+    BranchAndBoundResult or None
+        None only with a finite ``limit`` that no closed path beats.
+    """
+    return (yield from branch_and_bound_union([graph], eps=eps, token=token, max_iterations=max_iterations,
+                                              limit=limit))
+
+
+def branch_and_bound_union(graphs, *, eps: float = 0.0, token: CancelToken | None = None,
+                           max_iterations: int = 100_000, limit: float = np.inf):
+    """The best closed path over several product graphs, by one best-first branch-and-bound (generator).
+
+    A region is a set of start vertices of one graph; the open regions of all
+    graphs share one priority queue, so a graph whose lower bound exceeds the
+    best closed path found in another is never explored further. This is the
+    global optimum of ``min_g E_g`` (e.g. both readings of an ambiguous
+    feature), at a cost close to that of the winning graph alone.
+
+    Parameters
+    ----------
+    graphs : sequence of ProductGraph
+    eps, token, max_iterations, limit
+        As in :func:`branch_and_bound`.
+
+    Returns
+    -------
+    BranchAndBoundResult or None
+        ``graph_index`` says which graph the path belongs to; None only with
+        a finite ``limit`` that no closed path beats.
     """
     if not (0.0 <= eps < 1.0):
         raise ParameterError(f"eps must be in [0, 1), got {eps}")
+    if not (isinstance(limit, (int, float, np.floating)) and limit > 0 and not np.isnan(limit)):
+        raise ParameterError(f"limit must be a positive energy (or inf), got {limit!r}")
+    if len(graphs) == 0:
+        raise ParameterError("branch and bound needs at least one product graph")
     token = token or CancelToken()
     cancel = token.flag
     counter = itertools.count()
-    everything = np.ones(graph.n_starts, dtype=np.bool_)
-    upper, best = np.inf, None
-    graph.compute_heuristic(cancel)
-
-    def consider_closed(cost, path):
-        nonlocal upper, best
-        if path is not None and cost < upper:
-            upper, best = cost, path
-
-    cost, s, t = graph.shortest(*graph.endpoints(everything), upper, cancel)
-    if s < 0:
-        raise InputError("no path through the product graph (is the graph connected?)")
+    upper, best, best_index = float(limit), None, -1
     heap = []
-    if graph.is_closed(s, t):
-        consider_closed(cost, graph.backtrack(t))
-    else:
-        heapq.heappush(heap, (cost, next(counter), everything, s, t))
+    for graph in graphs:
+        graph.compute_heuristic(cancel)
+
+    def consider_closed(index, cost, path):
+        nonlocal upper, best, best_index
+        if path is not None and cost < upper:
+            upper, best, best_index = cost, path, index
+
+    def explore(index, region):
+        """Shortest path of a region: a closed one updates the bound, an open one is queued."""
+        graph = graphs[index]
+        cost, s, t = graph.shortest(*graph.endpoints(region), upper, cancel)
+        if s < 0:
+            return s  # nothing in this region beats the best closed path
+        if graph.is_closed(s, t):
+            consider_closed(index, cost, graph.backtrack(t))
+        elif cost * (1.0 + eps) < upper:
+            heapq.heappush(heap, (cost, next(counter), index, region, s, t))
+        return s
+
+    for index, graph in enumerate(graphs):
+        if explore(index, np.ones(graph.n_starts, dtype=np.bool_)) < 0 and not np.isfinite(upper):
+            raise InputError("no path through the product graph (is the graph connected?)")
     lower_bound = np.inf  # stays inf if every region is resolved: then the optimum is `upper`
     iterations = 0
     while heap:
         token.raise_if_cancelled()
-        lower, _, region, s, t = heapq.heappop(heap)
+        lower, _, index, region, s, t = heapq.heappop(heap)
         if lower * (1.0 + eps) >= upper or iterations >= max_iterations:
             lower_bound = lower  # every open region is at least this
             break
         iterations += 1
+        graph = graphs[index]
         # upper bound: close the region's best open path at its start
-        consider_closed(*graph.closed_from(s, upper, cancel))
+        consider_closed(index, *graph.closed_from(s, upper, cancel))
         if lower * (1.0 + eps) >= upper:
             lower_bound = lower
             break
         # split the region by graph distance to the open path's start and end
         for child in graph.split(region, s, t):
-            if not child.any():
-                continue
-            c_cost, c_s, c_t = graph.shortest(*graph.endpoints(child), upper, cancel)
-            if c_s < 0:
-                continue  # nothing in this region beats the best closed path
-            if graph.is_closed(c_s, c_t):
-                consider_closed(c_cost, graph.backtrack(c_t))
-            elif c_cost * (1.0 + eps) < upper:
-                heapq.heappush(heap, (c_cost, next(counter), child, c_s, c_t))
+            if child.any():
+                explore(index, child)
         bound = heap[0][0] if heap else upper
         yield Progress("branch and bound", -1.0,
                        f"iteration {iterations}: lower {min(bound, upper):.6g}, upper {upper:.6g}, "
                        f"{len(heap)} open regions")
     lower_bound = min(lower_bound, upper)
     if best is None:
+        if np.isfinite(limit):
+            return None
         raise InputError("branch and bound found no closed path")
-    return BranchAndBoundResult(best, upper, lower_bound, upper, iterations, graph.runs,
-                                graph.run_seconds / max(graph.runs, 1))
+    runs = sum(g.runs for g in graphs)
+    return BranchAndBoundResult(best, upper, lower_bound, upper, iterations, runs,
+                                sum(g.run_seconds for g in graphs) / max(runs, 1), best_index)

@@ -67,7 +67,7 @@ def forward_path_adjacency(n: int) -> sp.csr_matrix:
 
 def solve_contour2d(source, target, params: Contour2DParams, token):
     watch = Stopwatch()
-    base = Contour3DParams(k=params.k, n_scales=params.n_scales, area_ratio=1.0)
+    base = Contour3DParams(k=params.k, n_scales=params.n_scales, area_ratio=1.0, features="paper")
     yield Progress("features", 0.0)
     with watch("features"):
         qa = prepare_query(source, replace(base, n_contour=params.n_source))

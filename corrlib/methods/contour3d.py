@@ -5,9 +5,9 @@ the product of the contour and the mesh edge graph
 (:mod:`corrlib.geometry.cyclic_paths`). The result is a closed curve on the
 mesh with the contour point matched at every step.
 
-Features (as in the paper's code): the contour's interior is triangulated
-(boundary vertices first) and the first ``k`` Laplace–Beltrami eigenpairs of
-the filled silhouette and of the mesh give
+Features: the contour's interior is triangulated (boundary vertices first)
+and the first ``k`` Laplace–Beltrami eigenpairs of the filled silhouette and
+of the mesh give (as in the paper's code)
 
 * WKS (100 energies, variance 6, per-scale normalised), then every vertex's
   row divided by its maximum ("row-normalised WKS"), and
@@ -16,9 +16,32 @@ the filled silhouette and of the mesh give
   ``Σ_x M(x) HKS(x, t)``, and the whole divided by its maximum ("globally
   normalised scaled HKS"),
 
-restricted to the boundary on the contour side. The node cost is the L1
-distance of the feature vectors, plus ``tau`` where both shapes carry part
-labels (non-zero) that differ.
+restricted to the boundary on the contour side. ``features="paper"`` uses
+both, ``features="wks"`` (the default) the WKS alone: at large times the HKS
+of a flat filled silhouette and of a closed surface follow how their area is
+distributed, which differs between the two domains (a thin flat strip and a
+thin tube do not cool alike), while every WKS energy is a band of the
+spectrum normalised on its own. The node cost is the L1 distance of the
+feature vectors, plus ``tau`` where both shapes carry part labels (non-zero)
+that differ.
+
+Axis term (ours; ``axis_weight``, 0 gives the paper's node cost): the
+spectral features of a flat filled silhouette and of a closed surface differ
+everywhere, so alone they do not tell the head end of a silhouette from its
+tail end, and the optimum can run along a short stretch of the mesh. Both
+shapes share one global, deformation-invariant coordinate: the position along
+their longest intrinsic axis (:mod:`corrlib.geometry.intrinsic_axis`), the
+continuous counterpart of the thesis' part labels. The node cost gains
+
+    w · c · d̄ · |a_2D(i) − a_3D(j)|,
+
+with the weight ``w``, the confidence ``c`` of the two axes (the smaller of
+``1 - λ_1/λ_2`` of the two shapes: no term for round shapes) and the mean
+feature distance ``d̄`` (so ``w`` is in units of the node cost). The axis
+has no preferred direction, so one branch-and-bound runs over the product
+graphs of both ``a_2D`` and ``1 − a_2D`` and keeps the lower energy. A
+closed curve on the mesh may run either way, so the contour's orientation
+and its mirror image need no extra search.
 
 Scale normalisation (our definition, documented because the paper's edge
 length mixes 2D and 3D units): the mesh is scaled to unit surface area and
@@ -50,8 +73,9 @@ import numpy as np
 
 from corrlib.descriptors.spectral import hks, wks
 from corrlib.errors import ContourError, InputError
-from corrlib.geometry.cyclic_paths import ProductGraph, branch_and_bound
+from corrlib.geometry.cyclic_paths import ProductGraph, branch_and_bound_union
 from corrlib.geometry.elastic_paths import ElasticProductGraph
+from corrlib.geometry.intrinsic_axis import IntrinsicAxis, axis_mismatch, intrinsic_axis
 from corrlib.geometry.laplacian import mesh_laplacian
 from corrlib.geometry.spectrum import eigenpairs, mesh_spectrum
 from corrlib.geometry.triangulate import fill_contour
@@ -82,6 +106,12 @@ class Contour3DParams:
     area_ratio: float = param(0.5, label="Silhouette/surface area", low=0.01, high=10.0,
                               help="The contour is scaled to enclose this fraction of the mesh's surface area "
                                    "(the mesh is scaled to unit area); 1/2: a silhouette covers one side.")
+    features: str = param("wks", label="Features", choices=("wks", "paper"),
+                          help="Spectral features: the row-normalised WKS, or WKS and scaled HKS as in the "
+                               "paper's code.")
+    axis_weight: float = param(1.0, label="Axis weight", low=0.0, high=1e3,
+                               help="Weight of the intrinsic-axis node cost, in units of the mean feature distance "
+                                    "(0: the paper's node cost).")
     energy: str = param("paper", label="Energy", choices=("paper", "elastic"),
                         help="paper: feature cost times product length (CVPR 2016); elastic: plus stretching, "
                              "bending and no immediate reversal on the curve (second order, Roetzer et al. 2023).")
@@ -92,6 +122,21 @@ class Contour3DParams:
                                 "mean contour step.")
     max_iterations: int = param(10000, label="Max iterations", low=1, high=10_000_000,
                                 help="Cap on branch-and-bound iterations (the bounds are reported).")
+
+
+def row_normalised_wks(evals: np.ndarray, evecs: np.ndarray, n_scales: int = 100,
+                       wks_variance: float = 6.0) -> np.ndarray:
+    """WKS, every vertex's row divided by its maximum ((n, n_scales) float)."""
+    w = wks(evals, evecs, n_scales, variance=wks_variance)
+    return w / np.maximum(w.max(axis=1, keepdims=True), 1e-300)
+
+
+def scaled_hks(evals: np.ndarray, evecs: np.ndarray, mass_diag: np.ndarray, n_scales: int = 100) -> np.ndarray:
+    """Globally normalised scaled HKS of the paper's code ((n, n_scales) float, see the module docstring)."""
+    h = hks(evals, evecs, n_scales, normalize="none")
+    h = h / np.maximum(h.max(axis=1, keepdims=True), 1e-300)
+    h = h / np.maximum(mass_diag @ h, 1e-300)[None, :]
+    return h / max(h.max(), 1e-300)
 
 
 def paper_features(evals: np.ndarray, evecs: np.ndarray, mass_diag: np.ndarray, n_scales: int = 100,
@@ -109,13 +154,16 @@ def paper_features(evals: np.ndarray, evecs: np.ndarray, mass_diag: np.ndarray, 
     -------
     (n, 2 * n_scales) float
     """
-    w = wks(evals, evecs, n_scales, variance=wks_variance)
-    w = w / np.maximum(w.max(axis=1, keepdims=True), 1e-300)
-    h = hks(evals, evecs, n_scales, normalize="none")
-    h = h / np.maximum(h.max(axis=1, keepdims=True), 1e-300)
-    h = h / np.maximum(mass_diag @ h, 1e-300)[None, :]
-    h = h / max(h.max(), 1e-300)
-    return np.hstack([w, h])
+    return np.hstack([row_normalised_wks(evals, evecs, n_scales, wks_variance),
+                      scaled_hks(evals, evecs, mass_diag, n_scales)])
+
+
+def spectral_features(evals: np.ndarray, evecs: np.ndarray, mass_diag: np.ndarray,
+                      params: "Contour3DParams") -> np.ndarray:
+    """The features chosen by ``params.features`` ((n, d) float)."""
+    if params.features == "wks":
+        return row_normalised_wks(evals, evecs, params.n_scales, params.wks_variance)
+    return paper_features(evals, evecs, mass_diag, params.n_scales, params.wks_variance)
 
 
 @numba.njit(parallel=True, cache=True, nogil=True)
@@ -128,20 +176,30 @@ def _l1_costs(feat_a, feat_b, out):
             out[i, j] = acc
 
 
-def node_costs(feat_contour: np.ndarray, feat_mesh: np.ndarray, labels_contour=None, labels_mesh=None,
-               tau: float = 1e3) -> np.ndarray:
-    """(m, n) float: L1 feature distances, plus ``tau`` where non-zero part labels differ."""
+def feature_distances(feat_contour: np.ndarray, feat_mesh: np.ndarray) -> np.ndarray:
+    """(m, n) float: L1 distances between contour and mesh feature vectors."""
     a = np.ascontiguousarray(feat_contour, dtype=np.float64)
     b = np.ascontiguousarray(feat_mesh, dtype=np.float64)
     if a.shape[1] != b.shape[1]:
         raise InputError(f"feature dimensions differ: {a.shape[1]} vs {b.shape[1]}")
     out = np.empty((a.shape[0], b.shape[0]))
     _l1_costs(a, b, out)
-    if labels_contour is not None and labels_mesh is not None:
-        lc = np.asarray(labels_contour)[:, None]
-        lm = np.asarray(labels_mesh)[None, :]
-        out += tau * ((lc != lm) & (lc != 0) & (lm != 0))
     return out
+
+
+def label_penalty(labels_contour, labels_mesh, tau: float) -> np.ndarray | float:
+    """(m, n) float: ``tau`` where both part labels are non-zero and differ (0. without labels)."""
+    if labels_contour is None or labels_mesh is None:
+        return 0.0
+    lc = np.asarray(labels_contour)[:, None]
+    lm = np.asarray(labels_mesh)[None, :]
+    return tau * ((lc != lm) & (lc != 0) & (lm != 0))
+
+
+def node_costs(feat_contour: np.ndarray, feat_mesh: np.ndarray, labels_contour=None, labels_mesh=None,
+               tau: float = 1e3) -> np.ndarray:
+    """(m, n) float: the paper's node cost, L1 feature distances plus ``tau`` where part labels differ."""
+    return feature_distances(feat_contour, feat_mesh) + label_penalty(labels_contour, labels_mesh, tau)
 
 
 @dataclass
@@ -156,12 +214,33 @@ class PreparedQuery:
     labels : (m,) int or None
     contour : Contour2D
         The resampled input contour (original units).
+    axis : IntrinsicAxis
+        The filled silhouette's intrinsic axis at the contour points ((m,)
+        coordinate).
     """
 
     points: np.ndarray
     features: np.ndarray
     labels: np.ndarray | None
     contour: Contour2D
+    axis: IntrinsicAxis
+
+
+@dataclass
+class PreparedMesh:
+    """A mesh ready for matching.
+
+    Attributes
+    ----------
+    vertices : (n, 3) float
+        Centred and scaled to unit surface area.
+    features : (n, d) float
+    axis : IntrinsicAxis
+    """
+
+    vertices: np.ndarray
+    features: np.ndarray
+    axis: IntrinsicAxis
 
 
 def prepare_query(contour: Contour2D, params: Contour3DParams) -> PreparedQuery:
@@ -190,13 +269,15 @@ def prepare_query(contour: Contour2D, params: Contour3DParams) -> PreparedQuery:
         raise ContourError(f"{contour.name}: the filled silhouette has {filled.n_vertices} vertices, too few for "
                            f"k={params.k} eigenpairs; raise n_contour or fill_density, or lower k")
     evals, evecs = eigenpairs(stiffness, mass, params.k, name=contour.name)
-    feats = paper_features(evals, evecs, mass.diagonal(), params.n_scales, params.wks_variance)
+    feats = spectral_features(evals, evecs, mass.diagonal(), params)
     m = canonical.n_points
-    return PreparedQuery(canonical.points, feats[:m], resampled.labels, resampled)
+    axis = intrinsic_axis(evals, evecs, mass.diagonal())
+    return PreparedQuery(canonical.points, feats[:m], resampled.labels, resampled,
+                         IntrinsicAxis(axis.coordinate[:m], axis.confidence))
 
 
-def prepare_mesh(mesh: TriMesh, params: Contour3DParams) -> tuple[np.ndarray, np.ndarray]:
-    """Mesh vertices scaled to unit area and their features ((n, 3), (n, d))."""
+def prepare_mesh(mesh: TriMesh, params: Contour3DParams) -> PreparedMesh:
+    """Mesh vertices scaled to unit area, their features and the mesh's intrinsic axis."""
     if not isinstance(mesh, TriMesh):
         raise InputError(f"the target must be a TriMesh, got {type(mesh).__name__}")
     if mesh.n_vertices <= params.k:
@@ -204,10 +285,16 @@ def prepare_mesh(mesh: TriMesh, params: Contour3DParams) -> tuple[np.ndarray, np
                          f"eigenpairs (at most {mesh.n_vertices - 1}); lower k or use a finer mesh")
     spectrum = mesh_spectrum(mesh, params.k)
     # eigenvalues of the mesh scaled to unit area (see the module docstring)
-    feats = paper_features(spectrum.evals * mesh.area, spectrum.evecs, spectrum.mass.diagonal(), params.n_scales,
-                           params.wks_variance)
+    feats = spectral_features(spectrum.evals * mesh.area, spectrum.evecs, spectrum.mass.diagonal(), params)
     verts = (mesh.vertices - mesh.vertices.mean(axis=0)) / np.sqrt(mesh.area)
-    return verts, feats
+    axis = intrinsic_axis(spectrum.evals, spectrum.evecs, spectrum.mass.diagonal())
+    return PreparedMesh(verts, feats, axis)
+
+
+def axis_scale(query: PreparedQuery, mesh: PreparedMesh, distances: np.ndarray, params: Contour3DParams) -> float:
+    """Factor ``w c d̄`` of the axis term (see the module docstring); 0 turns the term off."""
+    confidence = min(query.axis.confidence, mesh.axis.confidence)
+    return float(params.axis_weight * confidence * distances.mean())
 
 
 def product_graph(cost: np.ndarray, contour_points: np.ndarray, mesh_vertices: np.ndarray, adjacency,
@@ -232,29 +319,30 @@ def match_prepared(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams,
     watch = Stopwatch()
     yield Progress("mesh features", 0.05)
     with watch("features"):
-        verts, feats = prepare_mesh(mesh, params)
-        cost = node_costs(query.features, feats, query.labels, mesh.labels, params.tau)
+        target = prepare_mesh(mesh, params)
+        distances = feature_distances(query.features, target.features)
+        cost = distances + label_penalty(query.labels, mesh.labels, params.tau)
+        scale = axis_scale(query, target, distances, params)
     token.raise_if_cancelled()
-    graph = product_graph(cost, query.points, verts, mesh.adjacency, params)
-    yield Progress("branch and bound", 0.1, f"{graph.m} x {graph.n} product graph")
+    # the axis has no direction: one branch-and-bound over both readings
+    directions = (False, True) if scale > 0 else (False,)
+    graphs = [product_graph(cost + scale * axis_mismatch(query.axis.coordinate, target.axis.coordinate,
+                                                         flipped=flipped) if scale > 0 else cost,
+                            query.points, target.vertices, mesh.adjacency, params) for flipped in directions]
+    yield Progress("branch and bound", 0.1, f"{graphs[0].m} x {graphs[0].n} product graph"
+                   + (", both directions of the axis" if scale > 0 else ""))
     with watch("search"):
-        gen = branch_and_bound(graph, eps=params.eps, token=token, max_iterations=params.max_iterations)
-        while True:
-            try:
-                report = next(gen)
-            except StopIteration as stop:
-                bb = stop.value
-                break
-            yield report
+        bb = yield from branch_and_bound_union(graphs, eps=params.eps, token=token,
+                                               max_iterations=params.max_iterations)
     path = bb.path
-    matched = path.matched_vertices(graph.m)
+    matched = path.matched_vertices(graphs[bb.graph_index].m)
     extras = {
         "path_vertices": path.vertices, "path_contour_index": path.curve_index, "path_layers": path.layers,
         "contour_points": query.contour.points, "lower_bound": bb.lower_bound, "upper_bound": bb.upper_bound,
-        "iterations": bb.iterations, "dijkstra_runs": bb.dijkstra_runs,
-        "seconds_per_dijkstra": bb.seconds_per_run, "optimal": bool(bb.lower_bound >= bb.upper_bound),
+        "iterations": bb.iterations, "dijkstra_runs": bb.dijkstra_runs, "seconds_per_dijkstra": bb.seconds_per_run,
+        "optimal": bool(bb.lower_bound >= bb.upper_bound), "axis_reversed": bool(directions[bb.graph_index]),
         "energy_meaning": f"{params.energy} product-graph path energy (unit-area mesh, contour area "
-                          f"{params.area_ratio:g})",
+                          f"{params.area_ratio:g}, axis weight {params.axis_weight:g})",
     }
     yield Progress("done", 1.0, f"energy {bb.energy:.6g} after {bb.iterations} iterations")
     return MatchResult("contour3d", map_xy=matched, map_yx=None, energy=bb.energy, timings=watch.times,

@@ -585,8 +585,9 @@ def build_parser() -> argparse.ArgumentParser:
                                              "to their mesh and to the other poses of its class")
     p.add_argument("datasets", nargs="+", help="dataset folders (the layouts of 'corr bench'; the class of a mesh "
                                                 "is its name without a trailing number)")
-    p.add_argument("--planes", default="main,symmetry",
-                   help="comma-separated section planes: main, symmetry, cross (default: main,symmetry)")
+    p.add_argument("--planes", default="main,symmetry,silhouette",
+                   help="comma-separated queries: the sections main, symmetry, cross and the side-view "
+                        "silhouette (default: main,symmetry,silhouette)")
     p.add_argument("--n-contour", dest="n_contour", type=int, help="contour points (default: the method's 200)")
     p.add_argument("--param", action="append", metavar="KEY=VALUE", help="a contour3d parameter (repeatable)")
     p.add_argument("--no-pictures", action="store_true", help="do not write a picture per query")

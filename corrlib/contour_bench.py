@@ -19,6 +19,14 @@ Two planes are offered:
 * ``cross``: spanned by the first and third principal axes (for a quadruped
   the horizontal section of the torso).
 
+and one silhouette, the query a user draws:
+
+* ``silhouette``: the outline of the orthographic projection onto the
+  ``main`` plane (a side view, rendered at 400 pixels); the ground truth of
+  an outline point are the vertices that project onto it, the nearest and
+  the farthest from the viewer (a silhouette cannot tell the near side of
+  the rim from the far side), and the nearer of the two is scored.
+
 A dataset folder may also hold maps between shapes of different classes,
 one 0-based target vertex per line for every source vertex, named
 ``<source>__<target>.txt`` or ``<source>2<target>`` (as the Sumner lion → cat
@@ -52,7 +60,9 @@ from corrlib.errors import CorrError, InputError, ParameterError
 from corrlib.shapes import Contour2D, TriMesh
 
 PLANES = ("main", "symmetry", "cross")
-DEFAULT_PLANES = ("main", "symmetry")
+QUERY_KINDS = PLANES + ("silhouette",)
+SILHOUETTE_RESOLUTION = 400
+DEFAULT_PLANES = ("main", "symmetry", "silhouette")
 COLLAPSE_COVERAGE = 0.7  # a matched curve shorter than this fraction of the ground truth counts as collapsed
 
 
@@ -173,6 +183,50 @@ def cut_query(mesh: TriMesh, plane: str = "main") -> CutQuery:
     return CutQuery(mesh.name, plane, contour, loop.points[kept], loop.edges[kept])
 
 
+@dataclass
+class SilhouetteQuery:
+    """A side-view silhouette query with its rim ground truth (see the module docstring).
+
+    Attributes
+    ----------
+    mesh_name : str
+    plane : str
+        ``"silhouette"``.
+    contour : Contour2D
+        The outline in pixel units.
+    projection : SilhouetteProjection
+        The mesh's vertices in the same units, with their depth.
+    length_3d : float
+        Length of the outline in mesh units, about the length of the rim's
+        projection (a polyline through the rim vertices would zig-zag
+        between the near and the far side and overstate it).
+    """
+
+    mesh_name: str
+    plane: str
+    contour: Contour2D
+    projection: object
+    length_3d: float
+
+    def ground_truth(self, points_2d: np.ndarray, mesh_vertices: np.ndarray) -> np.ndarray:
+        """Near-side and far-side rim vertex of arbitrary outline points ((m, 2) int)."""
+        from corrlib.geometry.sections import rim_vertices
+
+        return rim_vertices(points_2d, self.projection)
+
+
+def silhouette_query(mesh: TriMesh, resolution: int = SILHOUETTE_RESOLUTION) -> SilhouetteQuery:
+    """The outline of ``mesh`` seen along its axis of least variance (up: the second axis)."""
+    from corrlib.geometry.sections import project_for_silhouette, render_silhouette
+
+    _, axes = principal_frame(mesh)
+    contour = render_silhouette(mesh, axes[2], resolution, up=axes[1])
+    projection = project_for_silhouette(mesh, axes[2], resolution, up=axes[1])
+    length = contour.length / projection.pixels_per_unit
+    return SilhouetteQuery(mesh.name, "silhouette", Contour2D(contour.points, name=f"{mesh.name}-silhouette",
+                                                              validate=False), projection, length)
+
+
 def _vts_transfer(source_vertices: np.ndarray, rows_source: np.ndarray, rows_target: np.ndarray):
     """Vertex map source -> target through corresponding ``.vts`` rows (nearest row on the source)."""
     tree = cKDTree(source_vertices[rows_source])
@@ -193,8 +247,9 @@ def score_curve(map_xy: np.ndarray, path_vertices: np.ndarray, gt: np.ndarray, t
         Matched vertex of every contour point.
     path_vertices : (p,) int
         The closed path on the mesh (first = last).
-    gt : (m,) int
-        Ground-truth vertex of every contour point.
+    gt : (m,) or (m, k) int
+        Ground-truth vertex of every contour point, or k acceptable vertices
+        (the error is the distance to the nearest of them).
     target : TriMesh
     gt_length : float
         Length of the ground-truth curve on the target.
@@ -208,12 +263,14 @@ def score_curve(map_xy: np.ndarray, path_vertices: np.ndarray, gt: np.ndarray, t
     """
     from corrlib.geometry.geodesics import GeodesicSolver
 
-    errors = GeodesicSolver(target).pair_distances(map_xy, gt) / np.sqrt(target.area)
+    solver = GeodesicSolver(target)
+    candidates = np.asarray(gt).reshape(len(map_xy), -1)
+    errors = np.min([solver.pair_distances(map_xy, column) for column in candidates.T], axis=0) / np.sqrt(target.area)
     length = np.linalg.norm(np.diff(target.vertices[path_vertices], axis=0), axis=1).sum()
     return {"n_points": int(len(map_xy)), "mean_error": float(errors.mean()), "median_error": float(np.median(errors)),
             "within_005": float(np.mean(errors <= 0.05)), "within_01": float(np.mean(errors <= 0.1)),
             "coverage": float(length / gt_length), "distinct_vertices": int(len(np.unique(path_vertices))),
-            "gt_distinct_vertices": int(len(np.unique(gt)))}
+            "gt_distinct_vertices": int(len(np.unique(candidates[:, 0])))}
 
 
 def match_cut_query(source_path, target_path, plane: str, params: dict, *, gt_rows=None, gt_map=None,
@@ -255,7 +312,7 @@ def match_cut_query(source_path, target_path, plane: str, params: dict, *, gt_ro
         if plane == "symmetry" and abs(section_plane(source, "symmetry")[1] @ section_plane(source, "main")[1]) > 0.99:
             row.update(status="skipped", error="the symmetry plane is the main plane")
             return row
-        query = cut_query(source, plane)
+        query = silhouette_query(source) if plane == "silhouette" else cut_query(source, plane)
         if row["self"]:
             transfer = None
         elif gt_rows is not None:
@@ -281,7 +338,9 @@ def match_cut_query(source_path, target_path, plane: str, params: dict, *, gt_ro
         if picture is not None:
             from corrlib.plotting import save_curve_comparison
 
-            save_curve_comparison(picture, extras["contour_points"], target, path, extras["path_contour_index"], gt,
+            near_side = np.asarray(gt).reshape(len(result.map_xy), -1)[:, 0]
+            save_curve_comparison(picture, extras["contour_points"], target, path, extras["path_contour_index"],
+                                  near_side,
                                   title=f"{row['query']} -> {row['target']}: mean error {row['mean_error']:.3f}, "
                                         f"coverage {row['coverage']:.2f}")
     except Exception as exc:  # a failing match is recorded (with its type if unexpected); the others go on
@@ -339,8 +398,8 @@ def contour_jobs(datasets, planes=DEFAULT_PLANES) -> list[ContourJob]:
     from corrlib.retrieval import class_of
 
     for plane in planes:
-        if plane not in PLANES:
-            raise ParameterError(f"plane must be one of {', '.join(PLANES)}, got {plane!r}")
+        if plane not in QUERY_KINDS:
+            raise ParameterError(f"plane must be one of {', '.join(QUERY_KINDS)}, got {plane!r}")
     jobs = []
     for folder in datasets:
         data = load_dataset(folder, require_pairs=False)

@@ -5,13 +5,12 @@ import pytest
 import scipy.sparse as sp
 import trimesh
 from scipy.sparse.csgraph import dijkstra
-from scipy.spatial import cKDTree
 
 from _data import SUMNER, TOSCA
 from corrlib.errors import Cancelled, ContourError, InputError, ParameterError
 from corrlib.geometry.cyclic_paths import ProductGraph, branch_and_bound
 from corrlib.geometry.geodesics import GeodesicSolver
-from corrlib.geometry.sections import plane_basis, plane_section, render_silhouette
+from corrlib.geometry.sections import plane_section, project_for_silhouette, render_silhouette, rim_vertices
 from corrlib.io import load_mesh
 from corrlib.methods import solve
 from corrlib.methods.contour3d import node_costs
@@ -95,50 +94,25 @@ def test_parameter_and_cancel_errors():
 
 
 def silhouette_with_ground_truth(mesh, resolution=400):
-    """Side view silhouette (projection onto the plane of the two longest principal axes).
-
-    Ground truth of an outline point: the rim vertices projecting onto it; a silhouette cannot tell the
-    near side from the far side, so both the nearest and the farthest such vertex are returned.
-    """
+    """Side view silhouette (projection onto the plane of the two longest principal axes) and the projection
+    of the vertices that gives its ground truth (:func:`rim_vertices`: a silhouette cannot tell the near side
+    from the far side, so both the nearest and the farthest rim vertex count)."""
     centred = mesh.vertices - mesh.vertices.mean(axis=0)
     _, _, vt = np.linalg.svd(centred, full_matrices=False)
     view, up = vt[2], vt[1]
-    contour = render_silhouette(mesh, view, resolution, up=up)
-    nrm, _, _ = plane_basis(view)
-    v = up - (up @ nrm) * nrm
-    v /= np.linalg.norm(v)
-    u = np.cross(v, nrm)
-    xy = np.column_stack([mesh.vertices @ u, mesh.vertices @ v])
-    lo, hi = xy.min(axis=0), xy.max(axis=0)
-    pix = (resolution - 1) / max(hi - lo)
-    proj = np.column_stack([(xy[:, 0] - lo[0]) * pix + 4, -((hi[1] - xy[:, 1]) * pix + 4)])
-    depth = mesh.vertices @ nrm
-    return contour, proj, depth
-
-
-def rim_ground_truth(points, proj, depth, radius=3.0):
-    tree = cKDTree(proj)
-    near, far = [], []
-    for p in points:
-        idx = tree.query_ball_point(p, radius)
-        if not idx:
-            idx = [tree.query(p)[1]]
-        idx = np.array(idx)
-        near.append(idx[np.argmin(depth[idx])])
-        far.append(idx[np.argmax(depth[idx])])
-    return np.array(near), np.array(far)
+    return render_silhouette(mesh, view, resolution, up=up), project_for_silhouette(mesh, view, resolution, up=up)
 
 
 @pytest.fixture(scope="module")
 def wolf_silhouette_match(wolf_pair):
     wolf0, wolf1 = wolf_pair
-    contour, proj, depth = silhouette_with_ground_truth(wolf0)
+    contour, projection = silhouette_with_ground_truth(wolf0)
     result = solve("contour3d", contour, wolf1, n_contour=120)
-    return contour, proj, depth, result
+    return contour, projection, result
 
 
 def test_path_is_a_valid_closed_matching(wolf_silhouette_match, wolf_pair):
-    _, _, _, result = wolf_silhouette_match
+    _, _, result = wolf_silhouette_match
     wolf1 = wolf_pair[1]
     verts, layers = result.extras["path_vertices"], result.extras["path_layers"]
     m = 120
@@ -163,10 +137,10 @@ def test_silhouette_matches_its_shape_in_another_pose(wolf_silhouette_match, wol
     the paper's intrinsic features are blind to it, so the symmetric error is the meaningful one; legs
     that overlap in the projection keep a tail of large errors.
     """
-    contour, proj, depth, result = wolf_silhouette_match
+    contour, projection, result = wolf_silhouette_match
     wolf1 = wolf_pair[1]
     points = contour.ccw().resample(120).points
-    near, far = rim_ground_truth(points, proj, depth)
+    near, far = rim_vertices(points, projection).T
     solver = GeodesicSolver(wolf1)
     err = np.minimum(solver.pair_distances(result.map_xy, near), solver.pair_distances(result.map_xy, far))
     err /= np.sqrt(wolf1.area)
@@ -180,7 +154,7 @@ def test_silhouette_matches_its_shape_in_another_pose(wolf_silhouette_match, wol
 
 def test_result_is_invariant_to_similarity_transforms(wolf_pair):
     wolf0, wolf1 = wolf_pair
-    contour, _, _ = silhouette_with_ground_truth(wolf0, resolution=200)
+    contour, _ = silhouette_with_ground_truth(wolf0, resolution=200)
     base = solve("contour3d", contour, wolf1, n_contour=60, eps=0.0)
     moved_contour = contour.transformed(scale=0.013, rotation=1.1, translation=(40.0, -7.0))
     rot = trimesh.transformations.random_rotation_matrix(np.random.default_rng(2).random(3))[:3, :3]
@@ -188,6 +162,21 @@ def test_result_is_invariant_to_similarity_transforms(wolf_pair):
     other = solve("contour3d", moved_contour, moved_mesh, n_contour=60, eps=0.0)
     assert other.energy == pytest.approx(base.energy, rel=1e-6)
     assert np.mean(other.map_xy == base.map_xy) > 0.95
+
+
+def test_result_is_invariant_to_a_mirrored_and_reordered_mesh(wolf_pair):
+    """A mirror image of the mesh with shuffled vertices has the same intrinsic geometry: the eigenfunctions
+    change sign and order only (the axis may come out reversed, and both readings are searched), so the
+    optimal energy is the same and the matched vertices are the images of the same vertices."""
+    wolf0, wolf1 = wolf_pair
+    contour, _ = silhouette_with_ground_truth(wolf0, resolution=200)
+    base = solve("contour3d", contour, wolf1, n_contour=60)
+    perm = np.random.default_rng(4).permutation(wolf1.n_vertices)
+    inverse = np.argsort(perm)
+    mirrored = TriMesh(wolf1.vertices[perm] * [-1.0, 1.0, 1.0], inverse[wolf1.faces][:, ::-1], name="mirrored")
+    other = solve("contour3d", contour, mirrored, n_contour=60)
+    assert other.energy == pytest.approx(base.energy, rel=1e-6)
+    assert np.mean(perm[other.map_xy] == base.map_xy) > 0.95
 
 
 def test_part_labels_add_tau():
@@ -199,7 +188,7 @@ def test_part_labels_add_tau():
 
 def test_part_labels_constrain_the_match(wolf_pair):
     wolf0, wolf1 = wolf_pair
-    contour, _, _ = silhouette_with_ground_truth(wolf0, resolution=200)
+    contour, _ = silhouette_with_ground_truth(wolf0, resolution=200)
     c = contour.ccw().resample(80)
     # label the front and back halves on both shapes (along the longest axis)
     axis = np.linalg.svd(wolf1.vertices - wolf1.vertices.mean(0), full_matrices=False)[2][0]
@@ -233,7 +222,7 @@ def test_retrieval_ranks_the_class_first():
               SUMNER / "lion-00.off"]
     rankings = []
     for query_mesh, jobs in (("wolf0", 2), ("cat0", 1)):
-        contour, _, _ = silhouette_with_ground_truth(load_mesh(TOSCA / f"{query_mesh}.off"), resolution=300)
+        contour, _ = silhouette_with_ground_truth(load_mesh(TOSCA / f"{query_mesh}.off"), resolution=300)
         progress = []
         hits = run(retrieve(contour, meshes, jobs=jobs), callback=progress.append)
         assert len(progress) >= len(meshes)
@@ -280,7 +269,7 @@ def test_energy_is_invariant_to_the_mirror_image_and_orientation_of_the_sketch(w
     other way, with the same energy (the features are intrinsic and the edge costs symmetric), so trying
     both is unnecessary; the orientation of the input is irrelevant (it is made counter-clockwise)."""
     wolf0, wolf1 = wolf_pair
-    contour, _, _ = silhouette_with_ground_truth(wolf0, resolution=200)
+    contour, _ = silhouette_with_ground_truth(wolf0, resolution=200)
     base = solve("contour3d", contour, wolf1, n_contour=60)
     mirrored = solve("contour3d", Contour2D(contour.points * [-1.0, 1.0]), wolf1, n_contour=60)
     assert mirrored.energy == pytest.approx(base.energy, rel=1e-9)

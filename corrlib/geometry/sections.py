@@ -7,7 +7,8 @@
   coordinates are a 2D contour).
 * :func:`render_silhouette` rasterises the orthographic projection of a mesh
   and returns its outer outline as a :class:`~corrlib.shapes.Contour2D`
-  (a synthetic "sketch" of the shape).
+  (a synthetic "sketch" of the shape); :func:`rim_vertices` gives the
+  vertices that project onto outline points (its ground truth).
 """
 
 from __future__ import annotations
@@ -121,6 +122,50 @@ def plane_section(mesh, origin, normal) -> list[SectionLoop]:
     return loops
 
 
+SILHOUETTE_MARGIN = 4  # pixels around the projection in a rendered silhouette
+
+
+@dataclass
+class SilhouetteProjection:
+    """Where the vertices of a mesh land in the image of :func:`render_silhouette`.
+
+    Attributes
+    ----------
+    pixels : (n, 2) float
+        Vertex positions in the contour's coordinates (x = column, y = −row).
+    depth : (n,) float
+        Distance along the viewing direction (smaller = nearer the viewer).
+    shape : (int, int)
+        Image rows and columns.
+    pixels_per_unit : float
+        Image scale (pixels per mesh unit).
+    """
+
+    pixels: np.ndarray
+    depth: np.ndarray
+    shape: tuple[int, int]
+    pixels_per_unit: float
+
+
+def project_for_silhouette(mesh, direction, resolution: int = 256, *, up=None) -> SilhouetteProjection:
+    """The orthographic projection :func:`render_silhouette` draws (same arguments)."""
+    nrm, u, v = plane_basis(direction)
+    if up is not None:
+        up = np.asarray(up, dtype=np.float64)
+        v = up - (up @ nrm) * nrm
+        if np.linalg.norm(v) == 0:
+            raise InputError("the 'up' direction is parallel to the viewing direction")
+        v /= np.linalg.norm(v)
+        u = np.cross(v, nrm)
+    xy = np.column_stack([mesh.vertices @ u, mesh.vertices @ v])
+    lo, hi = xy.min(axis=0), xy.max(axis=0)
+    pix = (resolution - 1) / max(hi - lo)
+    cols = (xy[:, 0] - lo[0]) * pix + SILHOUETTE_MARGIN
+    rows = (hi[1] - xy[:, 1]) * pix + SILHOUETTE_MARGIN  # image rows grow downwards
+    shape = (int(np.ceil(rows.max())) + SILHOUETTE_MARGIN + 1, int(np.ceil(cols.max())) + SILHOUETTE_MARGIN + 1)
+    return SilhouetteProjection(np.column_stack([cols, -rows]), mesh.vertices @ nrm, shape, float(pix))
+
+
 def render_silhouette(mesh, direction, resolution: int = 256, *, up=None) -> Contour2D:
     """Outline of the orthographic projection of a mesh seen along ``direction``.
 
@@ -138,33 +183,49 @@ def render_silhouette(mesh, direction, resolution: int = 256, *, up=None) -> Con
     Returns
     -------
     Contour2D
-        Counter-clockwise, in pixel units, not resampled.
+        Counter-clockwise, in pixel units (x = column, y = −row), not
+        resampled; :func:`project_for_silhouette` gives the vertices in the
+        same units.
     """
+    from scipy.ndimage import binary_closing, binary_fill_holes
     from skimage.draw import polygon as draw_polygon
 
     from corrlib.io import contour_from_mask
 
-    nrm, u, v = plane_basis(direction)
-    if up is not None:
-        up = np.asarray(up, dtype=np.float64)
-        v = up - (up @ nrm) * nrm
-        if np.linalg.norm(v) == 0:
-            raise InputError("the 'up' direction is parallel to the viewing direction")
-        v /= np.linalg.norm(v)
-        u = np.cross(v, nrm)
-    xy = np.column_stack([mesh.vertices @ u, mesh.vertices @ v])
-    lo, hi = xy.min(axis=0), xy.max(axis=0)
-    pix = (resolution - 1) / max(hi - lo)
-    margin = 4
-    cols = (xy[:, 0] - lo[0]) * pix + margin
-    rows = (hi[1] - xy[:, 1]) * pix + margin  # image rows grow downwards
-    shape = (int(np.ceil(rows.max())) + margin + 1, int(np.ceil(cols.max())) + margin + 1)
-    mask = np.zeros(shape, dtype=bool)
+    projection = project_for_silhouette(mesh, direction, resolution, up=up)
+    cols, rows = projection.pixels[:, 0], -projection.pixels[:, 1]
+    mask = np.zeros(projection.shape, dtype=bool)
     for face in mesh.faces:
-        rr, cc = draw_polygon(rows[face], cols[face], shape)
+        rr, cc = draw_polygon(rows[face], cols[face], projection.shape)
         mask[rr, cc] = True
     # thin slivers can leave single-pixel gaps between faces: one dilation/erosion pass closes them
-    from scipy.ndimage import binary_closing, binary_fill_holes
-
     mask = binary_fill_holes(binary_closing(mask, iterations=1))
     return Contour2D(contour_from_mask(mask, name=f"{mesh.name} silhouette"), name=f"{mesh.name} silhouette").ccw()
+
+
+def rim_vertices(points: np.ndarray, projection: SilhouetteProjection, radius: float = 3.0) -> np.ndarray:
+    """Ground truth of outline points: the nearest and the farthest vertex projecting onto each.
+
+    A silhouette cannot tell the near side of the rim from the far side, so
+    both are returned. Vertices within ``radius`` pixels of a point count as
+    projecting onto it (the nearest vertex if there is none).
+
+    Parameters
+    ----------
+    points : (m, 2) float
+        Outline points in pixel units (a resampling of the rendered contour).
+    projection : SilhouetteProjection
+
+    Returns
+    -------
+    (m, 2) int
+        Near-side and far-side vertex of every point.
+    """
+    from scipy.spatial import cKDTree
+
+    tree = cKDTree(projection.pixels)
+    out = np.empty((len(points), 2), dtype=np.int64)
+    for i, p in enumerate(np.asarray(points, dtype=np.float64)):
+        idx = np.array(tree.query_ball_point(p, radius) or [tree.query(p)[1]])
+        out[i] = idx[np.argmin(projection.depth[idx])], idx[np.argmax(projection.depth[idx])]
+    return out

@@ -8,7 +8,7 @@ ground truth is carried to the other meshes of the class through the
 dataset's correspondences (``.vts`` rows or identical connectivity, the
 layouts of :func:`corrlib.bench.load_dataset`).
 
-Two planes are offered:
+Three section planes are offered:
 
 * ``main``: spanned by the two principal axes of largest variance (normal:
   the axis of smallest variance);
@@ -57,6 +57,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from corrlib.errors import CorrError, InputError, ParameterError
+from corrlib.geometry.sections import SilhouetteProjection
 from corrlib.shapes import Contour2D, TriMesh
 
 PLANES = ("main", "symmetry", "cross")
@@ -205,7 +206,7 @@ class SilhouetteQuery:
     mesh_name: str
     plane: str
     contour: Contour2D
-    projection: object
+    projection: SilhouetteProjection
     length_3d: float
 
     def ground_truth(self, points_2d: np.ndarray, mesh_vertices: np.ndarray) -> np.ndarray:

@@ -10,8 +10,8 @@ from corrlib.geometry.intrinsic_axis import axis_mismatch, intrinsic_axis
 from corrlib.geometry.laplacian import mesh_laplacian
 from corrlib.geometry.spectrum import eigenpairs
 from corrlib.methods import solve
-from corrlib.methods.contour3d import (Contour3DParams, axis_scale, feature_distances, label_penalty,
-                                       prepare_mesh, prepare_query, product_graph)
+from corrlib.methods.contour3d import (Contour3DParams, axis_scale, feature_distances, prepare_mesh,
+                                       prepare_query, product_graph)
 from corrlib.progress import CancelToken, run
 from corrlib.shapes import Contour2D, TriMesh
 
@@ -113,9 +113,8 @@ def capsule_and_ellipse():
 def solve_direction(query, target, mesh, params, flipped):
     distances = feature_distances(query.features, target.features)
     scale = axis_scale(query, target, distances, params)
-    cost = distances + label_penalty(None, None, params.tau) + scale * axis_mismatch(
-        query.axis.coordinate, target.axis.coordinate, flipped=flipped)
-    graph = product_graph(cost, query.points, target.vertices, mesh.adjacency, params)
+    cost = distances + scale * axis_mismatch(query.axis.coordinate, target.axis.coordinate, flipped=flipped)
+    graph = product_graph(cost, query.points, target.vertices, mesh.adjacency, params, float(distances.mean()))
     return run(branch_and_bound(graph))
 
 
@@ -155,22 +154,6 @@ def test_union_branch_and_bound_equals_brute_force(seeds):
     assert min(exact) <= approx.energy <= 1.2 * min(exact) + 1e-12
     with pytest.raises(ParameterError, match="at least one"):
         run(branch_and_bound_union([]))
-
-
-def test_branch_and_bound_limit():
-    """A limit above the optimum changes nothing; at or below it there is nothing to find (None)."""
-    from test_contour3d import tiny_graph
-
-    for seed in range(3):
-        free = run(branch_and_bound(tiny_graph(seed)))
-        above = run(branch_and_bound(tiny_graph(seed), limit=free.energy * 1.5))
-        assert above.energy == pytest.approx(free.energy, rel=1e-12)
-        assert np.array_equal(above.path.vertices, free.path.vertices)
-        assert run(branch_and_bound(tiny_graph(seed), limit=free.energy)) is None
-        assert run(branch_and_bound(tiny_graph(seed), limit=free.energy * 0.5)) is None
-    for bad in (0.0, -1.0, float("nan"), "x"):
-        with pytest.raises(ParameterError, match="limit"):
-            run(branch_and_bound(tiny_graph(0), limit=bad))
 
 
 def test_paper_features_stay_selectable():

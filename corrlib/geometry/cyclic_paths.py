@@ -366,12 +366,8 @@ class BranchAndBoundResult:
 
 
 def branch_and_bound(graph: ProductGraph, *, eps: float = 0.0, token: CancelToken | None = None,
-                     max_iterations: int = 100_000, limit: float = np.inf):
+                     max_iterations: int = 100_000):
     """Globally optimal (``eps = 0``) or ``(1 + eps)``-approximate closed path (generator).
-
-    ``limit`` is the energy of a closed path known elsewhere: only paths below
-    it are sought, everything that cannot beat it is pruned from the start,
-    and the result is None when no closed path of this graph is below it.
 
     Yields
     ------
@@ -380,15 +376,13 @@ def branch_and_bound(graph: ProductGraph, *, eps: float = 0.0, token: CancelToke
 
     Returns
     -------
-    BranchAndBoundResult or None
-        None only with a finite ``limit`` that no closed path beats.
+    BranchAndBoundResult
     """
-    return (yield from branch_and_bound_union([graph], eps=eps, token=token, max_iterations=max_iterations,
-                                              limit=limit))
+    return (yield from branch_and_bound_union([graph], eps=eps, token=token, max_iterations=max_iterations))
 
 
 def branch_and_bound_union(graphs, *, eps: float = 0.0, token: CancelToken | None = None,
-                           max_iterations: int = 100_000, limit: float = np.inf):
+                           max_iterations: int = 100_000):
     """The best closed path over several product graphs, by one best-first branch-and-bound (generator).
 
     A region is a set of start vertices of one graph; the open regions of all
@@ -400,25 +394,22 @@ def branch_and_bound_union(graphs, *, eps: float = 0.0, token: CancelToken | Non
     Parameters
     ----------
     graphs : sequence of ProductGraph
-    eps, token, max_iterations, limit
+    eps, token, max_iterations
         As in :func:`branch_and_bound`.
 
     Returns
     -------
-    BranchAndBoundResult or None
-        ``graph_index`` says which graph the path belongs to; None only with
-        a finite ``limit`` that no closed path beats.
+    BranchAndBoundResult
+        ``graph_index`` says which graph the path belongs to.
     """
     if not (0.0 <= eps < 1.0):
         raise ParameterError(f"eps must be in [0, 1), got {eps}")
-    if not (isinstance(limit, (int, float, np.floating)) and limit > 0 and not np.isnan(limit)):
-        raise ParameterError(f"limit must be a positive energy (or inf), got {limit!r}")
     if len(graphs) == 0:
         raise ParameterError("branch and bound needs at least one product graph")
     token = token or CancelToken()
     cancel = token.flag
     counter = itertools.count()
-    upper, best, best_index = float(limit), None, -1
+    upper, best, best_index = np.inf, None, -1
     heap = []
     for graph in graphs:
         graph.compute_heuristic(cancel)
@@ -468,8 +459,6 @@ def branch_and_bound_union(graphs, *, eps: float = 0.0, token: CancelToken | Non
                        f"{len(heap)} open regions")
     lower_bound = min(lower_bound, upper)
     if best is None:
-        if np.isfinite(limit):
-            return None
         raise InputError("branch and bound found no closed path")
     runs = sum(g.runs for g in graphs)
     return BranchAndBoundResult(best, upper, lower_bound, upper, iterations, runs,

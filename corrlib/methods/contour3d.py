@@ -298,20 +298,20 @@ def axis_scale(query: PreparedQuery, mesh: PreparedMesh, distances: np.ndarray, 
 
 
 def product_graph(cost: np.ndarray, contour_points: np.ndarray, mesh_vertices: np.ndarray, adjacency,
-                  params: Contour3DParams) -> ProductGraph:
+                  params: Contour3DParams, unit_cost: float) -> ProductGraph:
     """The product graph of the chosen energy.
 
     The elastic weights are unit-free: the stretching weight is in units of
-    the mean node cost (a unit of length mismatch costs as much as a unit of
-    length matched at the mean feature distance), the bending weight in units
-    of the mean node cost times the mean contour step.
+    ``unit_cost``, the mean node cost without the axis term (a unit of length
+    mismatch costs as much as a unit of length matched at the mean feature
+    distance), the bending weight in units of ``unit_cost`` times the mean
+    contour step. Both readings of the axis therefore get the same weights.
     """
     if params.energy == "paper":
         return ProductGraph(cost, contour_points, mesh_vertices, adjacency)
-    scale = float(cost.mean())
     step = float(np.mean(np.linalg.norm(np.roll(contour_points, -1, axis=0) - contour_points, axis=1)))
-    return ElasticProductGraph(cost, contour_points, mesh_vertices, adjacency, stretch=params.stretch * scale,
-                               bending=params.bending * scale * step)
+    return ElasticProductGraph(cost, contour_points, mesh_vertices, adjacency, stretch=params.stretch * unit_cost,
+                               bending=params.bending * unit_cost * step)
 
 
 def match_prepared(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams, token):
@@ -326,9 +326,11 @@ def match_prepared(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams,
     token.raise_if_cancelled()
     # the axis has no direction: one branch-and-bound over both readings
     directions = (False, True) if scale > 0 else (False,)
+    unit_cost = float(cost.mean())
     graphs = [product_graph(cost + scale * axis_mismatch(query.axis.coordinate, target.axis.coordinate,
                                                          flipped=flipped) if scale > 0 else cost,
-                            query.points, target.vertices, mesh.adjacency, params) for flipped in directions]
+                            query.points, target.vertices, mesh.adjacency, params, unit_cost)
+              for flipped in directions]
     yield Progress("branch and bound", 0.1, f"{graphs[0].m} x {graphs[0].n} product graph"
                    + (", both directions of the axis" if scale > 0 else ""))
     with watch("search"):

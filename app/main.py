@@ -16,6 +16,14 @@ import os
 import sys
 
 
+DEFAULT_SCREENSHOT_TIMEOUT_S = 300.0
+SCREENSHOT_SETTLE_MS = 500  # after the first result: let the views finish drawing before the grab
+NO_JOB_SCREENSHOT_DELAY_MS = 1500  # with nothing to run, grab the window this long after start
+SETTLE_EVENT_ROUNDS = 5  # event-loop passes that apply the requested tab/slider/function before the grab
+NO_DISPLAY_HINT = ('xvfb-run -a -s "-screen 0 1600x1000x24" corr-studio --demo --screenshot shot.png')
+TRUE_WORDS = {"1", "true", "yes", "on"}  # --param NAME=VALUE spellings of True for boolean parameters
+
+
 def build_parser() -> argparse.ArgumentParser:
     parser = argparse.ArgumentParser(prog="corr-studio", description="Desktop studio for shape correspondence.")
     parser.add_argument("files", nargs="*", help="source and target (meshes, contours or silhouettes)")
@@ -33,11 +41,112 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--retrieve", metavar="FOLDER", help="rank this folder against the query (first file)")
     parser.add_argument("--compare", action="store_true", help="run the comparison of all methods on the pair")
     parser.add_argument("--screenshot", metavar="PATH", help="write a PNG of the window after the first result")
-    parser.add_argument("--timeout", type=float, default=300.0, help="--screenshot gives up after this many s")
+    parser.add_argument("--timeout", type=float, default=DEFAULT_SCREENSHOT_TIMEOUT_S,
+                        help="--screenshot gives up after this many s")
     parser.add_argument("--param", action="append", metavar="NAME=VALUE", default=[],
                         help="parameter of the started method")
     parser.add_argument("--bench", action="store_true", help="run the studio benchmarks and exit")
     return parser
+
+
+def has_display() -> bool:
+    """False (after a message on stderr) when Qt's xcb platform has no X display to connect to."""
+    os.environ.setdefault("QT_QPA_PLATFORM", "xcb")
+    if os.environ["QT_QPA_PLATFORM"] == "xcb" and not os.environ.get("DISPLAY"):
+        print("corr-studio: no display (DISPLAY is not set). Run it on a desktop, or on a virtual screen: "
+              + NO_DISPLAY_HINT, file=sys.stderr)
+        return False
+    return True
+
+
+def wait_for_loads(window) -> None:
+    """Run the event loop until the files the window is loading (in its worker) are loaded or failed."""
+    from PySide6.QtCore import QEventLoop
+
+    loop = QEventLoop()
+    window.loading_finished.connect(loop.quit)
+    if window.is_loading():
+        loop.exec()
+    window.loading_finished.disconnect(loop.quit)
+
+
+def open_inputs(window, args) -> None:
+    """Load the files (first: source, second: target) and the demo pair; return when they are loaded."""
+    for i, path in enumerate(args.files[:2]):
+        window.load_file(path, "source" if i == 0 else "target")
+    if args.demo:
+        window.load_demo()
+    wait_for_loads(window)
+
+
+def select_tab(window, name: str | None) -> None:
+    """Show the tab titled ``name`` (case-insensitive); nothing for None or an unknown name."""
+    for i in range(window.tabs.count()):
+        if name and window.tabs.tabText(i).lower() == name.lower():
+            window.tabs.setCurrentIndex(i)
+
+
+def apply_param(window, item: str, method: str | None) -> str | None:
+    """Set ``NAME=VALUE`` in the form of ``method`` (default: the selected one); an error message or None."""
+    name, _, value = item.partition("=")
+    method = method or window.method_box.currentData()
+    form = window.form_of(method) if method is not None else None
+    if form is None:
+        return f"--param {item}: no method to apply it to (load inputs or pass --method)"
+    current = form.values()
+    if name not in current:
+        return f"--param {item}: {method} has no parameter {name!r} (it has {', '.join(current)})"
+    try:
+        current[name] = (value.lower() in TRUE_WORDS if isinstance(current[name], bool)
+                         else type(current[name])(value))
+    except ValueError:
+        return f"--param {item}: cannot interpret {value!r}"
+    form.set_values(current)
+    return None
+
+
+def start_jobs(window, args) -> bool:
+    """Start what the command line asks for (retrieval, comparison or one method); True if a job started."""
+    if args.retrieve:
+        window.retrieval_view.set_folder(args.retrieve)
+        window.tabs.setCurrentWidget(window.retrieval_view)
+        window.run_retrieval()
+        return True
+    if args.compare:
+        window.tabs.setCurrentWidget(window.compare_view)
+        window.run_compare()
+        return True
+    if (args.demo or args.method or len(args.files) >= 2) and window.method_box.count():
+        window.run_method(method=args.method)
+        return True
+    return False
+
+
+def schedule_screenshot(app, window, args, started: bool) -> None:
+    """Write ``args.screenshot`` after the first result or error (or soon, if nothing runs), then quit;
+    give up after ``args.timeout`` seconds."""
+    from PySide6.QtCore import QTimer
+
+    from app.views.sequence import STEPS
+
+    def shoot(*_a):
+        select_tab(window, args.tab)  # a finished job switches to its own view; show the requested one
+        view = window.sequence_view
+        if args.sequence_t is not None and view.positions is not None:
+            view.slider.setValue(int(STEPS * args.sequence_t / view.t_max.value()))
+        if args.torus_function:
+            window.product_view.function.setCurrentText(args.torus_function)
+        for _ in range(SETTLE_EVENT_ROUNDS):
+            app.processEvents()
+        QTimer.singleShot(SCREENSHOT_SETTLE_MS,
+                          lambda: (window.save_screenshot(args.screenshot), window.close(), app.quit()))
+
+    if started:
+        window.result_ready.connect(shoot)
+        window.error_shown.connect(shoot)
+    else:
+        QTimer.singleShot(NO_JOB_SCREENSHOT_DELAY_MS, shoot)
+    QTimer.singleShot(int(args.timeout * 1000), lambda: (window.save_screenshot(args.screenshot), app.quit()))
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -45,17 +154,12 @@ def main(argv: list[str] | None = None) -> int:
 
     t_start = time.perf_counter()
     args = build_parser().parse_args(argv)
-    os.environ.setdefault("QT_QPA_PLATFORM", "xcb")
-    if os.environ["QT_QPA_PLATFORM"] == "xcb" and not os.environ.get("DISPLAY"):
-        print("corr-studio: no display (DISPLAY is not set). Run it on a desktop, or on a virtual screen: "
-              'xvfb-run -a -s "-screen 0 1600x1000x24" corr-studio --demo --screenshot shot.png',
-              file=sys.stderr)
+    if not has_display():
         return 2
     if args.bench:
         from app.bench import run_benchmarks
 
         return run_benchmarks(t_start)
-    from PySide6.QtCore import QTimer
     from PySide6.QtWidgets import QApplication
 
     from app.main_window import MainWindow
@@ -63,69 +167,18 @@ def main(argv: list[str] | None = None) -> int:
     app = QApplication.instance() or QApplication(sys.argv[:1])
     window = MainWindow(interactive=args.screenshot is None)
     window.show()
-    for i, path in enumerate(args.files[:2]):
-        window.load_file(path, "source" if i == 0 else "target")
-    if args.demo:
-        window.load_demo()
-    def select_tab() -> None:
-        for i in range(window.tabs.count()):
-            if args.tab and window.tabs.tabText(i).lower() == args.tab.lower():
-                window.tabs.setCurrentIndex(i)
-
-    select_tab()
+    open_inputs(window, args)
+    select_tab(window, args.tab)
     if args.pair_mode:
         window.pair_view.mode.setCurrentText(args.pair_mode)
     for item in args.param:
-        name, _, value = item.partition("=")
-        method = args.method or window.method_box.currentData()
-        if method not in window._form_of:
-            print(f"corr-studio: --param {item}: no method to apply it to (load inputs or pass --method)",
-                  file=sys.stderr)
+        error = apply_param(window, item, args.method)
+        if error is not None:
+            print(f"corr-studio: {error}", file=sys.stderr)
             return 2
-        form = window._form_of[method]
-        current = form.values()
-        if name not in current:
-            print(f"corr-studio: --param {item}: {method} has no parameter {name!r} "
-                  f"(it has {', '.join(current)})", file=sys.stderr)
-            return 2
-        try:
-            current[name] = (value.lower() in {"1", "true", "yes", "on"} if isinstance(current[name], bool)
-                             else type(current[name])(value))
-        except ValueError:
-            print(f"corr-studio: --param {item}: cannot interpret {value!r}", file=sys.stderr)
-            return 2
-        form.set_values(current)
-    started = False
-    if args.retrieve:
-        window.retrieval_view.set_folder(args.retrieve)
-        window.tabs.setCurrentWidget(window.retrieval_view)
-        window.run_retrieval()
-        started = True
-    elif args.compare:
-        window.tabs.setCurrentWidget(window.compare_view)
-        window.run_compare()
-        started = True
-    elif args.demo or args.method or len(args.files) >= 2:
-        if window.method_box.count():
-            window.run_method(method=args.method)
-            started = True
+    started = start_jobs(window, args)
     if args.screenshot:
-        def shoot(*_a):
-            select_tab()  # a finished job switches to its own view; show the requested one
-            if args.sequence_t is not None and window.sequence_view.positions is not None:
-                window.sequence_view.slider.setValue(int(1000 * args.sequence_t / window.sequence_view.t_max.value()))
-            if args.torus_function:
-                window.product_view.function.setCurrentText(args.torus_function)
-            for _ in range(5):
-                app.processEvents()
-            QTimer.singleShot(500, lambda: (window.save_screenshot(args.screenshot), window.close(), app.quit()))
-
-        if started:
-            window.result_ready.connect(shoot)
-            window.error_shown.connect(shoot)
-        else:
-            QTimer.singleShot(1500, shoot)
-        QTimer.singleShot(int(args.timeout * 1000), lambda: (window.save_screenshot(args.screenshot), app.quit()))
+        schedule_screenshot(app, window, args, started)
     return app.exec()
 
 

@@ -5,6 +5,7 @@ from __future__ import annotations
 import csv
 import io
 import time
+from collections.abc import Callable
 from pathlib import Path
 
 import numpy as np
@@ -27,6 +28,7 @@ from PySide6.QtWidgets import (
 )
 
 import corrlib
+from app.jobs import LoadedShape, MethodOutcome, describe, load_job, method_job
 from app.param_form import ParamForm
 from app.sketch import SketchPanel
 from app.views.compare import CompareView
@@ -36,23 +38,23 @@ from app.views.retrieval import RetrievalView, retrieval_job
 from app.views.sequence import SequenceView
 from app.worker import JobRunner, progress_text
 from corrlib.errors import CorrError
-from corrlib.io import IMAGE_SUFFIXES, MESH_SUFFIXES, POINT_SUFFIXES, load_contour, load_mesh
-from corrlib.methods import all_methods, methods_for, solve_iter
+from corrlib.io import CONTOUR_SUFFIXES, dialog_filter
+from corrlib.methods import all_methods, methods_for
 from corrlib.shapes import Contour2D, TriMesh
 
-CONTOUR_SUFFIXES = IMAGE_SUFFIXES | POINT_SUFFIXES | {".svg"}
-MESH_FILTER = "Meshes (*.off *.obj *.ply *.stl)"
-CONTOUR_FILTER = "Contours and silhouettes (*.png *.gif *.jpg *.jpeg *.bmp *.tif *.tiff *.svg *.txt *.csv *.xy *.pts *.dat)"
+MESH_FILTER = dialog_filter("mesh", all_files=False)  # file-dialog filters: from corrlib.io.FORMATS
+CONTOUR_FILTER = dialog_filter("contour", all_files=False)
 
-
-def describe(shape) -> str:
-    if isinstance(shape, TriMesh):
-        warnings = [f.message for f in shape.report() if f.level == "warning"]
-        text = f"{shape.name}: {shape.n_vertices} vertices, {shape.n_faces} faces, area {shape.area:.4g}"
-        return text + ("\n  " + "\n  ".join(warnings) if warnings else "\n  validation: no problems")
-    if isinstance(shape, Contour2D):
-        return f"{shape.name}: contour, {shape.n_points} points, length {shape.length:.4g}"
-    return "none"
+DEFAULT_WINDOW_SIZE = (1500, 950)
+PROGRESS_STEPS = 1000  # resolution of the job panel's progress bar
+WARM_UP_DELAY_MS = 300  # start loading the compiled kernels this long after the window opened
+STALL_PROBE_MS = 20  # the job panel's timer period: a longer gap between ticks is a GUI stall
+LOG_MAX_LINES = 2000
+MAX_RECENT_FILES = 10
+N_EXPORT_FRAMES = 11  # morph frames written by Export > Morph frames (t = 0 .. t max)
+ABOUT_PROVENANCE_CHARS = 3000  # how much of the data provenance the About box shows
+#: job keys; one job at a time per key (a new job with a running key supersedes it)
+LOAD_KEY, PAIR_KEY, COMPARE_KEY, RETRIEVAL_KEY = "load", "pair", "compare", "retrieval"
 
 
 class JobPanel(QWidget):
@@ -63,7 +65,7 @@ class JobPanel(QWidget):
     def __init__(self, parent=None):
         super().__init__(parent)
         self.bar = QProgressBar()
-        self.bar.setRange(0, 1000)
+        self.bar.setRange(0, PROGRESS_STEPS)
         self.stage = QLabel("idle")
         self.stage.setWordWrap(True)
         self.elapsed = QLabel("")
@@ -72,7 +74,7 @@ class JobPanel(QWidget):
         self.cancel.clicked.connect(self.cancel_requested)
         self.log = QPlainTextEdit()
         self.log.setReadOnly(True)
-        self.log.setMaximumBlockCount(2000)
+        self.log.setMaximumBlockCount(LOG_MAX_LINES)
         layout = QVBoxLayout(self)
         for w in (self.bar, self.stage, self.elapsed, self.cancel):
             layout.addWidget(w)
@@ -82,14 +84,14 @@ class JobPanel(QWidget):
         self.max_stall = 0.0  # longest gap between GUI timer ticks while a job ran (seconds)
         self.max_stall_stage = ""  # the stage shown when it happened
         self.timer = QTimer(self)
-        self.timer.setInterval(20)
+        self.timer.setInterval(STALL_PROBE_MS)
         self.timer.timeout.connect(self._tick)
 
     def started(self, text: str) -> None:
         self._start = self._last_tick = time.perf_counter()
         self.max_stall = 0.0
         self.max_stall_stage = ""
-        self.bar.setRange(0, 1000)
+        self.bar.setRange(0, PROGRESS_STEPS)
         self.bar.setValue(0)
         self.stage.setText(text)
         self.cancel.setEnabled(True)
@@ -98,8 +100,8 @@ class JobPanel(QWidget):
 
     def report(self, report) -> None:
         if report.fraction >= 0:
-            self.bar.setRange(0, 1000)
-            self.bar.setValue(int(1000 * report.fraction))
+            self.bar.setRange(0, PROGRESS_STEPS)
+            self.bar.setValue(int(PROGRESS_STEPS * report.fraction))
         else:
             self.bar.setRange(0, 0)  # busy indicator
         self.stage.setText(progress_text(report))
@@ -108,8 +110,8 @@ class JobPanel(QWidget):
 
     def stopped(self, text: str) -> None:
         self.timer.stop()
-        self.bar.setRange(0, 1000)
-        self.bar.setValue(1000)
+        self.bar.setRange(0, PROGRESS_STEPS)
+        self.bar.setValue(PROGRESS_STEPS)
         self.cancel.setEnabled(False)
         took = time.perf_counter() - self._start if self._start else 0.0
         self.stage.setText(text)
@@ -128,10 +130,16 @@ class JobPanel(QWidget):
 
 
 class MainWindow(QMainWindow):
-    """The studio. ``result_ready`` fires when a pair/contour result is on screen."""
+    """The studio. ``result_ready`` fires when a pair/contour result is on screen.
+
+    Files are read and validated, methods solved and their errors measured in
+    :class:`JobRunner` threads (factories in :mod:`app.jobs`); the slots here
+    only draw. ``loading_finished`` fires when the queue of files to load is empty.
+    """
 
     result_ready = Signal(object)
     error_shown = Signal(str)
+    loading_finished = Signal()
 
     def __init__(self, settings: QSettings | None = None, interactive: bool = True):
         super().__init__()
@@ -147,6 +155,9 @@ class MainWindow(QMainWindow):
         self.runner.failed.connect(self._on_failed)
         self.runner.cancelled.connect(self._on_cancelled)
         self._compare_queue: list[str] = []
+        # files waiting to be loaded (one load job at a time, in request order): (path, which, then)
+        self._load_queue: list[tuple[str, str, Callable[[], None] | None]] = []
+        self._loading: tuple[str, str, Callable[[], None] | None] | None = None
 
         self.tabs = QTabWidget()
         self.pair_view = PairView()
@@ -167,7 +178,7 @@ class MainWindow(QMainWindow):
         self._build_menus()
         self.statusBar().showMessage("Load shapes (File menu, drag and drop) or open the demo pair.")
         self.setAcceptDrops(True)
-        self.resize(1500, 950)
+        self.resize(*DEFAULT_WINDOW_SIZE)
         state = self.settings.value("window/state")
         geometry = self.settings.value("window/geometry")
         if geometry is not None:
@@ -176,7 +187,7 @@ class MainWindow(QMainWindow):
             self.restoreState(state)
         self.refresh_methods()
         # load the compiled kernels while the window is idle, not during the first solve
-        QTimer.singleShot(300, self._warm_up)
+        QTimer.singleShot(WARM_UP_DELAY_MS, self._warm_up)
 
     def _warm_up(self) -> None:
         import threading
@@ -223,10 +234,10 @@ class MainWindow(QMainWindow):
         self.method_desc = QLabel("")
         self.method_desc.setWordWrap(True)
         self.forms = QStackedWidget()
-        self._form_of: dict[str, ParamForm] = {}
+        self._forms: dict[str, ParamForm] = {}
         for spec in all_methods():
             form = ParamForm(spec.params)
-            self._form_of[spec.name] = form
+            self._forms[spec.name] = form
             self.forms.addWidget(form)
         self.run_button = QPushButton("Run")
         self.run_button.clicked.connect(self.run_method)
@@ -315,7 +326,7 @@ class MainWindow(QMainWindow):
                           f"Continuous non-rigid shape correspondence (Lähner's thesis methods).<br><br>"
                           f"numpy {numpy.__version__}, scipy {scipy.__version__}, pyvista {pyvista.__version__}, "
                           f"PySide6 {PySide6.__version__}<br><br><pre style='font-size:8pt'>"
-                          f"{provenance[:3000]}</pre>")
+                          f"{provenance[:ABOUT_PROVENANCE_CHARS]}</pre>")
 
     # ------------------------------------------------------------------ loading
 
@@ -330,10 +341,10 @@ class MainWindow(QMainWindow):
             self.load_file(path, "source")
 
     def open_gt_dialog(self) -> None:
-        a, _ = QFileDialog.getOpenFileName(self, "Ground truth of the source (.vts)", "", "*.vts")
+        a, _ = QFileDialog.getOpenFileName(self, "Ground truth of the source (.vts)", "", dialog_filter("ground-truth"))
         if not a:
             return
-        b, _ = QFileDialog.getOpenFileName(self, "Ground truth of the target (.vts)", "", "*.vts")
+        b, _ = QFileDialog.getOpenFileName(self, "Ground truth of the target (.vts)", "", dialog_filter("ground-truth"))
         if b:
             self.load_ground_truth(a, b)
 
@@ -349,31 +360,54 @@ class MainWindow(QMainWindow):
             return
         self.job_panel.write(f"ground truth: {self.gt[0].size} rows")
 
-    def load_file(self, path: str, which: str = "source") -> bool:
-        """Load a mesh or contour as source/target; bad files produce a message, never a crash."""
-        suffix = Path(path).suffix.lower()
-        try:
-            shape = load_mesh(path) if suffix in MESH_SUFFIXES else load_contour(path)
-        except CorrError as exc:
-            self.show_error(str(exc))
-            return False
-        except Exception as exc:  # anything unexpected from a third-party reader
-            self.show_error(f"{path}: cannot load: {exc}")
-            return False
-        if isinstance(shape, Contour2D):
-            self.sketch.show_contour(shape)
-            self.retrieval_view.set_query(shape)
-        self.set_shape(shape, which)
-        self._add_recent(path)
-        return True
+    def load_file(self, path: str, which: str = "source", then: Callable[[], None] | None = None) -> None:
+        """Load a mesh or contour as source/target in the worker (queued: files load one after another).
 
-    def set_shape(self, shape, which: str) -> None:
+        Bad files produce a message, never a crash. ``then`` is called on the GUI
+        thread once this file is loaded and set (not if loading fails or is cancelled).
+        """
+        self._load_queue.append((str(path), which, then))
+        if self._loading is None:
+            self._next_load()
+
+    def is_loading(self) -> bool:
+        """True while a file is being loaded or waits in the load queue."""
+        return self._loading is not None or bool(self._load_queue)
+
+    def _next_load(self) -> None:
+        self._loading = self._load_queue.pop(0) if self._load_queue else None
+        if self._loading is None:
+            self.loading_finished.emit()
+            return
+        path, which, _then = self._loading
+        self.job_panel.started(f"loading {which}: {Path(path).name}")
+        self.runner.start(LOAD_KEY, load_job(path))
+
+    def _on_loaded(self, loaded: LoadedShape) -> None:
+        _path, which, then = self._loading
+        self.job_panel.stopped(f"loaded {loaded.shape.name}")
+        if isinstance(loaded.shape, Contour2D):
+            self.sketch.show_contour(loaded.shape)
+            self.retrieval_view.set_query(loaded.shape)
+        self.set_shape(loaded.shape, which, loaded.description)
+        self._add_recent(loaded.path)
+        if then is not None:
+            then()
+        self._next_load()
+
+    def set_shape(self, shape, which: str, description: str | None = None) -> None:
+        """Use ``shape`` as source/target (``description``: from :func:`app.jobs.describe`, computed if None).
+
+        Method jobs on the previous pair are cancelled: their results would not fit the new pair.
+        """
+        self._cancel_method_jobs()
+        text = describe(shape) if description is None else description
         if which == "source":
             self.source = shape
-            self.source_info.setText(describe(shape))
+            self.source_info.setText(text)
         else:
             self.target = shape
-            self.target_info.setText(describe(shape))
+            self.target_info.setText(text)
         self.gt = None
         self.last_result = None
         if isinstance(self.source, TriMesh) and isinstance(self.target, TriMesh):
@@ -381,13 +415,18 @@ class MainWindow(QMainWindow):
         self.refresh_methods()
 
     def load_demo(self) -> None:
+        """Load the bundled pair (the target after the source loaded) with its identity ground truth."""
         from corrlib.resources import DEMO_PAIR, resource
 
-        if self.load_file(str(resource(DEMO_PAIR[0])), "source") and \
-                self.load_file(str(resource(DEMO_PAIR[1])), "target"):
-            ident = np.arange(self.source.n_vertices)
-            self.gt = (ident, ident)  # the demo pair shares its vertex order
-            self.job_panel.write("demo pair loaded (identity ground truth)")
+        def identity_ground_truth() -> None:
+            if isinstance(self.source, TriMesh) and isinstance(self.target, TriMesh) and \
+                    self.source.n_vertices == self.target.n_vertices:
+                ident = np.arange(self.source.n_vertices)
+                self.gt = (ident, ident)  # the demo pair shares its vertex order
+                self.job_panel.write("demo pair loaded (identity ground truth)")
+
+        self.load_file(str(resource(DEMO_PAIR[0])), "source",
+                       then=lambda: self.load_file(str(resource(DEMO_PAIR[1])), "target", then=identity_ground_truth))
 
     def load_bundled(self, which: str) -> None:
         from corrlib.resources import resource
@@ -402,14 +441,14 @@ class MainWindow(QMainWindow):
 
     def _add_recent(self, path: str) -> None:
         recent = [p for p in (self.settings.value("recent", []) or []) if p != path]
-        self.settings.setValue("recent", ([path] + recent)[:10])
+        self.settings.setValue("recent", ([path] + recent)[:MAX_RECENT_FILES])
         self._fill_recent()
 
     def _fill_recent(self) -> None:
         self.recent_menu.clear()
         for path in self.settings.value("recent", []) or []:
             action = QAction(path, self)
-            action.triggered.connect(lambda _=False, p=path: self.load_file(p, "source" if self.source is None else "target"))
+            action.triggered.connect(lambda _=False, p=path: self.load_file(p, self._free_slot()))
             self.recent_menu.addAction(action)
 
     def dragEnterEvent(self, event):
@@ -419,8 +458,13 @@ class MainWindow(QMainWindow):
     def dropEvent(self, event):
         for url in event.mimeData().urls():
             path = url.toLocalFile()
-            which = "source" if self.source is None or Path(path).suffix.lower() in CONTOUR_SUFFIXES else "target"
+            which = "source" if Path(path).suffix.lower() in CONTOUR_SUFFIXES else self._free_slot()
             self.load_file(path, which)
+
+    def _free_slot(self) -> str:
+        """"source" while there is no source (loaded or being loaded), else "target"."""
+        pending = [which for _path, which, _then in ([self._loading] if self._loading else []) + self._load_queue]
+        return "source" if self.source is None and "source" not in pending else "target"
 
     # ------------------------------------------------------------------ methods and jobs
 
@@ -448,10 +492,14 @@ class MainWindow(QMainWindow):
 
         spec = get_method(name)
         self.method_desc.setText(spec.description)
-        self.forms.setCurrentWidget(self._form_of[name])
+        self.forms.setCurrentWidget(self._forms[name])
+
+    def form_of(self, method: str) -> ParamForm | None:
+        """The parameter form of the registered method ``method`` (None for an unknown name)."""
+        return self._forms.get(method)
 
     def current_params(self, name: str):
-        return self._form_of[name].params()
+        return self._forms[name].params()
 
     def run_method(self, *_args, method: str | None = None) -> None:
         if method is not None and self.method_box.findData(method) >= 0:
@@ -460,22 +508,33 @@ class MainWindow(QMainWindow):
         if name is None:
             self.show_error("no method accepts the loaded inputs (load a source and a target)")
             return
-        self._start_method("pair", name)
+        self._start_method(PAIR_KEY, name)
 
     def _start_method(self, key: str, name: str) -> bool:
-        """Validate the form of ``name`` and start it on the loaded pair as job ``key``."""
+        """Validate the form of ``name`` and start it on the loaded pair as job ``key``.
+
+        The job also measures the map's errors against the loaded ground truth
+        and, for the pair view, computes the source function (:func:`app.jobs.method_job`).
+        """
         try:
             params = self.current_params(name)
         except CorrError as exc:
             self.show_error(f"{name}: invalid parameters: {exc}")
             return False
-        source, target = self.source, self.target
-        self.job_panel.started(f"{'compare: ' if key == 'compare' else ''}running {name}")
-        self.runner.start(key, lambda token: solve_iter(name, source, target, params, token))
+        self.job_panel.started(f"{'compare: ' if key == COMPARE_KEY else ''}running {name}")
+        self.runner.start(key, method_job(name, self.source, self.target, params, self.gt,
+                                          view_data=key == PAIR_KEY))
         return True
 
+    def _cancel_method_jobs(self) -> None:
+        for key in (PAIR_KEY, COMPARE_KEY):
+            self.runner.cancel(key)
+        self._compare_queue.clear()
+
     def cancel_jobs(self) -> None:
-        for key in ("pair", "retrieval", "compare"):
+        """Cancel every running job and forget the files waiting to be loaded."""
+        self._load_queue.clear()
+        for key in (LOAD_KEY, PAIR_KEY, RETRIEVAL_KEY, COMPARE_KEY):
             self.runner.cancel(key)
         self._compare_queue.clear()
 
@@ -484,33 +543,40 @@ class MainWindow(QMainWindow):
 
     def _on_failed(self, key: str, message: str) -> None:
         self.job_panel.stopped("failed")
-        self._compare_queue.clear()
+        if key != LOAD_KEY:
+            self._compare_queue.clear()
         self.show_error(message)
+        if key == LOAD_KEY:
+            self._next_load()
 
     def _on_cancelled(self, key: str) -> None:
         self.job_panel.stopped("cancelled")
-        self._compare_queue.clear()
-
-    def _error_report(self, result):
-        from corrlib.evaluation import geodesic_errors
-
-        if self.gt is None or result.map_xy is None or not isinstance(self.target, TriMesh):
-            return None
-        return geodesic_errors(np.maximum(result.map_xy, 0), self.target, self.gt[0], self.gt[1], method="heat")
+        if key == LOAD_KEY:
+            self._next_load()
+        else:
+            self._compare_queue.clear()
 
     def _on_finished(self, key: str, payload) -> None:
-        if key == "retrieval":
+        if key == LOAD_KEY:
+            self._on_loaded(payload)
+            return
+        if key == RETRIEVAL_KEY:
             hits, thumbs = payload
             self.retrieval_view.show_results(hits, thumbs)
             self.job_panel.stopped(f"ranked {len(hits)} meshes")
             self.result_ready.emit(hits)
             return
-        result = payload
+        outcome: MethodOutcome = payload
+        result = outcome.result
         self.job_panel.stopped(f"{result.method} finished")
-        if key == "compare":
-            self.compare_view.add_result(self.source, self.target, result, self._error_report(result))
+        if outcome.source is not self.source or outcome.target is not self.target:
+            self.job_panel.write(f"{result.method}: result dropped, the inputs changed while it ran")
+            return
+        self._log_outcome(outcome)
+        if key == COMPARE_KEY:
+            self.compare_view.add_result(self.source, self.target, result, outcome.report, outcome.n_unmatched)
             self._next_compare()
-            if not self.runner.is_running("compare"):
+            if not self.runner.is_running(COMPARE_KEY):
                 self.result_ready.emit(result)
             return
         self.last_result = result
@@ -518,29 +584,34 @@ class MainWindow(QMainWindow):
             self.tabs.setCurrentWidget(self.product_view)
             self.product_view.show_contour_pair(result)
         elif isinstance(self.source, Contour2D):
-            ex = result.extras
             self.tabs.setCurrentWidget(self.product_view)  # shown first, so the cameras fit its real size
-            self.product_view.show_contour_match(ex["contour_points"], self.target, ex["path_vertices"],
-                                                 ex["path_contour_index"], result.energy)
+            path = result.path
+            self.product_view.show_contour_match(path.contour_points, self.target, path.vertices,
+                                                 path.contour_index, result.energy)
         else:
-            report = self._error_report(result)
-            errors = None
-            if report is not None:
-                errors = np.full(self.source.n_vertices, np.nan)
-                errors[self.gt[0]] = report.errors
-                self.job_panel.write("error: " + ", ".join(f"{k} {v:.3f}" for k, v in report.summary().items()))
             self.tabs.setCurrentWidget(self.pair_view)
-            self.pair_view.set_result(result, errors)
-            self._show_sequence(result)
+            self.pair_view.set_result(result, None if outcome.errors is None else outcome.errors.per_vertex,
+                                      function=outcome.function, n_unmatched=outcome.n_unmatched)
+            if outcome.sequence is not None:
+                self.sequence_view.set_sequence(self.source, *outcome.sequence)
         self.result_ready.emit(result)
 
-    def _show_sequence(self, result) -> None:
-        from corrlib.morph import FLOW_DESCRIPTION, LINEAR_DESCRIPTION, has_deformation, sequence_positions
-
-        # up to the largest t the slider allows (a divergence-free result stores its flow that far)
-        positions = sequence_positions(result, self.source, self.target, t_max=self.sequence_view.t_max.maximum())
-        self.sequence_view.set_sequence(self.source, positions,
-                                        FLOW_DESCRIPTION if has_deformation(result) else LINEAR_DESCRIPTION)
+    def _log_outcome(self, outcome: MethodOutcome) -> None:
+        """Write the error summary (computed in the job) and the unmatched count to the job log."""
+        name = outcome.result.method
+        if outcome.note:
+            self.job_panel.write(f"{name}: {outcome.note}")
+        if outcome.n_unmatched:
+            self.job_panel.write(f"{name}: {outcome.n_unmatched} source vertices unmatched")
+        errors = outcome.errors
+        if errors is None:
+            return
+        left_out = f" ({errors.n_unmatched} of {errors.n_rows} rows unmatched, left out)" if errors.n_unmatched else ""
+        if errors.report is None:
+            self.job_panel.write(f"error: no ground-truth row is matched{left_out}")
+        else:
+            self.job_panel.write("error: " + ", ".join(f"{k} {v:.3f}" for k, v in errors.report.summary().items())
+                                 + left_out)
 
     def run_retrieval(self) -> None:
         view = self.retrieval_view
@@ -548,12 +619,12 @@ class MainWindow(QMainWindow):
             self.show_error("retrieval needs a query (sketch or silhouette) and a folder of meshes")
             return
         self.job_panel.started(f"ranking {view.folder}")
-        self.runner.start("retrieval", retrieval_job(view.query, view.folder))
+        self.runner.start(RETRIEVAL_KEY, retrieval_job(view.query, view.folder))
 
     def open_retrieved_pair(self, query, mesh_path: str) -> None:
+        """The query as source, ``mesh_path`` as target (loaded in the worker), then the 2D-to-3D match."""
         self.set_shape(query, "source")
-        if self.load_file(mesh_path, "target"):
-            self.run_method(method="contour3d")
+        self.load_file(mesh_path, "target", then=lambda: self.run_method(method="contour3d"))
 
     def run_compare(self) -> None:
         if not (isinstance(self.source, TriMesh) and isinstance(self.target, TriMesh)):
@@ -570,7 +641,7 @@ class MainWindow(QMainWindow):
     def _next_compare(self) -> None:
         if not self._compare_queue:
             return
-        if not self._start_method("compare", self._compare_queue.pop(0)):
+        if not self._start_method(COMPARE_KEY, self._compare_queue.pop(0)):
             self._compare_queue.clear()
 
     # ------------------------------------------------------------------ exports (atomic, ask before overwrite)
@@ -585,7 +656,7 @@ class MainWindow(QMainWindow):
         if self.last_result is None or self.last_result.map_xy is None:
             self.show_error("run a method first: there is no map to export")
             return
-        path = self._save_path("Export map", "Map (*.txt)" if kind == "txt" else "Result (*.npz)")
+        path = self._save_path("Export map", dialog_filter("map" if kind == "txt" else "result", save=True))
         if path:
             try:
                 save_map(path, self.last_result.map_xy) if kind == "txt" else self.last_result.save(path)
@@ -599,7 +670,7 @@ class MainWindow(QMainWindow):
         if colors is None:
             self.show_error("no coloured target to export (run a method, show 'coordinates')")
             return
-        path = self._save_path("Export coloured target", "PLY (*.ply)")
+        path = self._save_path("Export coloured target", dialog_filter("mesh", save=True))
         if path:
             try:
                 save_mesh(path, self.target.vertices, self.target.faces, colors)
@@ -607,7 +678,7 @@ class MainWindow(QMainWindow):
                 self.show_error(str(exc))
 
     def open_texture_dialog(self) -> None:
-        path, _ = QFileDialog.getOpenFileName(self, "Texture image", "", "Images (*.png *.jpg *.jpeg *.bmp)")
+        path, _ = QFileDialog.getOpenFileName(self, "Texture image", "", dialog_filter("texture"))
         if path:
             self.load_texture(path)
 
@@ -624,8 +695,8 @@ class MainWindow(QMainWindow):
         self.pair_view.redraw()
 
     def export_frames(self, suffix: str = ".obj", folder: str | None = None) -> list[Path]:
-        """Write 11 frames from t = 0 to t max with the source's connectivity, ``animation.glb`` (glTF
-        morph-target animation) and ``volumes.csv`` (asks before overwriting)."""
+        """Write :data:`N_EXPORT_FRAMES` frames from t = 0 to t max with the source's connectivity,
+        ``animation.glb`` (glTF morph-target animation) and ``volumes.csv`` (asks before overwriting)."""
         from corrlib.morph import export_sequence
 
         if self.sequence_view.positions is None:
@@ -634,7 +705,7 @@ class MainWindow(QMainWindow):
         folder = folder or QFileDialog.getExistingDirectory(self, "Folder for the frames")
         if not folder:
             return []
-        frames = list(self.sequence_view.frames(11))
+        frames = list(self.sequence_view.frames(N_EXPORT_FRAMES))
         existing = [p for p in Path(folder).glob("frame_*") if p.suffix == suffix] + \
             [p for p in (Path(folder) / "animation.glb",) if p.exists()]
         if existing and self.interactive and QMessageBox.question(
@@ -661,7 +732,7 @@ class MainWindow(QMainWindow):
         if self.sequence_view.positions is None:
             self.show_error("no sequence to export (run a method on two meshes)")
             return
-        path = self._save_path("Sequence picture strip", "PNG (*.png)")
+        path = self._save_path("Sequence picture strip", dialog_filter("picture", save=True))
         if path:
             self.tabs.setCurrentWidget(self.sequence_view)
             strip = self.sequence_view.picture_strip()
@@ -669,7 +740,7 @@ class MainWindow(QMainWindow):
                 Image.fromarray(strip).save(fh, format="PNG")
 
     def export_screenshot(self) -> None:
-        path = self._save_path("Screenshot", "PNG (*.png)")
+        path = self._save_path("Screenshot", dialog_filter("picture", save=True))
         if path:
             self.save_screenshot(path)
 
@@ -695,7 +766,7 @@ class MainWindow(QMainWindow):
         if not rows:
             self.show_error("the comparison table is empty")
             return
-        path = self._save_path("Comparison table", "CSV (*.csv)")
+        path = self._save_path("Comparison table", dialog_filter("table", save=True))
         if path:
             buf = io.StringIO()
             writer = csv.writer(buf)
@@ -711,6 +782,11 @@ class MainWindow(QMainWindow):
         self.settings.setValue("window/state", self.saveState())
         self.settings.setValue("window/geometry", self.saveGeometry())
         self.runner.shutdown()
+        was_loading = self.is_loading()
+        self._load_queue.clear()
+        self._loading = None
+        if was_loading:
+            self.loading_finished.emit()  # nothing more will load: release whoever waits for the loads
         for view in (self.pair_view, self.product_view, self.sequence_view, self.retrieval_view, self.compare_view):
             view.close_plotters()
         super().closeEvent(event)

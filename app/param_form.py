@@ -21,6 +21,12 @@ from PySide6.QtWidgets import (
 from corrlib.errors import ParameterError
 from corrlib.methods.base import make_params, param_fields
 
+SPINBOX_INT_MAX = 2**31 - 1  # QSpinBox holds a 32-bit int: unbounded int parameters stop here
+SPINBOX_FLOAT_MAX = 1e12  # the range of an unbounded float parameter is +- this
+SMALL_FLOAT = 1e-2  # float defaults below this (and not 0) get more decimals
+DECIMALS_SMALL, DECIMALS = 8, 4
+DEFAULT_FLOAT_STEP = 0.1  # single step of a float parameter whose default is 0
+
 
 class ParamForm(QWidget):
     """Widgets for every field of a parameter dataclass; :meth:`params` validates and builds it."""
@@ -63,16 +69,17 @@ class ParamForm(QWidget):
             return w
         if isinstance(default, int):
             w = QSpinBox()
-            w.setRange(int(meta.get("low") if meta.get("low") is not None else -2**31 + 1),
-                       int(min(meta.get("high") if meta.get("high") is not None else 2**31 - 1, 2**31 - 1)))
+            w.setRange(int(meta.get("low") if meta.get("low") is not None else -SPINBOX_INT_MAX),
+                       int(min(meta.get("high") if meta.get("high") is not None else SPINBOX_INT_MAX,
+                               SPINBOX_INT_MAX)))
             w.setValue(default)
             return w
         if isinstance(default, float):
             w = QDoubleSpinBox()
-            w.setDecimals(8 if abs(default) < 1e-2 and default != 0 else 4)
-            w.setRange(meta.get("low") if meta.get("low") is not None else -1e12,
-                       meta.get("high") if meta.get("high") is not None else 1e12)
-            w.setSingleStep(10 ** math.floor(math.log10(abs(default))) if default else 0.1)
+            w.setDecimals(DECIMALS_SMALL if abs(default) < SMALL_FLOAT and default != 0 else DECIMALS)
+            w.setRange(meta.get("low") if meta.get("low") is not None else -SPINBOX_FLOAT_MAX,
+                       meta.get("high") if meta.get("high") is not None else SPINBOX_FLOAT_MAX)
+            w.setSingleStep(10 ** math.floor(math.log10(abs(default))) if default else DEFAULT_FLOAT_STEP)
             w.setValue(default)
             return w
         w = QLineEdit(str(default))

@@ -10,6 +10,11 @@ from PySide6.QtWidgets import QHBoxLayout, QLabel, QPushButton, QSpinBox, QVBoxL
 from corrlib.errors import CorrError
 from corrlib.shapes import Contour2D
 
+MIN_CANVAS_SIZE = (240, 200)
+MIN_STEP_PX = 2.0  # a drawn point is kept when the mouse moved at least this far from the last one
+SKETCH_POINTS_RANGE = (10, 2000)
+DEFAULT_SKETCH_POINTS = 200  # the sketch is resampled by arc length to this many points
+FIT_MARGIN = 0.85  # a loaded contour fills this fraction of the canvas
 
 def smooth_closed(points: np.ndarray, passes: int = 2) -> np.ndarray:
     """Laplacian smoothing of a closed polyline (each pass: average with both neighbours)."""
@@ -26,7 +31,7 @@ class SketchArea(QWidget):
 
     def __init__(self, parent=None):
         super().__init__(parent)
-        self.setMinimumSize(240, 200)
+        self.setMinimumSize(*MIN_CANVAS_SIZE)
         self.strokes: list[np.ndarray] = []  # history for undo; the last one is the current sketch
         self._current: list[tuple[float, float]] = []
         self.setMouseTracking(False)
@@ -60,7 +65,7 @@ class SketchArea(QWidget):
         if self._current:
             x, y = event.position().x(), event.position().y()
             lx, ly = self._current[-1]
-            if (x - lx) ** 2 + (y - ly) ** 2 >= 4.0:
+            if (x - lx) ** 2 + (y - ly) ** 2 >= MIN_STEP_PX ** 2:
                 self._current.append((x, y))
                 self.update()
 
@@ -98,8 +103,8 @@ class SketchPanel(QWidget):
         self.status = QLabel("Draw a closed silhouette with the left mouse button.")
         self.status.setWordWrap(True)
         self.n_points = QSpinBox()
-        self.n_points.setRange(10, 2000)
-        self.n_points.setValue(200)
+        self.n_points.setRange(*SKETCH_POINTS_RANGE)
+        self.n_points.setValue(DEFAULT_SKETCH_POINTS)
         self.n_points.setToolTip("The sketch is resampled by arc length to this many points.")
         buttons = QHBoxLayout()
         for text, slot in (("Undo", self.area.undo), ("Clear", self.area.clear), ("Smooth", self.smooth),
@@ -127,7 +132,7 @@ class SketchPanel(QWidget):
         p = contour.points.copy()
         p[:, 1] *= -1  # contours have y up, the widget y down
         lo, hi = p.min(axis=0), p.max(axis=0)
-        scale = 0.85 * min(self.area.width() / max(hi[0] - lo[0], 1e-9), self.area.height() / max(hi[1] - lo[1], 1e-9))
+        scale = FIT_MARGIN * min(self.area.width() / max(hi[0] - lo[0], 1e-9), self.area.height() / max(hi[1] - lo[1], 1e-9))
         centre = np.array([self.area.width(), self.area.height()]) / 2
         self.area.set_points((p - (lo + hi) / 2) * scale + centre)
 

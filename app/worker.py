@@ -5,6 +5,13 @@ thread by the slots connected to :class:`JobRunner`'s signals. Starting a job
 with the id of a running one supersedes it: the old one is cancelled and its
 late signals are dropped (the runner only forwards signals of the job that
 is current for its id).
+
+Jobs run on plain daemon threads, not superqt's ``thread_worker``: that runs
+on Qt's global thread pool (as many threads as cores, so a third job would
+wait), its non-daemon threads keep the process alive until a solver stops,
+and its abort works only at a ``yield`` — the supersession by key, the
+:class:`CancelToken` polled inside compiled loops and the bounded
+:meth:`JobRunner.shutdown` would all still be needed on top.
 """
 
 from __future__ import annotations
@@ -18,6 +25,8 @@ from PySide6.QtCore import QObject, Signal
 
 from corrlib.errors import Cancelled, CorrError
 from corrlib.progress import CancelToken, Progress
+
+SHUTDOWN_TIMEOUT_S = 10.0  # closing the window waits this long for cancelled jobs to stop
 
 
 class _Job:
@@ -104,7 +113,7 @@ class JobRunner(QObject):
         job = self._jobs.get(key)
         return time.perf_counter() - job.started if job else 0.0
 
-    def shutdown(self, timeout: float = 10.0) -> None:
+    def shutdown(self, timeout: float = SHUTDOWN_TIMEOUT_S) -> None:
         """Cancel every job and wait for the threads (called when the window closes)."""
         jobs = list(self._jobs.values())
         for job in jobs:

@@ -1,5 +1,15 @@
 """corrlib: continuous non-rigid shape correspondence (Qt-free library).
 
+What a script needs is importable from here::
+
+    import corrlib
+    x, y = corrlib.load_mesh("wolf0.off"), corrlib.load_mesh("wolf1.off")
+    result = corrlib.solve("kernel-matching", x, y)
+
+``load_mesh``, ``load_contour``, ``load_shape``, ``solve``, ``MatchResult``
+and ``evaluate`` are loaded on first use, so ``import corrlib`` stays light;
+``corrlib.methods.all_methods()`` lists the registered methods.
+
 Map convention used throughout: ``map_xy[i]`` is the index on shape Y of the
 partner of vertex ``i`` of shape X. Laplacians are positive semi-definite in
 weak form ``S phi = lambda M phi`` with M-orthonormal eigenvectors.
@@ -18,3 +28,21 @@ from corrlib.errors import (  # noqa: F401
     SolverError,
 )
 from corrlib.shapes import Contour2D, TriMesh  # noqa: F401
+
+#: lazily re-exported names -> the module defining them
+_EXPORTS = {
+    "load_mesh": "corrlib.io", "load_contour": "corrlib.io", "load_shape": "corrlib.io",
+    "solve": "corrlib.methods", "MatchResult": "corrlib.methods.base", "evaluate": "corrlib.evaluation",
+}
+
+
+def __getattr__(name: str):
+    if name in _EXPORTS:
+        import importlib
+
+        return getattr(importlib.import_module(_EXPORTS[name]), name)
+    raise AttributeError(f"module 'corrlib' has no attribute {name!r}")
+
+
+def __dir__():
+    return sorted([*globals(), *_EXPORTS])

@@ -15,8 +15,9 @@
   ``1e-9 × (score range) / max(n_rows, n_cols)``, so the objective matches
   the exact optimum to ~1e-9 of the score range. It releases the GIL (cells
   can be solved in threads) and polls a cancellation flag once per ε phase.
-* ``"scipy"``: :func:`scipy.optimize.linear_sum_assignment` (exact, slow on
-  smooth kernel scores: ~15 s at n = 3.4k here).
+* ``"scipy"``: :func:`scipy.optimize.linear_sum_assignment` (exact; the
+  Jonker–Volgenant algorithm is slow on the smooth, near-tied scores of
+  heat kernels).
 
 Rectangular problems (``n_rows != n_cols``): every element of the smaller
 side is matched. With a ``slack`` value, every row and column may instead

@@ -45,10 +45,12 @@ from pathlib import Path
 import numpy as np
 
 from corrlib.errors import FileFormatError, InputError, ParameterError
+from corrlib.io import suffixes
 from corrlib.parallel import job_executor
 from corrlib.progress import peak_rss_mb
 
-MESH_SUFFIXES = (".off", ".ply", ".obj")
+#: dataset meshes: the formats of :data:`corrlib.io.FORMATS` with a vertex order (ground truth indexes it)
+MESH_SUFFIXES = suffixes("mesh", readable=True, vertex_order=True)
 
 
 @dataclass
@@ -358,7 +360,7 @@ class Runner:
         with atomic_write(self.out / "errors.csv") as fh:
             fh.write(",".join(columns) + "\n")
             for rec in records:
-                fh.write(",".join(_csv(rec.get(c, "")) for c in columns) + "\n")
+                fh.write(",".join(csv_cell(rec.get(c, "")) for c in columns) + "\n")
         summary = {}
         curves = {}
         for label in [m.label for m in self.methods] + list(self.external):
@@ -406,7 +408,7 @@ def _all_params(method: MethodRun) -> dict:
     return asdict(make_params(get_method(method.name).params, **method.params))
 
 
-def _csv(value) -> str:
+def csv_cell(value) -> str:
     if isinstance(value, float):
         return f"{value:.6g}"
     text = str(value)
@@ -429,7 +431,8 @@ def _markdown(summary: dict) -> str:
 
 # ----------------------------------------------------------------------------- retrieval benchmark
 
-CONTOUR_SUFFIXES = (".png", ".gif", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff", ".svg", ".txt", ".csv", ".xy")
+#: retrieval queries: every contour format of :data:`corrlib.io.FORMATS`
+CONTOUR_SUFFIXES = suffixes("contour", readable=True)
 
 
 def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | None = None,
@@ -483,7 +486,7 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
     with atomic_write(out / "retrieval.csv") as fh:
         fh.write("query,class,ap,first_relevant,top,error\n")
         for r in rows:
-            fh.write(",".join(_csv(r[c]) for c in ("query", "class", "ap", "first_relevant", "top", "error")) + "\n")
+            fh.write(",".join(csv_cell(r[c]) for c in ("query", "class", "ap", "first_relevant", "top", "error")) + "\n")
     ok = [r for r in rows if not r["error"]]
     per_class = {}
     for r in ok:

@@ -1,7 +1,8 @@
 """The ``corr`` command line.
 
-Subcommands: ``info``, ``eval``, ``match``, ``match-contour``, ``retrieve``, ``demo``,
-``methods``, ``perf``.
+Subcommands (``corr --help`` lists them with one line each): ``info``, ``eval``, ``match``,
+``match-contour``, ``match-contours``, ``retrieve``, ``bench``, ``bench-retrieval``,
+``bench-contour``, ``refine``, ``morph``, ``demo``, ``methods``, ``perf``.
 Bad input prints ``error: <message>`` on stderr and exits with status 2.
 """
 
@@ -23,27 +24,32 @@ EXIT_BAD_INPUT = 2
 # ----------------------------------------------------------------------------- info
 
 
-def _info_mesh(path: Path) -> dict:
-    import trimesh
+def _info_mesh(path: Path) -> tuple[dict, str | None]:
+    """Statistics and findings of a mesh loaded exactly as ``corr match`` loads it (:func:`corrlib.io.load_mesh`).
 
-    from corrlib.shapes import TriMesh, inspect_mesh
+    Returns the report and, when ``load_mesh`` refuses the content, its error message (the
+    report then lists every finding of the arrays the file holds). Unreadable files raise.
+    """
+    from corrlib.errors import MeshError
+    from corrlib.io import load_mesh, read_mesh_arrays
+    from corrlib.shapes import inspect_mesh
 
     try:
-        raw = trimesh.load(str(path), process=False, maintain_order=True, force="mesh")
-    except Exception as exc:  # malformed file: report, do not crash
-        raise FileFormatError(f"{path}: cannot read mesh: {exc}") from exc
-    v = np.asarray(getattr(raw, "vertices", np.zeros((0, 3))))
-    f = np.asarray(getattr(raw, "faces", np.zeros((0, 3))))
-    findings = inspect_mesh(v, f)
-    info = {"file": str(path), "kind": "mesh", "vertices": int(v.shape[0]), "faces": int(f.shape[0]),
-            "valid": not any(fd.level == "error" for fd in findings)}
-    if info["valid"]:
-        mesh = TriMesh(v, f, name=path.name, validate=False)
-        info.update({
+        mesh = load_mesh(path)
+    except MeshError as exc:
+        vertices, faces = read_mesh_arrays(path)
+        findings = inspect_mesh(vertices, faces)
+        info = {"file": str(path), "kind": "mesh", "vertices": len(vertices), "faces": len(faces),
+                "valid": False}
+        return _with_findings(info, findings), str(exc)
+    info = {"file": str(path), "kind": "mesh", "vertices": mesh.n_vertices, "faces": mesh.n_faces, "valid": True,
             "area": mesh.area, "bbox_diagonal": mesh.bbox_diagonal, "closed": mesh.is_closed,
             "boundary_loops": len(mesh.boundary_loops), "mean_edge_length": float(mesh.edge_lengths.mean()),
-            "enclosed_volume": mesh.enclosed_volume(),
-        })
+            "enclosed_volume": mesh.enclosed_volume()}
+    return _with_findings(info, mesh.report()), None
+
+
+def _with_findings(info: dict, findings) -> dict:
     info["findings"] = [{"level": fd.level, "code": fd.code, "message": fd.message} for fd in findings]
     return info
 
@@ -58,12 +64,12 @@ def _info_contour(path: Path) -> dict:
 
 
 def cmd_info(args) -> int:
-    from corrlib.io import MESH_SUFFIXES
+    from corrlib.io import shape_kind
 
     path = Path(args.file)
     if not path.exists():
         raise FileFormatError(f"{path}: file not found")
-    info = _info_mesh(path) if path.suffix.lower() in MESH_SUFFIXES else _info_contour(path)
+    info, error = _info_mesh(path) if shape_kind(path) == "mesh" else (_info_contour(path), None)
     if args.json:
         print(json.dumps(info, indent=2))
     else:
@@ -75,6 +81,8 @@ def cmd_info(args) -> int:
             print(f"{fd['level']:>16}: [{fd['code']}] {fd['message']}")
         if not info["findings"]:
             print(f"{'validation':>16}: no problems found")
+    if error is not None:  # the same message as 'corr match' gives for this file
+        print(f"error: {error}", file=sys.stderr)
     return 0 if info["valid"] else EXIT_BAD_INPUT
 
 
@@ -122,14 +130,9 @@ def cmd_eval(args) -> int:
 
 
 def _load_shape(path: str):
-    from corrlib.io import IMAGE_SUFFIXES, MESH_SUFFIXES, load_contour, load_mesh
+    from corrlib.io import load_shape
 
-    suffix = Path(path).suffix.lower()
-    if suffix in MESH_SUFFIXES:
-        return load_mesh(path)
-    if suffix in IMAGE_SUFFIXES or suffix in {".svg", ".txt", ".csv", ".xy", ".pts", ".dat"}:
-        return load_contour(path)
-    raise FileFormatError(f"{path}: unsupported shape format {suffix!r}")
+    return load_shape(path)
 
 
 def _parse_overrides(pairs: list[str]) -> dict:
@@ -150,10 +153,10 @@ def _write_match_outputs(result, source, target, out: Path, *, quiet: bool = Fal
     written = [npz, js]
     if result.map_xy is not None:
         written.append(save_map(out.with_name(out.name + ".map_xy.txt"), result.map_xy))
-    if "energy_trace" in result.extras:
+    if result.energy_trace is not None:
         from corrlib.plotting import save_energy_trace
 
-        written.append(save_energy_trace(out.with_name(out.name + ".energy.png"), result.extras["energy_trace"],
+        written.append(save_energy_trace(out.with_name(out.name + ".energy.png"), result.energy_trace,
                                          result.extras.get("tau_trace")))
     if result.map_yx is not None:
         written.append(save_map(out.with_name(out.name + ".map_yx.txt"), result.map_yx))
@@ -185,7 +188,7 @@ def _progress_printer(quiet: bool):
 def _initial_match(value: str, source, target):
     """``--init``: a map file (one target index per source vertex) or a landmarks file (two columns)."""
     from corrlib.io import load_map
-    from corrlib.methods.kernel_matching import InitialMatch
+    from corrlib.methods.base import InitialMatch
 
     path = Path(value)
     if not path.exists():
@@ -218,8 +221,8 @@ def cmd_match(args) -> int:
         overrides["times"] = args.times
     result = solve(spec, source, target, callback=_progress_printer(args.quiet), initial=initial, **overrides)
     print(f"method {result.method}: energy {result.energy}, {result.timings.get('total', 0):.2f} s")
-    if "energy_trace" in result.extras:
-        trace = result.extras["energy_trace"]
+    if result.energy_trace is not None:
+        trace = result.energy_trace
         print(f"energy trace ({trace.size} assignments): " + ", ".join(f"{e:.5g}" for e in trace))
     _write_match_outputs(result, source, target, Path(args.output), quiet=args.quiet)
     return 0
@@ -367,23 +370,20 @@ def cmd_demo(args) -> int:
 
 
 def _query_contour(path: str, labels: str | None = None):
-    from corrlib.io import MESH_SUFFIXES, load_contour, load_mesh
-    from corrlib.shapes import Contour2D
+    from corrlib.io import load_shape
+    from corrlib.shapes import Contour2D, TriMesh
 
-    suffix = Path(path).suffix.lower()
-    if suffix in MESH_SUFFIXES:
+    contour = sketch = load_shape(path)
+    if isinstance(sketch, TriMesh):
         # a planar triangulated sketch: its boundary loop is the contour
-        sketch = load_mesh(path)
         loops = sketch.boundary_loops
         if not loops:
             raise FileFormatError(f"{path}: the sketch mesh has no boundary to use as a contour")
         loop = max(loops, key=len)
         contour = Contour2D(sketch.vertices[loop, :2], name=Path(path).name)
-    else:
-        contour = load_contour(path)
     if labels:
         values = np.loadtxt(labels, dtype=np.int64, ndmin=1)
-        if suffix in MESH_SUFFIXES and values.shape[0] == sketch.n_vertices:
+        if isinstance(sketch, TriMesh) and values.shape[0] == sketch.n_vertices:
             values = values[loop]  # per-vertex labels of the sketch mesh
         contour = Contour2D(contour.points, name=contour.name, labels=values)
     return contour
@@ -410,15 +410,15 @@ def cmd_match_contour(args) -> int:
     if args.mesh_labels:
         mesh = mesh.with_labels(np.loadtxt(args.mesh_labels, dtype=np.int64, ndmin=1))
     result = solve("contour3d", contour, mesh, _contour3d_params(args), callback=_progress_printer(args.quiet))
-    ex = result.extras
-    print(f"energy {result.energy:.6g} (lower bound {ex['lower_bound']:.6g}, "
-          f"{'optimal' if ex['optimal'] else 'within the ε bound'}), {ex['iterations']} branch-and-bound "
-          f"iterations, {ex['dijkstra_runs']} layered Dijkstra runs of {ex['seconds_per_dijkstra']:.3f} s, "
+    search, path = result.search, result.path
+    print(f"energy {result.energy:.6g} (lower bound {search.lower_bound:.6g}, "
+          f"{'optimal' if search.optimal else 'within the ε bound'}), {search.iterations} branch-and-bound "
+          f"iterations, {search.dijkstra_runs} layered Dijkstra runs of {search.seconds_per_dijkstra:.3f} s, "
           f"{result.timings['total']:.2f} s in total")
     out = Path(args.output)
     npz, js = result.save(out)
-    png = save_contour_match(out.with_name(out.name + ".png"), ex["contour_points"], mesh, ex["path_vertices"],
-                             ex["path_contour_index"], title=f"energy {result.energy:.4g}")
+    png = save_contour_match(out.with_name(out.name + ".png"), path.contour_points, mesh, path.vertices,
+                             path.contour_index, title=f"energy {result.energy:.4g}")
     if not args.quiet:
         for path in (npz, js, png):
             print(f"wrote {path}")
@@ -485,16 +485,31 @@ def _add_scale_out(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scheduler", help="Dask scheduler address (tcp://host:8786) instead of local processes")
 
 
-def build_parser() -> argparse.ArgumentParser:
-    parser = argparse.ArgumentParser(prog="corr", description="Continuous non-rigid shape correspondence.")
-    sub = parser.add_subparsers(dest="command", required=True)
+def _command(sub, name: str, help: str, description: str | None = None, **defaults) -> argparse.ArgumentParser:
+    """A subcommand: ``help`` is its one line in ``corr --help``, ``description`` its text in ``corr NAME --help``."""
+    p = sub.add_parser(name, help=help, description=description or help)
+    p.set_defaults(**defaults)
+    return p
 
-    p = sub.add_parser("info", help="statistics and a validation report of a mesh or contour file")
+
+def _add_output(p: argparse.ArgumentParser, default: str, help: str = "output path without suffix", *,
+                quiet: bool = True) -> None:
+    p.add_argument("-o", "--output", default=default, help=help)
+    if quiet:
+        p.add_argument("-q", "--quiet", action="store_true")
+
+
+def _add_info_parser(sub) -> None:
+    p = _command(sub, "info", "statistics and validation report of a mesh or contour",
+                 "Statistics and a validation report of a mesh or contour file (loaded as 'corr match' loads it). "
+                 "Exit status 2 if the file cannot be used.", func=cmd_info)
     p.add_argument("file")
     p.add_argument("--json", action="store_true", help="print JSON")
-    p.set_defaults(func=cmd_info)
 
-    p = sub.add_parser("eval", help="Princeton-protocol geodesic error of a map against ground truth")
+
+def _add_eval_parser(sub) -> None:
+    p = _command(sub, "eval", "geodesic error of a map against ground truth",
+                 "Princeton-protocol geodesic error of a map against ground truth.", func=cmd_eval)
     p.add_argument("map", help="map file: one 0-based target index per source vertex (or a result .npz)")
     p.add_argument("--gt-source", required=True, help=".vts ground truth of the source (1-based)")
     p.add_argument("--gt-target", required=True, help=".vts ground truth of the target (1-based)")
@@ -505,9 +520,11 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--plot", help="write the cumulative error curve to this PNG")
     p.add_argument("--errors", help="write the per-row errors to this text file")
     p.add_argument("--json", action="store_true")
-    p.set_defaults(func=cmd_eval)
 
-    p = sub.add_parser("match", help="match two shapes with a registered method")
+
+def _add_match_parsers(sub) -> None:
+    """``match``, ``match-contour`` and ``match-contours``."""
+    p = _command(sub, "match", "match two shapes with a registered method", func=cmd_match)
     p.add_argument("source")
     p.add_argument("target")
     p.add_argument("--method", default="kernel-matching", help="registered method (see `corr methods`)")
@@ -515,11 +532,10 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--init", help="descriptors | fmap | a map file (one target index per source vertex) | "
                                   "a landmarks file (source target per line), for methods that refine")
     p.add_argument("--times", help="comma-separated diffusion times relative to the area (kernel matching)")
-    p.add_argument("-o", "--output", default="result", help="output path without suffix")
-    p.add_argument("-q", "--quiet", action="store_true")
-    p.set_defaults(func=cmd_match)
+    _add_output(p, "result")
 
-    p = sub.add_parser("match-contour", help="2D-to-3D elastic matching of a closed contour to a mesh")
+    p = _command(sub, "match-contour", "match a closed 2D contour to a mesh (2D-to-3D)",
+                 "2D-to-3D elastic matching of a closed contour to a mesh.", func=cmd_match_contour)
     p.add_argument("query", help="contour: point file, SVG, silhouette image or planar sketch mesh")
     p.add_argument("mesh")
     p.add_argument("--eps", type=float, help="approximation factor (0 = global optimum)")
@@ -528,19 +544,19 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--query-labels", help="part label per contour point (or per sketch-mesh vertex)")
     p.add_argument("--mesh-labels", help="part label per mesh vertex")
     p.add_argument("--param", action="append", metavar="NAME=VALUE", help="other method parameter")
-    p.add_argument("-o", "--output", default="contour_match", help="output path without suffix")
-    p.add_argument("-q", "--quiet", action="store_true")
-    p.set_defaults(func=cmd_match_contour)
+    _add_output(p, "contour_match")
 
-    p = sub.add_parser("match-contours", help="match two closed contours on their product torus")
+    p = _command(sub, "match-contours", "match two closed contours on their product torus",
+                 func=cmd_match, method="contour2d", init=None, times=None)
     p.add_argument("source")
     p.add_argument("target")
     p.add_argument("--param", action="append", metavar="NAME=VALUE", help="method parameter (repeatable)")
-    p.add_argument("-o", "--output", default="contours", help="output path without suffix")
-    p.add_argument("-q", "--quiet", action="store_true")
-    p.set_defaults(func=cmd_match, method="contour2d", init=None, times=None)
+    _add_output(p, "contours")
 
-    p = sub.add_parser("retrieve", help="rank the meshes of a folder by matching energy to a query contour")
+
+def _add_retrieve_parser(sub) -> None:
+    p = _command(sub, "retrieve", "rank the meshes of a folder against a query contour",
+                 "Rank the meshes of a folder by matching energy to a query contour.", func=cmd_retrieve)
     p.add_argument("query")
     p.add_argument("folder")
     p.add_argument("--top", type=int, default=10, help="how many ranks to print")
@@ -550,12 +566,17 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--n-contour", dest="n_contour", type=int, default=100,
                    help="contour resampling (default 100 for retrieval)")
     p.add_argument("--param", action="append", metavar="NAME=VALUE")
-    p.add_argument("-o", "--output", help="write the full ranking as TSV")
-    p.add_argument("-q", "--quiet", action="store_true")
-    p.set_defaults(func=cmd_retrieve)
+    _add_output(p, None, "write the full ranking as TSV")
 
-    p = sub.add_parser("bench", help="run methods over a benchmark dataset with the standard protocol")
-    p.add_argument("dataset", help="folder: meshes (*.off), corres/<name>.vts (+ .sym.vts), pairs.txt; or "
+
+def _add_bench_parsers(sub) -> None:
+    """``bench``, ``bench-retrieval`` and ``bench-contour``."""
+    from corrlib.io import suffixes
+
+    meshes = " ".join("*" + s for s in suffixes("mesh", vertex_order=True))
+    p = _command(sub, "bench", "run methods over a benchmark dataset",
+                 "Run methods over a benchmark dataset with the standard protocol.", func=cmd_bench)
+    p.add_argument("dataset", help=f"folder: meshes ({meshes}), corres/<name>.vts (+ .sym.vts), pairs.txt; or "
                                    "meshes with one connectivity (identity ground truth)")
     p.add_argument("--method", action="append", metavar="NAME[:k=v,...][@LABEL]",
                    help="a registered method with parameters (repeatable)")
@@ -565,24 +586,22 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--pairs", help="pairs file (default: DATASET/pairs.txt, else all ordered pairs)")
     _add_scale_out(p)
     p.add_argument("--geodesics", default="exact", choices=["exact", "heat", "graph"])
-    p.add_argument("-o", "--output", default="bench_output", help="output folder (a rerun resumes it)")
-    p.add_argument("-q", "--quiet", action="store_true")
-    p.set_defaults(func=cmd_bench)
+    _add_output(p, "bench_output", "output folder (a rerun resumes it)")
 
-    p = sub.add_parser("bench-retrieval", help="retrieval benchmark: queries against a collection, MAP and "
-                                               "per-class average precision")
+    p = _command(sub, "bench-retrieval", "retrieval benchmark: mean average precision",
+                 "Retrieval benchmark: queries against a collection, MAP and per-class average precision.",
+                 func=cmd_bench_retrieval)
     p.add_argument("queries", help="folder of silhouette images / contour files (class = name without number)")
     p.add_argument("collection", help="folder of meshes (class = name without number)")
     _add_scale_out(p)
     p.add_argument("--eps", type=float, default=0.05, help="approximation factor (default 0.05)")
     p.add_argument("--n-contour", dest="n_contour", type=int, default=100, help="contour resampling (default 100)")
     p.add_argument("--param", action="append", metavar="KEY=VALUE", help="another contour3d parameter (repeatable)")
-    p.add_argument("-o", "--output", default="retrieval_output", help="output folder")
-    p.add_argument("-q", "--quiet", action="store_true")
-    p.set_defaults(func=cmd_bench_retrieval)
+    _add_output(p, "retrieval_output", "output folder")
 
-    p = sub.add_parser("bench-contour", help="2D-to-3D benchmark: plane-section queries with ground truth matched "
-                                             "to their mesh and to the other poses of its class")
+    p = _command(sub, "bench-contour", "2D-to-3D benchmark with plane-section queries",
+                 "2D-to-3D benchmark: plane-section queries with ground truth matched to their mesh and to the "
+                 "other poses of its class.", func=cmd_bench_contour)
     p.add_argument("datasets", nargs="+", help="dataset folders (the layouts of 'corr bench'; the class of a mesh "
                                                 "is its name without a trailing number)")
     p.add_argument("--planes", default="main,symmetry,silhouette",
@@ -592,23 +611,26 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--param", action="append", metavar="KEY=VALUE", help="a contour3d parameter (repeatable)")
     p.add_argument("--no-pictures", action="store_true", help="do not write a picture per query")
     _add_scale_out(p)
-    p.add_argument("-o", "--output", default="contour_bench_output", help="output folder")
-    p.add_argument("-q", "--quiet", action="store_true")
-    p.set_defaults(func=cmd_bench_contour)
+    _add_output(p, "contour_bench_output", "output folder")
 
-    p = sub.add_parser("refine", help="refine an initial map or landmarks into a dense map")
+
+def _add_refine_parser(sub) -> None:
+    p = _command(sub, "refine", "refine an initial map or landmarks into a dense map", func=cmd_refine)
     p.add_argument("source")
     p.add_argument("target")
     p.add_argument("--init", required=True,
                    help="map file (one target index per source vertex) or landmarks (two columns: source target)")
     p.add_argument("--method", default="product-manifold", help="a refining method (default product-manifold)")
     p.add_argument("--param", action="append", metavar="NAME=VALUE", help="method parameter (repeatable)")
-    p.add_argument("-o", "--output", default="refined", help="output path without suffix")
-    p.add_argument("-q", "--quiet", action="store_true")
-    p.set_defaults(func=cmd_refine)
+    _add_output(p, "refined")
 
-    p = sub.add_parser("morph", help="deform the source into the target and export interpolated and "
-                                     "extrapolated meshes")
+
+def _add_morph_parser(sub) -> None:
+    from corrlib.io import suffixes
+
+    p = _command(sub, "morph", "deform the source into the target, export the frames",
+                 "Deform the source into the target and export interpolated and extrapolated meshes.",
+                 func=cmd_morph)
     p.add_argument("source")
     p.add_argument("target")
     p.add_argument("--method", default="divergence-free",
@@ -616,25 +638,33 @@ def build_parser() -> argparse.ArgumentParser:
     p.add_argument("--frames", type=int, default=11, help="number of frames (default 11)")
     p.add_argument("--t-max", dest="t_max", type=float, default=1.5,
                    help="last time: 1 is the target, above 1 extrapolates (default 1.5)")
-    p.add_argument("--format", default="obj", choices=["obj", "ply", "off"], help="mesh format of the frames")
+    p.add_argument("--format", default="obj", choices=[s.lstrip(".") for s in suffixes("mesh", writable=True)],
+                   help="mesh format of the frames")
     p.add_argument("--param", action="append", metavar="NAME=VALUE", help="method parameter (repeatable)")
-    p.add_argument("-o", "--output", default="frames", help="output folder")
-    p.add_argument("-q", "--quiet", action="store_true")
-    p.set_defaults(func=cmd_morph)
+    _add_output(p, "frames", "output folder")
 
-    p = sub.add_parser("demo", help="match the bundled demo pair and write a result and a picture")
-    p.add_argument("-o", "--output", default="demo_output", help="output folder")
-    p.add_argument("-q", "--quiet", action="store_true")
-    p.set_defaults(func=cmd_demo)
 
-    p = sub.add_parser("methods", help="list the registered methods and their parameters")
-    p.set_defaults(func=cmd_methods)
+def _add_tool_parsers(sub) -> None:
+    """``demo``, ``methods`` and ``perf``."""
+    p = _command(sub, "demo", "match the bundled demo pair, write result and picture",
+                 "Match the bundled demo pair and write a result and a picture.", func=cmd_demo)
+    _add_output(p, "demo_output", "output folder")
 
-    p = sub.add_parser("perf", help="performance benchmarks (prints figures)")
+    _command(sub, "methods", "list the registered methods and their parameters", func=cmd_methods)
+
+    p = _command(sub, "perf", "performance benchmarks (prints figures)", func=cmd_perf)
     p.add_argument("suite", nargs="?", default="foundation", help="benchmark suite (default: foundation)")
     p.add_argument("--repeat", type=int, default=3, help="repetitions; the best time is reported")
     p.add_argument("--quick", action="store_true", help="a short smoke run with fewer cases")
-    p.set_defaults(func=cmd_perf)
+
+
+def build_parser() -> argparse.ArgumentParser:
+    """The ``corr`` parser: one subcommand per ``_add_*_parser`` call, in the order ``corr --help`` lists them."""
+    parser = argparse.ArgumentParser(prog="corr", description="Continuous non-rigid shape correspondence.")
+    sub = parser.add_subparsers(dest="command", required=True)
+    for add in (_add_info_parser, _add_eval_parser, _add_match_parsers, _add_retrieve_parser, _add_bench_parsers,
+                _add_refine_parser, _add_morph_parser, _add_tool_parsers):
+        add(sub)
     return parser
 
 

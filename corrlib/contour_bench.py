@@ -328,19 +328,19 @@ def match_cut_query(source_path, target_path, plane: str, params: dict, *, gt_ro
         start = time.perf_counter()
         result = solve("contour3d", query.contour, target, **params)
         seconds = time.perf_counter() - start
-        extras = result.extras
-        gt = query.ground_truth(extras["contour_points"], source.vertices)
+        matched, search = result.path, result.search
+        gt = query.ground_truth(matched.contour_points, source.vertices)
         if transfer is not None:
             gt = transfer(gt)
-        path = np.asarray(extras["path_vertices"])
+        path = np.asarray(matched.vertices)
         row.update(score_curve(result.map_xy, path, gt, target, query.length_3d * np.sqrt(target.area / source.area)))
-        row.update(energy=float(result.energy), gap=float(extras["upper_bound"] - extras["lower_bound"]),
-                   optimal=bool(extras["optimal"]), iterations=int(extras["iterations"]), seconds=seconds)
+        row.update(energy=float(result.energy), gap=float(search.upper_bound - search.lower_bound),
+                   optimal=search.optimal, iterations=search.iterations, seconds=seconds)
         if picture is not None:
             from corrlib.plotting import save_curve_comparison
 
             near_side = np.asarray(gt).reshape(len(result.map_xy), -1)[:, 0]
-            save_curve_comparison(picture, extras["contour_points"], target, path, extras["path_contour_index"],
+            save_curve_comparison(picture, matched.contour_points, target, path, matched.contour_index,
                                   near_side,
                                   title=f"{row['query']} -> {row['target']}: mean error {row['mean_error']:.3f}, "
                                         f"coverage {row['coverage']:.2f}")
@@ -503,7 +503,7 @@ def contour_benchmark(datasets, out, *, planes=DEFAULT_PLANES, params: dict | No
     dict
         The summary: ``{"all" | "same mesh" | "other pose" | "other class": {...}}``.
     """
-    from corrlib.bench import _csv
+    from corrlib.bench import csv_cell
     from corrlib.io import atomic_write, ensure_output_folder
     from corrlib.methods import get_method, make_params
     from corrlib.parallel import job_executor
@@ -532,7 +532,7 @@ def contour_benchmark(datasets, out, *, planes=DEFAULT_PLANES, params: dict | No
     with atomic_write(out / "contour_bench.csv") as fh:
         fh.write(",".join(COLUMNS) + "\n")
         for r in rows:
-            fh.write(",".join(_csv(r.get(c, "")) for c in COLUMNS) + "\n")
+            fh.write(",".join(csv_cell(r.get(c, "")) for c in COLUMNS) + "\n")
     with atomic_write(out / "contour_summary.json") as fh:
         json.dump({"summary": summary, "params": params, "planes": list(planes), "rows": rows}, fh, indent=1)
     with atomic_write(out / "contour_summary.md") as fh:

@@ -144,3 +144,26 @@ def geodesic_errors(map_xy, target, gt_source, gt_target, *, gt_target_sym=None,
             mirrored = solver.pair_distances(predicted[closer], gt_target_sym[closer], method=method) / norm
             errors_sym[closer] = np.minimum(errors[closer], mirrored)
     return ErrorReport(errors=errors, errors_sym=errors_sym, normalization=norm)
+
+
+def evaluate(result, target, gt_source, gt_target, **options) -> ErrorReport:
+    """Princeton-protocol errors of a method's result (or of a bare map) on the target.
+
+    Parameters
+    ----------
+    result : MatchResult or (n_x,) int
+        A result with ``map_xy``, or the map itself.
+    target : TriMesh
+    gt_source, gt_target : (r,) int
+        Ground-truth rows (see :func:`geodesic_errors`).
+    **options
+        Passed to :func:`geodesic_errors` (``gt_target_sym``, ``normalize``, ``method``, ``solver``).
+
+    Returns
+    -------
+    ErrorReport
+    """
+    map_xy = getattr(result, "map_xy", result)
+    if map_xy is None:
+        raise InputError(f"the result of {getattr(result, 'method', '?')!r} has no point-to-point map to evaluate")
+    return geodesic_errors(map_xy, target, gt_source, gt_target, **options)

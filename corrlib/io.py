@@ -1,8 +1,14 @@
 """Reading and writing shapes, contours, maps and results.
 
-* Meshes: OFF/OBJ/PLY/STL through trimesh with ``process=False`` (vertex
-  order survives); saved as OFF/OBJ/PLY with optional per-vertex colours by
-  our own writers (vertex order and count exactly as given).
+Every suffix the library knows is in one table, :data:`FORMATS` (the
+``*_SUFFIXES`` constants, :func:`suffixes` and the studio's file-dialog
+filters, :func:`dialog_filter`, are derived from it); :func:`load_shape`
+loads a mesh or a contour by its suffix.
+
+* Meshes: OFF by our own line-based parser, OBJ/PLY/STL through trimesh with
+  ``process=False`` (vertex order survives; an STL is welded); saved as
+  OFF/OBJ/PLY with optional per-vertex colours by our own writers (vertex
+  order and count exactly as given).
 * Contours: text/CSV point lists, an SVG path, or a silhouette image
   (PNG/GIF/JPG/BMP/TIFF); always returned counter-clockwise.
 * Ground truth ``.vts`` (1-based vertex indices, one per line) and plain map
@@ -26,6 +32,7 @@ import platform
 import re
 import tempfile
 import xml.etree.ElementTree as ET
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -33,9 +40,112 @@ import numpy as np
 from corrlib.errors import ContourError, CorrError, FileFormatError, InputError
 from corrlib.shapes import Contour2D, TriMesh
 
-MESH_SUFFIXES = {".off", ".obj", ".ply", ".stl"}
-IMAGE_SUFFIXES = {".png", ".gif", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff"}
-POINT_SUFFIXES = {".txt", ".csv", ".xy", ".pts", ".dat"}
+# ----------------------------------------------------------------------------- the table of formats
+
+
+@dataclass(frozen=True)
+class Format:
+    """One family of files the library reads or writes.
+
+    Attributes
+    ----------
+    kind : str
+        What the file holds: ``"mesh"``, ``"contour"``, ``"ground-truth"``,
+        ``"map"``, ``"result"``, ``"picture"``, ``"table"`` or ``"texture"``.
+    suffixes : tuple of str
+        Lower-case suffixes with the dot, most common first.
+    description : str
+        One line for help texts.
+    readable, writable : bool
+        Whether :mod:`corrlib.io` (or the studio, for pictures, tables and
+        textures) reads / writes it.
+    vertex_order : bool
+        For meshes: the file defines a vertex order that ground-truth indices
+        refer to (STL is a triangle soup welded on reading: it has none).
+    """
+
+    kind: str
+    suffixes: tuple[str, ...]
+    description: str
+    readable: bool = True
+    writable: bool = False
+    vertex_order: bool = True
+
+
+_IMAGES = (".png", ".gif", ".jpg", ".jpeg", ".bmp", ".tif", ".tiff")
+_POINT_FILES = (".txt", ".csv", ".xy", ".pts", ".dat")
+_SVG = (".svg",)
+
+#: Every file format, in the order dialogs and help texts list them.
+FORMATS: tuple[Format, ...] = (
+    Format("mesh", (".off",), "OFF/COFF/NOFF mesh (polygons are fan-triangulated)", writable=True),
+    Format("mesh", (".obj",), "Wavefront OBJ mesh", writable=True),
+    Format("mesh", (".ply",), "PLY mesh", writable=True),
+    Format("mesh", (".stl",), "STL triangle soup (vertices welded on reading)", vertex_order=False),
+    Format("contour", _IMAGES, "silhouette image (largest outer boundary)"),
+    Format("contour", _SVG, "SVG path, polygon or polyline (largest closed one)"),
+    Format("contour", _POINT_FILES, "point list, one 'x y' per line", writable=True),
+    Format("ground-truth", (".vts",), "ground-truth correspondence, 1-based vertex indices"),
+    Format("map", (".txt",), "point-to-point map, one 0-based target index per line", writable=True),
+    Format("result", (".npz",), "result arrays (with a .json sidecar)", writable=True),
+    Format("picture", (".png",), "PNG picture", readable=False, writable=True),
+    Format("table", (".csv",), "comma-separated table", readable=False, writable=True),
+    Format("texture", _IMAGES, "texture image"),
+)
+
+#: Plural names of the kinds in file dialogs.
+KIND_LABELS = {"mesh": "Meshes", "contour": "Contours and silhouettes", "ground-truth": "Ground truth",
+               "map": "Maps", "result": "Results", "picture": "Pictures", "table": "Tables",
+               "texture": "Images"}
+
+
+def suffixes(kind: str, *, readable: bool | None = None, writable: bool | None = None,
+             vertex_order: bool | None = None) -> tuple[str, ...]:
+    """Suffixes of ``kind`` in table order, optionally only those readable / writable / with a vertex order."""
+    if kind not in KIND_LABELS:
+        raise ValueError(f"unknown file kind {kind!r} (known: {', '.join(KIND_LABELS)})")
+    wanted = {"readable": readable, "writable": writable, "vertex_order": vertex_order}
+    out: list[str] = []
+    for fmt in FORMATS:
+        if fmt.kind == kind and all(v is None or getattr(fmt, k) == v for k, v in wanted.items()):
+            out.extend(s for s in fmt.suffixes if s not in out)
+    return tuple(out)
+
+
+def dialog_filter(*kinds: str, save: bool = False, all_files: bool | None = None) -> str:
+    """A Qt file-dialog filter for one or more kinds of file, from :data:`FORMATS`.
+
+    ``dialog_filter("mesh")`` is ``"Meshes (*.off *.obj *.ply *.stl);;All files (*)"``.
+
+    Parameters
+    ----------
+    kinds : str
+        Kinds of :data:`FORMATS`, one filter entry each, in this order.
+    save : bool
+        List the formats that can be written (a save dialog) instead of those that can be read.
+    all_files : bool, optional
+        Append ``All files (*)``; by default for open dialogs only.
+    """
+    parts = []
+    for kind in kinds:
+        sfx = suffixes(kind, writable=True) if save else suffixes(kind, readable=True)
+        if not sfx:
+            raise ValueError(f"no {'writable' if save else 'readable'} {kind} format")
+        parts.append(f"{KIND_LABELS[kind]} ({' '.join('*' + s for s in sfx)})")
+    if all_files if all_files is not None else not save:
+        parts.append("All files (*)")
+    return ";;".join(parts)
+
+
+# compatibility constants, derived from the table
+MESH_SUFFIXES = frozenset(suffixes("mesh", readable=True))
+MESH_WRITE_SUFFIXES = frozenset(suffixes("mesh", writable=True))
+#: mesh formats whose vertex order ground-truth files can refer to (benchmarks)
+ORDERED_MESH_SUFFIXES = frozenset(suffixes("mesh", readable=True, vertex_order=True))
+IMAGE_SUFFIXES = frozenset(_IMAGES)
+POINT_SUFFIXES = frozenset(_POINT_FILES)
+SVG_SUFFIXES = frozenset(_SVG)
+CONTOUR_SUFFIXES = frozenset(suffixes("contour", readable=True))
 
 
 # ----------------------------------------------------------------------------- atomic writes
@@ -118,6 +228,7 @@ def _read_off(path: Path) -> tuple[np.ndarray, np.ndarray]:
     if len(lines) < first + n_v + n_f:
         raise FileFormatError(f"{path}: the header announces {n_v} vertices and {n_f} faces but the file "
                               f"has only {len(lines) - first} data lines")
+    _check_vertex_lines(path, lines[first:first + n_v], n_v)
     try:
         coords = np.array([ln[:3] for ln in lines[first:first + n_v]], dtype=np.float64)
     except ValueError:
@@ -143,6 +254,70 @@ def _read_off(path: Path) -> tuple[np.ndarray, np.ndarray]:
     return coords.reshape(n_v, 3), np.array(faces, dtype=np.int64).reshape(-1, 3)
 
 
+def _looks_like_face(tokens: list[str]) -> bool:
+    try:
+        values = [int(t) for t in tokens]
+    except ValueError:
+        return False
+    return values[0] >= 3 and len(values) >= 1 + values[0]
+
+
+def _check_vertex_lines(path: Path, vertex_lines: list[list[str]], n_v: int) -> None:
+    """Refuse a vertex block that runs into the faces (a header announcing more vertices than the file has)."""
+    if not vertex_lines:
+        return
+    widths = np.fromiter(map(len, vertex_lines), dtype=np.int64, count=len(vertex_lines))
+    for i in np.flatnonzero(widths != widths[0]):
+        if _looks_like_face(vertex_lines[i]):
+            raise FileFormatError(f"{path}: vertex line {i} ({' '.join(vertex_lines[i])[:40]!r}) is a face line: "
+                                  f"the header announces {n_v} vertices, more than the file has")
+
+
+def read_mesh_arrays(path) -> tuple[np.ndarray, np.ndarray]:
+    """The vertex and face arrays :func:`load_mesh` builds its mesh from (file checks only, no content checks).
+
+    Returns
+    -------
+    vertices : (n, 3) float
+    faces : (f, 3) int
+        Polygons fan-triangulated; an STL's vertices welded.
+
+    Raises
+    ------
+    FileFormatError
+        Missing, unreadable or unsupported file; no vertices; no faces (a point cloud).
+    """
+    path = _require_file(path)
+    suffix = path.suffix.lower()
+    if suffix not in MESH_SUFFIXES:
+        raise FileFormatError(f"{path}: unsupported mesh format {suffix!r} "
+                              f"(supported: {', '.join(suffixes('mesh', readable=True))})")
+    if suffix == ".off":
+        vertices, faces = _read_off(path)  # our parser: fast, exact order, precise messages
+    else:
+        vertices, faces = _read_trimesh(path, weld=suffix == ".stl")
+    if vertices.size == 0:
+        raise FileFormatError(f"{path}: the file contains no vertices")
+    if faces.size == 0:
+        raise FileFormatError(f"{path}: the file contains no faces (a point cloud, not a mesh)")
+    return vertices, faces
+
+
+def _read_trimesh(path: Path, *, weld: bool) -> tuple[np.ndarray, np.ndarray]:
+    import trimesh
+
+    try:
+        loaded = trimesh.load(str(path), process=False, maintain_order=True, force="mesh")
+    except Exception as exc:  # trimesh raises many exception types for malformed files
+        raise FileFormatError(f"{path}: cannot read mesh: {exc}") from exc
+    if weld and hasattr(loaded, "merge_vertices"):
+        # STL is a triangle soup with no shared vertices (and so no vertex order to keep): weld it
+        loaded.merge_vertices()
+    vertices = np.asarray(getattr(loaded, "vertices", np.zeros((0, 3))))
+    faces = np.asarray(getattr(loaded, "faces", np.zeros((0, 3))))
+    return vertices, faces
+
+
 def load_mesh(path, *, largest_component: bool = False) -> TriMesh:
     """Load a triangle mesh keeping the file's vertex order.
 
@@ -165,30 +340,8 @@ def load_mesh(path, *, largest_component: bool = False) -> TriMesh:
     MeshError
         Invalid mesh content (see :func:`corrlib.shapes.inspect_mesh`).
     """
-    path = _require_file(path)
-    suffix = path.suffix.lower()
-    if suffix not in MESH_SUFFIXES:
-        raise FileFormatError(f"{path}: unsupported mesh format {suffix!r} "
-                              f"(supported: {', '.join(sorted(MESH_SUFFIXES))})")
-    if suffix == ".off":
-        vertices, faces = _read_off(path)  # our parser: fast, exact order, precise messages
-    else:
-        import trimesh
-
-        try:
-            loaded = trimesh.load(str(path), process=False, maintain_order=True, force="mesh")
-        except Exception as exc:  # trimesh raises many exception types for malformed files
-            raise FileFormatError(f"{path}: cannot read mesh: {exc}") from exc
-        if suffix == ".stl" and hasattr(loaded, "merge_vertices"):
-            # STL is a triangle soup with no shared vertices (and so no vertex order to keep): weld it
-            loaded.merge_vertices()
-        vertices = np.asarray(getattr(loaded, "vertices", np.zeros((0, 3))))
-        faces = np.asarray(getattr(loaded, "faces", np.zeros((0, 3))))
-    if vertices.size == 0:
-        raise FileFormatError(f"{path}: the file contains no vertices")
-    if faces.size == 0:
-        raise FileFormatError(f"{path}: the file contains no faces (a point cloud, not a mesh)")
-    return TriMesh.from_arrays(vertices, faces, name=path.name, largest_component=largest_component)
+    vertices, faces = read_mesh_arrays(path)
+    return TriMesh.from_arrays(vertices, faces, name=Path(path).name, largest_component=largest_component)
 
 
 def _colors_u8(colors, n: int, path) -> np.ndarray | None:
@@ -225,8 +378,9 @@ def save_mesh(path, vertices, faces, colors=None) -> Path:
     f = np.asarray(faces, dtype=np.int64)
     c = _colors_u8(colors, v.shape[0], path)
     suffix = path.suffix.lower()
-    if suffix not in {".off", ".obj", ".ply"}:
-        raise FileFormatError(f"{path}: cannot write mesh format {suffix!r} (use .off, .obj or .ply)")
+    if suffix not in MESH_WRITE_SUFFIXES:
+        raise FileFormatError(f"{path}: cannot write mesh format {suffix!r} "
+                              f"(use {', '.join(suffixes('mesh', writable=True))})")
     fmt = "%.9g %.9g %.9g"
     with atomic_write(path) as fh:
         if suffix == ".off":
@@ -295,93 +449,107 @@ def _bezier(points: np.ndarray, samples: int = 16) -> np.ndarray:
             + 3 * (1 - t) * t ** 2 * points[2] + t ** 3 * points[3])
 
 
+class _SvgPathReader:
+    """The state of :func:`parse_svg_path`: tokens, read position, current point and subpaths so far."""
+
+    def __init__(self, d: str, source: str):
+        self.tokens = _SVG_TOKEN.findall(d)
+        self.source = source
+        self.i = 0
+        self.cur = np.zeros(2)
+        self.start = np.zeros(2)
+        self.last_ctrl = None
+        self.subpaths: list[list[np.ndarray]] = []
+
+    def error(self, what: str) -> FileFormatError:
+        return FileFormatError(f"{self.source}: {what}")
+
+    def nums(self, count: int) -> np.ndarray:
+        vals = self.tokens[self.i:self.i + count]
+        if len(vals) < count or any(v.isalpha() for v in vals):
+            raise self.error(f"malformed SVG path data near token {self.i}")
+        self.i += count
+        return np.array([float(v) for v in vals])
+
+    def add(self, point: np.ndarray) -> None:
+        self.cur = point
+        self.subpaths[-1].append(point.copy())
+
+    def step(self, cmd: str) -> str:
+        """Run one command (its parameters follow at :attr:`i`); returns the command implied for more numbers."""
+        if cmd in "Aa":
+            raise self.error("SVG elliptical arc commands (A) are not supported; convert arcs to Bézier curves")
+        rel = cmd.islower()
+        base = self.cur if rel else np.zeros(2)
+        c = cmd.upper()
+        if c == "Z":
+            if self.subpaths and self.subpaths[-1]:
+                self.cur = self.start.copy()
+            self.last_ctrl = None
+            if self.i < len(self.tokens) and not self.tokens[self.i].isalpha():
+                raise self.error(f"malformed SVG path data near token {self.i} (numbers after Z)")
+            return cmd
+        if c == "M":
+            self.cur = base + self.nums(2)
+            self.start = self.cur.copy()
+            self.subpaths.append([self.cur.copy()])
+            self.last_ctrl = None
+            return "l" if rel else "L"  # further pairs are implicit line-tos
+        if not self.subpaths:
+            self.subpaths.append([self.cur.copy()])
+        if c in "LHV":
+            self.line(c, base, rel)
+        elif c in "CSQT":
+            self.curve(c, base)
+        else:
+            raise self.error(f"unsupported SVG path command {cmd!r}")
+        return cmd
+
+    def line(self, c: str, base: np.ndarray, rel: bool) -> None:
+        if c == "L":
+            self.add(base + self.nums(2))
+        elif c == "H":
+            x = self.nums(1)[0]
+            self.add(np.array([self.cur[0] + x if rel else x, self.cur[1]]))
+        else:
+            y = self.nums(1)[0]
+            self.add(np.array([self.cur[0], self.cur[1] + y if rel else y]))
+        self.last_ctrl = None
+
+    def reflected_ctrl(self) -> np.ndarray:
+        return 2 * self.cur - self.last_ctrl if self.last_ctrl is not None else self.cur.copy()
+
+    def curve(self, c: str, base: np.ndarray) -> None:
+        if c == "C":
+            ctrl = self.nums(6).reshape(3, 2) + base
+        elif c == "S":
+            ctrl = np.vstack([self.reflected_ctrl(), self.nums(4).reshape(2, 2) + base])
+        elif c == "Q":
+            ctrl = self.nums(4).reshape(2, 2) + base
+        else:
+            ctrl = np.vstack([self.reflected_ctrl(), self.nums(2) + base])
+        self.subpaths[-1].extend(_bezier(np.vstack([self.cur, ctrl])))
+        self.last_ctrl = ctrl[-2] if c in "CS" else ctrl[0]
+        self.cur = ctrl[-1].copy()
+
+
 def parse_svg_path(d: str, source: str = "svg") -> list[np.ndarray]:
     """Polylines (one per subpath) of an SVG path ``d`` attribute, in SVG coordinates.
 
     Supports M, L, H, V, C, S, Q, T, Z in absolute and relative form; curves
     are sampled with 16 points per segment. Elliptical arcs (A) are rejected.
     """
-    tokens = _SVG_TOKEN.findall(d)
-    subpaths: list[list[np.ndarray]] = []
-    cur = np.zeros(2)
-    start = np.zeros(2)
-    last_ctrl = None
+    reader = _SvgPathReader(d, source)
     cmd = None
-    i = 0
-
-    def nums(count):
-        nonlocal i
-        vals = tokens[i:i + count]
-        if len(vals) < count or any(v.isalpha() for v in vals):
-            raise FileFormatError(f"{source}: malformed SVG path data near token {i}")
-        i += count
-        return np.array([float(v) for v in vals])
-
-    while i < len(tokens):
-        tok = tokens[i]
+    while reader.i < len(reader.tokens):
+        tok = reader.tokens[reader.i]
         if tok.isalpha():
             cmd = tok
-            i += 1
+            reader.i += 1
         elif cmd is None:
-            raise FileFormatError(f"{source}: SVG path data must start with a command")
-        if cmd in "Aa":
-            raise FileFormatError(f"{source}: SVG elliptical arc commands (A) are not supported; "
-                                  "convert arcs to Bézier curves")
-        rel = cmd.islower()
-        base = cur if rel else np.zeros(2)
-        c = cmd.upper()
-        if c == "Z":
-            if subpaths and subpaths[-1]:
-                cur = start.copy()
-            last_ctrl = None
-            continue
-        if c == "M":
-            cur = base + nums(2)
-            start = cur.copy()
-            subpaths.append([cur.copy()])
-            cmd = "l" if rel else "L"  # further pairs are implicit line-tos
-            last_ctrl = None
-            continue
-        if not subpaths:
-            subpaths.append([cur.copy()])
-        if c == "L":
-            cur = base + nums(2)
-            subpaths[-1].append(cur.copy())
-            last_ctrl = None
-        elif c == "H":
-            x = nums(1)[0]
-            cur = np.array([cur[0] + x if rel else x, cur[1]])
-            subpaths[-1].append(cur.copy())
-            last_ctrl = None
-        elif c == "V":
-            y = nums(1)[0]
-            cur = np.array([cur[0], cur[1] + y if rel else y])
-            subpaths[-1].append(cur.copy())
-            last_ctrl = None
-        elif c in "CS":
-            if c == "C":
-                ctrl = nums(6).reshape(3, 2) + base
-            else:
-                c2 = nums(4).reshape(2, 2) + base
-                c1 = 2 * cur - last_ctrl if last_ctrl is not None else cur.copy()
-                ctrl = np.vstack([c1, c2])
-            pts = np.vstack([cur, ctrl])
-            subpaths[-1].extend(_bezier(pts))
-            last_ctrl = ctrl[-2]
-            cur = ctrl[-1].copy()
-        elif c in "QT":
-            if c == "Q":
-                ctrl = nums(4).reshape(2, 2) + base
-            else:
-                c1 = 2 * cur - last_ctrl if last_ctrl is not None else cur.copy()
-                ctrl = np.vstack([c1, nums(2) + base])
-            pts = np.vstack([cur, ctrl])
-            subpaths[-1].extend(_bezier(pts))
-            last_ctrl = ctrl[0]
-            cur = ctrl[-1].copy()
-        else:
-            raise FileFormatError(f"{source}: unsupported SVG path command {cmd!r}")
-    return [np.array(sp_) for sp_ in subpaths if len(sp_) >= 3]
+            raise reader.error("SVG path data must start with a command")
+        cmd = reader.step(cmd)
+    return [np.array(sp_) for sp_ in reader.subpaths if len(sp_) >= 3]
 
 
 def _svg_polylines(path: Path) -> list[np.ndarray]:
@@ -503,7 +671,7 @@ def load_contour(path, n_points: int | None = None, *, assume_closed: bool = Fal
         points = _points_file(path)
         contour = Contour2D.from_open_points(points, name=name, assume_closed=assume_closed,
                                              min_points=min_points)
-    elif suffix == ".svg":
+    elif suffix in SVG_SUFFIXES:
         polylines = _svg_polylines(path)
         best = max(polylines, key=_polygon_area)
         best = best * np.array([1.0, -1.0])
@@ -521,7 +689,7 @@ def load_contour(path, n_points: int | None = None, *, assume_closed: bool = Fal
         contour = Contour2D(contour_from_mask(mask, name=name), name=name, min_points=min_points)
     else:
         raise FileFormatError(f"{path}: unsupported contour format {suffix!r} (use a point file, "
-                              f"an SVG or an image: {', '.join(sorted(IMAGE_SUFFIXES))})")
+                              f"an SVG or an image: {', '.join(suffixes('contour', readable=True))})")
     contour = contour.ccw()
     if n_points is not None:
         contour = contour.resample(n_points)
@@ -533,6 +701,32 @@ def save_contour(path, contour: Contour2D) -> Path:
     with atomic_write(path) as fh:
         np.savetxt(fh, contour.points, fmt="%.9g")
     return Path(path)
+
+
+# ----------------------------------------------------------------------------- either kind of shape
+
+
+def shape_kind(path) -> str:
+    """``"mesh"`` or ``"contour"`` by the file's suffix (see :data:`FORMATS`).
+
+    Raises
+    ------
+    FileFormatError
+        The suffix is neither a mesh nor a contour format.
+    """
+    suffix = Path(path).suffix.lower()
+    if suffix in MESH_SUFFIXES:
+        return "mesh"
+    if suffix in CONTOUR_SUFFIXES:
+        return "contour"
+    raise FileFormatError(f"{path}: unsupported shape format {suffix!r} (meshes: "
+                          f"{', '.join(suffixes('mesh', readable=True))}; contours: "
+                          f"{', '.join(suffixes('contour', readable=True))})")
+
+
+def load_shape(path) -> TriMesh | Contour2D:
+    """Load a mesh (:func:`load_mesh`) or a contour (:func:`load_contour`) according to the file's suffix."""
+    return load_mesh(path) if shape_kind(path) == "mesh" else load_contour(path)
 
 
 # ----------------------------------------------------------------------------- maps and ground truth
@@ -703,7 +897,8 @@ def load_result(stem) -> tuple[dict[str, np.ndarray], dict]:
 
 
 __all__ = [
-    "CorrError", "atomic_write", "load_mesh", "save_mesh", "load_contour", "save_contour",
+    "CorrError", "Format", "FORMATS", "KIND_LABELS", "suffixes", "dialog_filter", "shape_kind", "load_shape",
+    "atomic_write", "read_mesh_arrays", "load_mesh", "save_mesh", "load_contour", "save_contour",
     "contour_from_mask", "silhouette_mask", "parse_svg_path", "load_vts", "load_map", "save_map",
     "save_result", "load_result", "environment",
 ]

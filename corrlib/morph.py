@@ -32,7 +32,7 @@ LINEAR_DESCRIPTION = ("linear vertex interpolation through the map (fallback: no
 
 def has_deformation(result) -> bool:
     """Whether a result carries a deformation model (a divergence-free flow) rather than only a map."""
-    return "coefficients" in result.extras and "frames" in result.extras
+    return result.deformation is not None
 
 
 def _linear(result, source, target):
@@ -58,35 +58,15 @@ def sequence_positions(result, source, target, t_max: float = 1.5):
         RK2 trajectory (exact at its steps, linear in between), otherwise
         :func:`linear_positions` through ``result.map_xy``.
     """
-    ex = result.extras
     if not has_deformation(result):
         return _linear(result, source, target)
-    if "trajectory" in ex and float(ex["trajectory_times"][-1]) >= t_max - 1e-9:
-        return step_interpolator(np.asarray(ex["trajectory_times"]), np.asarray(ex["trajectory"]))
-    from corrlib.methods.divergence_free import Deformation
-
-    return Deformation.from_result(result).interpolator(source.vertices, t_max)
-
-
-def step_interpolator(times: np.ndarray, steps: np.ndarray):
-    """``positions(t)`` from positions at increasing ``times`` (s,) and ``steps`` (s, n, 3): linear in
-    between, exact at the step times, clamped to the stored range."""
-    def positions(t: float) -> np.ndarray:
-        t = float(np.clip(t, times[0], times[-1]))
-        i = int(np.clip(np.searchsorted(times, t, side="right") - 1, 0, len(times) - 2))
-        alpha = (t - times[i]) / (times[i + 1] - times[i])
-        return ((1.0 - alpha) * steps[i] + alpha * steps[i + 1]).astype(np.float64)
-
-    return positions
+    return result.deformation.source_interpolator(source.vertices, t_max)
 
 
 def frame_positions(result, source, target, times) -> list[np.ndarray]:
     """Exact positions at ``times`` (the flow integrated to each time, or linear interpolation)."""
     if has_deformation(result):
-        from corrlib.methods.divergence_free import Deformation
-
-        deformation = Deformation.from_result(result)
-        return [deformation.positions(source.vertices, float(t)) for t in times]
+        return [result.deformation.positions(source.vertices, float(t)) for t in times]
     positions = _linear(result, source, target)
     return [positions(float(t)) for t in times]
 

@@ -40,7 +40,6 @@ def suite_foundation(repeat: int, quick: bool = False) -> None:
     from corrlib.geometry.spectrum import eigenpairs, mesh_spectrum
     from corrlib.io import load_mesh, load_vts
     from corrlib.methods import solve
-    from corrlib.methods.kernel_matching import _score
     from corrlib.resources import resource
 
     cat0 = load_mesh(resource("data/tosca/cat0.off"))
@@ -134,11 +133,11 @@ def suite_contour3d(repeat: int, quick: bool = False) -> None:
     for label, eps, extra in cases:
         t, result = _best_time(lambda e=eps, kw=extra: solve("contour3d", query, cat1, n_contour=200, eps=e, **kw),
                                1 if "elastic" in label else repeat)
-        ex = result.extras
+        search = result.search
         _line(f"match 200-point contour to cat1 ({cat1.n_vertices} v), {label}, eps={eps}"
               + ("  [target <= 2 s]" if eps == 0 else ""), t,
-              f"energy {result.energy:.5g}, lower bound {ex['lower_bound']:.5g}, {ex['iterations']} B&B "
-              f"iterations, {ex['dijkstra_runs']} Dijkstra runs of {ex['seconds_per_dijkstra']:.3f} s")
+              f"energy {result.energy:.5g}, lower bound {search.lower_bound:.5g}, {search.iterations} B&B "
+              f"iterations, {search.dijkstra_runs} Dijkstra runs of {search.seconds_per_dijkstra:.3f} s")
     if quick:
         return
     with tempfile.TemporaryDirectory() as tmp:
@@ -176,7 +175,7 @@ def suite_kernel(repeat: int, quick: bool = False) -> None:
     from corrlib.geometry.spectrum import mesh_spectrum
     from corrlib.io import load_mesh, load_vts
     from corrlib.methods import solve
-    from corrlib.methods.kernel_matching import _score
+    from corrlib.methods.kernel_matching import kernel_score
     from corrlib.resources import resource
 
     cat0 = load_mesh(resource("data/tosca/cat0.off"))
@@ -209,7 +208,7 @@ def suite_kernel(repeat: int, quick: bool = False) -> None:
         i1 = farthest_point_sampling(cat1.vertices, n)
         c = s1.evecs[i1[rng.permutation(n)]].T @ s0.evecs[i0]
         tau = 0.0259  # the first (largest) relative time of the default schedule
-        score = _score(s1.evecs[i1], s0.evecs[i0], c, np.exp(-tau * cat1.area * s1.evals),
+        score = kernel_score(s1.evecs[i1], s0.evecs[i0], c, np.exp(-tau * cat1.area * s1.evals),
                        np.exp(-tau * cat0.area * s0.evals))
         t_auction, sol = _best_time(lambda: linear_assignment(score), repeat)
         t_exact, ref = _best_time(lambda: linear_assignment(score, method="scipy"), 1)
@@ -227,7 +226,7 @@ def suite_divfree(repeat: int, quick: bool = False) -> None:
     from corrlib.evaluation import geodesic_errors
     from corrlib.io import load_mesh, load_vts
     from corrlib.methods import make_params, solve
-    from corrlib.methods.divergence_free import DivergenceFreeParams, _prepare, em_iteration
+    from corrlib.methods.divergence_free import DivergenceFreeParams, em_iteration, prepare_fit
     from corrlib.progress import Stopwatch
     from corrlib.resources import resource
 
@@ -236,7 +235,7 @@ def suite_divfree(repeat: int, quick: bool = False) -> None:
     print(f"machine: {os.cpu_count()} cores; pair: cat0 ({cat0.n_vertices} v) -> cat1 ({cat1.n_vertices} v)")
     params = make_params(DivergenceFreeParams)
     fx, fy = mesh_descriptors(cat0, "shot"), mesh_descriptors(cat1, "shot")
-    sx, sy, feat_dist, frames, w = _prepare(cat0.vertices, cat1.vertices, fx, fy, params, Stopwatch())
+    sx, sy, feat_dist, frames, w = prepare_fit(cat0.vertices, cat1.vertices, fx, fy, params, Stopwatch())
     basis = DivFreeBasis(params.n_fields)
     start, targets = frames.source_to_cube(cat0.vertices[sx]), frames.target_to_cube(cat1.vertices[sy])
     coeffs = basis.random_coefficients(0.05, seed=0)

@@ -38,8 +38,20 @@ def coordinate_colors(vertices: np.ndarray) -> np.ndarray:
     return np.clip((v - lo) / np.where(hi > lo, hi - lo, 1.0), 0.0, 1.0)
 
 
-def _view_axes(reference: np.ndarray) -> np.ndarray:
-    """(3, 3) rows: longest principal axis as x, shortest as depth (y), the middle one up (z); proper."""
+def view_axes(reference: np.ndarray) -> np.ndarray:
+    """A viewing frame from the principal axes of a point set (used by the plots and the studio's thumbnails).
+
+    Parameters
+    ----------
+    reference : (n, 3) float
+        The points whose principal axes orient the view.
+
+    Returns
+    -------
+    (3, 3) float
+        Rows: longest principal axis as x, shortest as depth (y), the middle one up (z); a proper
+        rotation, signs fixed by the third moment so that similar shapes face alike.
+    """
     centred = reference - reference.mean(axis=0)
     _, _, vt = np.linalg.svd(centred, full_matrices=False)
     axes = np.stack([vt[0], vt[2], vt[1]])
@@ -60,7 +72,7 @@ def draw_mesh(ax, vertices: np.ndarray, faces: np.ndarray, colors: np.ndarray, t
     """
     from mpl_toolkits.mplot3d.art3d import Poly3DCollection
 
-    axes = _view_axes(vertices if frame_from is None else frame_from)
+    axes = view_axes(vertices if frame_from is None else frame_from)
     v = (vertices - vertices.mean(axis=0)) @ axes.T
     tris = v[faces]
     face_colors = np.asarray(colors)[faces].mean(axis=1)
@@ -156,7 +168,7 @@ def save_contour_match(path, contour_points: np.ndarray, mesh, path_vertices: np
     fig = plt.figure(figsize=(11, 5), dpi=100)
     _draw_query(fig.add_subplot(1, 2, 1), contour_points, hue)
     ax2 = fig.add_subplot(1, 2, 2, projection="3d")
-    axes = _view_axes(mesh.vertices)
+    axes = view_axes(mesh.vertices)
     draw_mesh(ax2, mesh.vertices, mesh.faces, np.full((mesh.n_vertices, 3), 0.8), f"{mesh.name}: matched curve")
     pts = (mesh.vertices[path_vertices] - mesh.vertices.mean(axis=0)) @ axes.T
     # lift the curve slightly towards the viewer so the surface does not hide it
@@ -193,10 +205,10 @@ def save_torus_pictures(path, result) -> Path:
     from corrlib.geometry.torus import arclength_angles, path_angles, torus_embedding
 
     plt = _pyplot()
-    ex = result.extras
-    a, b = ex["source_points"], ex["target_points"]
+    matched = result.path
+    a, b = matched.contour_points, matched.target_points
     u, v = arclength_angles(a), arclength_angles(b)
-    uv = path_angles(ex["path_layers"], ex["path_vertices"], u, v)
+    uv = path_angles(matched.layers, matched.vertices, u, v)
     fig = plt.figure(figsize=(15, 4.5), dpi=100)
     ax = fig.add_subplot(1, 3, 1)
     m = a.shape[0]
@@ -210,7 +222,8 @@ def save_torus_pictures(path, result) -> Path:
     ax.set_axis_off()
     ax.set_title("A and B, coloured by the position on A")
     ax = fig.add_subplot(1, 3, 2)
-    ax.imshow(np.asarray(ex["cost"]).T, origin="lower", extent=(0, 1, 0, 1), aspect="auto", cmap="viridis")
+    ax.imshow(np.asarray(matched.product_functions["cost"]).T, origin="lower", extent=(0, 1, 0, 1), aspect="auto",
+              cmap="viridis")
     ax.plot(uv[:, 0], np.mod(uv[:, 1], 1.0), ".", color="crimson", ms=2)
     ax.set_xlabel("u (contour A)")
     ax.set_ylabel("v (contour B)")
@@ -253,7 +266,7 @@ def save_curve_comparison(path, contour_points: np.ndarray, mesh, path_vertices:
 
     fig, axs = plt.subplots(1, 3, figsize=(15, 5), dpi=90)
     _draw_query(axs[0], contour_points, hue)
-    axes = _view_axes(mesh.vertices)
+    axes = view_axes(mesh.vertices)
     v = (mesh.vertices - mesh.vertices.mean(axis=0)) @ axes.T
     curve = v[path_vertices]
     gt = v[np.r_[gt_vertices, gt_vertices[:1]]]

@@ -73,8 +73,8 @@ def _match_one(query: PreparedQuery, path: str, params: Contour3DParams) -> Retr
         result = run(match_prepared(query, mesh, params, CancelToken()))
     except CorrError as exc:
         return RetrievalHit(Path(path), np.inf, str(exc), seconds=time.perf_counter() - start)
-    return RetrievalHit(Path(path), float(result.energy), "", result.extras["path_vertices"],
-                        result.extras["path_contour_index"], time.perf_counter() - start)
+    return RetrievalHit(Path(path), float(result.energy), "", result.path.vertices, result.path.contour_index,
+                        time.perf_counter() - start)
 
 
 def mesh_files(folder) -> list[Path]:

@@ -154,21 +154,36 @@ def inspect_mesh(vertices, faces) -> list[Finding]:
     v, f, findings = _as_arrays(vertices, faces)
     if findings:
         return findings
+    findings = _value_findings(v, f)
+    if findings:  # NaN coordinates or indices out of range: the other checks cannot run
+        return findings
+    n = v.shape[0]
+    findings += _face_findings(v, f)
+    edges = _Edges.of(f, n)
+    findings += _manifold_findings(edges)
+    findings += _duplicate_face_findings(f, n)
+    findings += _connectivity_findings(f, n)
+    findings += _edge_warnings(edges)
+    return findings
+
+
+def _value_findings(v: np.ndarray, f: np.ndarray) -> list[Finding]:
+    """Non-finite coordinates, then face indices out of range (each stops the inspection)."""
     n = v.shape[0]
     bad_rows = np.flatnonzero(~np.all(np.isfinite(v), axis=1))
     if bad_rows.size:
-        findings.append(
-            Finding("error", "non-finite", f"{bad_rows.size} vertices have NaN or infinite coordinates "
-                    f"(e.g. vertex {_examples(bad_rows)})")
-        )
-        return findings
+        return [Finding("error", "non-finite", f"{bad_rows.size} vertices have NaN or infinite coordinates "
+                        f"(e.g. vertex {_examples(bad_rows)})")]
     out_of_range = np.flatnonzero(np.any((f < 0) | (f >= n), axis=1))
     if out_of_range.size:
-        findings.append(
-            Finding("error", "index-range", f"{out_of_range.size} faces reference vertex indices outside "
-                    f"[0, {n - 1}] (e.g. face {_examples(out_of_range)})")
-        )
-        return findings
+        return [Finding("error", "index-range", f"{out_of_range.size} faces reference vertex indices outside "
+                        f"[0, {n - 1}] (e.g. face {_examples(out_of_range)})")]
+    return []
+
+
+def _face_findings(v: np.ndarray, f: np.ndarray) -> list[Finding]:
+    """Faces that repeat a vertex, and (other) faces of zero area."""
+    findings = []
     repeated = np.flatnonzero((f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 0] == f[:, 2]))
     if repeated.size:
         findings.append(
@@ -184,20 +199,43 @@ def inspect_mesh(vertices, faces) -> list[Finding]:
             Finding("error", "zero-area-face", f"{zero.size} faces have zero area "
                     f"(e.g. face {_examples(zero)})")
         )
-    # edges: each directed half-edge once per face
-    half = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
-    und = np.sort(half, axis=1)
-    # 1-D integer keys: np.unique on rows (axis=0) sorts structured views, several times slower
-    edge_keys, inverse, counts = np.unique(und[:, 0] * np.int64(n) + und[:, 1], return_inverse=True,
-                                           return_counts=True)
-    uniq = np.column_stack(np.divmod(edge_keys, np.int64(n)))
-    inverse = inverse.ravel()
-    nm = np.flatnonzero(counts > 2)
-    if nm.size:
-        findings.append(
-            Finding("error", "non-manifold-edge", f"{nm.size} edges are shared by more than two faces "
-                    f"(e.g. edge {uniq[nm[0]][0]}-{uniq[nm[0]][1]})")
-        )
+    return findings
+
+
+@dataclass(frozen=True)
+class _Edges:
+    """The half-edges of a face array and their undirected edges (for the manifold and boundary checks)."""
+
+    half: np.ndarray  # (3f, 2) directed half-edges, once per face
+    uniq: np.ndarray  # (e, 2) undirected edges, sorted
+    inverse: np.ndarray  # (3f,) edge of each half-edge
+    counts: np.ndarray  # (e,) faces per edge
+
+    @classmethod
+    def of(cls, f: np.ndarray, n: int) -> _Edges:
+        half = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+        und = np.sort(half, axis=1)
+        # 1-D integer keys: np.unique on rows (axis=0) sorts structured views, several times slower
+        edge_keys, inverse, counts = np.unique(und[:, 0] * np.int64(n) + und[:, 1], return_inverse=True,
+                                               return_counts=True)
+        uniq = np.column_stack(np.divmod(edge_keys, np.int64(n)))
+        return cls(half, uniq, inverse.ravel(), counts)
+
+    @property
+    def non_manifold(self) -> np.ndarray:
+        return np.flatnonzero(self.counts > 2)
+
+
+def _manifold_findings(edges: _Edges) -> list[Finding]:
+    nm = edges.non_manifold
+    if not nm.size:
+        return []
+    a, b = edges.uniq[nm[0]]
+    return [Finding("error", "non-manifold-edge", f"{nm.size} edges are shared by more than two faces "
+                    f"(e.g. edge {a}-{b})")]
+
+
+def _duplicate_face_findings(f: np.ndarray, n: int) -> list[Finding]:
     sorted_faces = np.sort(f, axis=1)
     if n < 2_000_000:  # n³ fits in int64
         dup_faces = np.unique((sorted_faces[:, 0] * np.int64(n) + sorted_faces[:, 1]) * np.int64(n)
@@ -205,7 +243,13 @@ def inspect_mesh(vertices, faces) -> list[Finding]:
     else:
         dup_faces = np.unique(sorted_faces, axis=0).shape[0]
     if dup_faces < f.shape[0]:
-        findings.append(Finding("error", "duplicate-face", f"{f.shape[0] - dup_faces} faces are duplicates"))
+        return [Finding("error", "duplicate-face", f"{f.shape[0] - dup_faces} faces are duplicates")]
+    return []
+
+
+def _connectivity_findings(f: np.ndarray, n: int) -> list[Finding]:
+    """Vertices in no face, and more than one connected component."""
+    findings = []
     used = np.zeros(n, dtype=bool)
     used[f.ravel()] = True
     unused = np.flatnonzero(~used)
@@ -214,7 +258,7 @@ def inspect_mesh(vertices, faces) -> list[Finding]:
             Finding("error", "unreferenced-vertex", f"{unused.size} vertices belong to no face "
                     f"(e.g. vertex {_examples(unused)})")
         )
-    n_comp, labels = _face_components(n, f)
+    _, labels = _face_components(n, f)
     n_comp_used = np.unique(labels[used]).size
     if n_comp_used > 1:
         sizes = np.bincount(labels[used])
@@ -224,20 +268,23 @@ def inspect_mesh(vertices, faces) -> list[Finding]:
                     f"(vertex counts {', '.join(map(str, sizes[:5]))}{', ...' if sizes.size > 5 else ''}); "
                     "load it with largest_component=True to keep the largest")
         )
-    # warnings
-    if not nm.size:
+    return findings
+
+
+def _edge_warnings(edges: _Edges) -> list[Finding]:
+    """Inconsistent orientation (only on a manifold mesh) and a boundary."""
+    findings = []
+    if not edges.non_manifold.size:
         # consistent orientation: each undirected interior edge must appear once in each direction
-        directed = half[:, 0] < half[:, 1]
-        fwd = np.bincount(inverse[directed], minlength=uniq.shape[0])
-        bwd = np.bincount(inverse[~directed], minlength=uniq.shape[0])
-        bad = np.flatnonzero((counts == 2) & (fwd != 1))
+        directed = edges.half[:, 0] < edges.half[:, 1]
+        fwd = np.bincount(edges.inverse[directed], minlength=edges.uniq.shape[0])
+        bad = np.flatnonzero((edges.counts == 2) & (fwd != 1))
         if bad.size:
             findings.append(
                 Finding("warning", "orientation", f"{bad.size} interior edges join faces of inconsistent "
                         "orientation (normals may flip)")
             )
-        del bwd
-    n_boundary = int(np.sum(counts == 1))
+    n_boundary = int(np.sum(edges.counts == 1))
     if n_boundary:
         findings.append(
             Finding("warning", "boundary", f"the mesh has a boundary ({n_boundary} boundary edges); "

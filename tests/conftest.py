@@ -49,3 +49,13 @@ def grid_mesh(nx, ny, periodic=False):
             a, b, c, d = idx(i, j), idx(i + 1, j), idx(i + 1, j + 1), idx(i, j + 1)
             faces += [(a, b, c), (a, c, d)]
     return np.column_stack([u.ravel(), v.ravel()]), np.array(faces, dtype=np.int64)
+
+
+@pytest.fixture
+def window(qtbot, tmp_path):
+    """A shown studio window with its own settings file (GUI tests only; Qt is imported here, lazily)."""
+    from _studio import make_window
+
+    win = make_window(qtbot, tmp_path / "studio.ini")
+    yield win
+    win.close()

@@ -15,6 +15,7 @@ def exact_value(score):
     return float(score[r, c].sum())
 
 
+@pytest.mark.slow
 def test_auction_matches_exact_optimum_on_random_instances():
     rng = np.random.default_rng(0)
     for trial in range(200):
@@ -30,6 +31,7 @@ def test_auction_matches_exact_optimum_on_random_instances():
         assert abs(assignment_score(score, sol) - exact_value(score)) <= 1e-8 * span
 
 
+@pytest.mark.slow
 def test_auction_on_kernel_structured_scores(wolf_pair):
     from corrlib.geometry.sampling import farthest_point_sampling
     from corrlib.geometry.spectrum import mesh_spectrum

@@ -34,6 +34,7 @@ def wolf_dataset(tmp_path):
     return folder
 
 
+@pytest.mark.slow
 def test_runner_reproduces_the_direct_evaluation(cat_dataset, tmp_path):
     from corrlib.evaluation import geodesic_errors
     from corrlib.io import load_map, load_mesh, load_vts
@@ -67,6 +68,7 @@ def test_runner_reproduces_the_direct_evaluation(cat_dataset, tmp_path):
     assert again["ours"]["mean"] == pytest.approx(summary["nn"]["mean"], rel=1e-12)
 
 
+@pytest.mark.slow
 def test_resume_after_an_interruption_gives_the_same_table(wolf_dataset, tmp_path):
     ds = load_dataset(wolf_dataset)
     assert ds.identity and len(ds.pairs) == 2
@@ -113,6 +115,7 @@ def test_bad_datasets_and_methods(tmp_path, wolf_dataset):
     assert methods_from_toml(toml)[0].label == "nn30"
 
 
+@pytest.mark.slow
 def test_dask_cluster_gives_the_local_results(wolf_dataset, tmp_path):
     import distributed  # the dist extra is part of the test setup (scripts/test.sh)
 
@@ -132,6 +135,7 @@ def test_dask_cluster_gives_the_local_results(wolf_dataset, tmp_path):
                               load_map(tmp_path / "local" / "maps" / label / f"{pair}.txt"))
 
 
+@pytest.mark.slow
 def test_retrieval_benchmark_local_and_on_dask(tmp_path):
     import distributed
 

@@ -73,6 +73,7 @@ def test_methods_listing(capsys):
     assert "fmap-zoomout" in out and "descriptor-nn" in out and "--param k_init=30" in out
 
 
+@pytest.mark.slow
 def test_demo_console_script(tmp_path):
     proc = subprocess.run([sys.executable, "-m", "corrlib.cli", "demo", "-o", str(tmp_path), "-q"],
                           capture_output=True, text=True, timeout=300)
@@ -82,12 +83,14 @@ def test_demo_console_script(tmp_path):
     assert "mean" in proc.stdout
 
 
+@pytest.mark.slow
 def test_perf_quick_runs(capsys):
     assert main(["perf", "foundation", "--quick", "--repeat", "1"]) == 0
     out = capsys.readouterr().out
     assert "200 eigenpairs, method=slicing" in out and "SHOT" in out and "geodesic error" in out
 
 
+@pytest.mark.slow
 def test_match_contour_and_retrieve(tmp_path, capsys):
     from _data import SKETCH2D
 
@@ -123,6 +126,7 @@ def test_match_contour_bad_input(tmp_path, capsys):
     assert "no mesh files" in capsys.readouterr().err
 
 
+@pytest.mark.slow
 def test_match_kernel_with_init_file(tmp_path, capsys):
     n = 4344
     noisy = np.arange(n)

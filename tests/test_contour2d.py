@@ -47,7 +47,7 @@ def test_warped_contour_is_recovered():
     resampled_a = a.resample(120)
     original = cKDTree(a.points).query(resampled_a.points)[1]
     truth = b_full.points[(original - shift) % 400]
-    predicted = result.extras["target_points"][result.map_xy]
+    predicted = result.path.target_points[result.map_xy]
     err = np.linalg.norm(predicted - truth, axis=1) / np.sqrt(b_full.area)
     perimeter = b_full.length / np.sqrt(b_full.area)
     assert np.median(err) < 0.03 and np.mean(err < 0.02 * perimeter) > 0.95

@@ -114,7 +114,7 @@ def wolf_silhouette_match(wolf_pair):
 def test_path_is_a_valid_closed_matching(wolf_silhouette_match, wolf_pair):
     _, _, result = wolf_silhouette_match
     wolf1 = wolf_pair[1]
-    verts, layers = result.extras["path_vertices"], result.extras["path_layers"]
+    verts, layers = result.path.vertices, result.path.layers
     m = 120
     assert verts[0] == verts[-1] and layers[0] == 0 and layers[-1] == m
     steps = np.diff(layers)
@@ -124,7 +124,7 @@ def test_path_is_a_valid_closed_matching(wolf_silhouette_match, wolf_pair):
     moved = verts[1:] != verts[:-1]
     assert all(adj[a, b] > 0 for a, b in zip(verts[:-1][moved], verts[1:][moved]))
     assert result.map_xy.shape == (m,) and result.map_xy.min() >= 0
-    assert result.extras["optimal"] and result.energy == pytest.approx(result.extras["lower_bound"])
+    assert result.search.optimal and result.energy == pytest.approx(result.search.lower_bound)
 
 
 def test_silhouette_matches_its_shape_in_another_pose(wolf_silhouette_match, wolf_pair):
@@ -179,6 +179,7 @@ def test_result_is_invariant_to_a_mirrored_and_reordered_mesh(wolf_pair):
     assert np.mean(perm[other.map_xy] == base.map_xy) > 0.95
 
 
+@pytest.mark.slow
 def test_energy_is_comparable_across_resolutions(wolf_pair):
     """Retrieval ranks meshes by energy, so a finer mesh of the same shape must not change the energy much:
     measured +7 % for a 4x subdivided wolf1 (100 points), while cat1 costs 18 % more than wolf1."""
@@ -230,6 +231,7 @@ def test_plane_section_loops(wolf_pair):
     Contour2D(lp.points_2d)  # a valid simple closed contour
 
 
+@pytest.mark.slow
 def test_retrieval_ranks_the_class_first():
     meshes = [TOSCA / "cat0.off", TOSCA / "cat1.off", TOSCA / "wolf0.off", TOSCA / "wolf1.off",
               SUMNER / "lion-00.off"]
@@ -286,7 +288,7 @@ def test_energy_is_invariant_to_the_mirror_image_and_orientation_of_the_sketch(w
     base = solve("contour3d", contour, wolf1, n_contour=60)
     mirrored = solve("contour3d", Contour2D(contour.points * [-1.0, 1.0]), wolf1, n_contour=60)
     assert mirrored.energy == pytest.approx(base.energy, rel=1e-9)
-    assert set(mirrored.extras["path_vertices"]) == set(base.extras["path_vertices"])
+    assert set(mirrored.path.vertices) == set(base.path.vertices)
     order = np.r_[0, np.arange(contour.n_points - 1, 0, -1)]  # clockwise, same first point
     reversed_ = solve("contour3d", Contour2D(contour.points[order]), wolf1, n_contour=60)
     assert reversed_.energy == base.energy and np.array_equal(reversed_.map_xy, base.map_xy)
@@ -319,10 +321,10 @@ def test_elastic_energy_does_not_collapse_where_the_paper_energy_does():
     for energy in ("paper", "elastic"):
         # the paper's node cost, so that only the path energy differs
         result = solve("contour3d", query.contour, lion, n_contour=60, energy=energy, features="paper", axis_weight=0)
-        assert result.extras["optimal"]
-        gt = query.ground_truth(result.extras["contour_points"], lion.vertices)
-        scores[energy] = score_curve(result.map_xy, result.extras["path_vertices"], gt, lion, query.length_3d)
-        assert energy in result.extras["energy_meaning"]
+        assert result.search.optimal
+        gt = query.ground_truth(result.path.contour_points, lion.vertices)
+        scores[energy] = score_curve(result.map_xy, result.path.vertices, gt, lion, query.length_3d)
+        assert energy in result.energy_meaning
     assert scores["paper"]["coverage"] < 0.3 and scores["paper"]["distinct_vertices"] < 20
     assert scores["elastic"]["coverage"] > 0.6 and scores["elastic"]["distinct_vertices"] > 40
     assert scores["elastic"]["mean_error"] < scores["paper"]["mean_error"] - 0.05

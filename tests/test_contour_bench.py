@@ -112,6 +112,7 @@ def test_vts_ground_truth_carries_the_section_to_the_other_pose(tmp_path):
     assert 0.8 * expected < length1 < 1.5 * expected, (length1, expected)
 
 
+@pytest.mark.slow
 def test_benchmark_end_to_end_with_vts_ground_truth(tmp_path):
     data = tmp_path / "cats"
     data.mkdir()
@@ -164,6 +165,7 @@ def test_a_plane_that_cuts_nothing_closed_is_a_named_error():
         cut_query(strip, "main")
 
 
+@pytest.mark.slow
 def test_cross_class_map_files_add_pairs_with_their_ground_truth(tmp_path, capsys):
     """``<a>2<b>`` (as the Sumner lion -> cat map is shipped) or ``<a>__<b>.txt``, by shape or by class."""
     shutil.copy(TOSCA / "wolf0.off", tmp_path / "wolf0.off")
@@ -216,6 +218,7 @@ def test_silhouette_ground_truth_lies_on_the_outline_and_is_near_and_far_side():
     assert 2 * extent.max() < query.length_3d < 4 * extent.sum()
 
 
+@pytest.mark.slow
 def test_silhouette_queries_end_to_end(tmp_path):
     """Side-view silhouettes of the wolves matched to both poses. Measured with the defaults: mean error
     0.086-0.101, coverage 0.85-0.88 (the nearer of the near- and far-side rim vertex scored); the

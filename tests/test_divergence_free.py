@@ -11,8 +11,8 @@ from corrlib.deformation.flow import flow, flow_with_jacobian, trajectory, veloc
 from corrlib.errors import InputError, ParameterError
 from corrlib.evaluation import geodesic_errors
 from corrlib.methods import make_params, solve
-from corrlib.methods.divergence_free import (Deformation, DivergenceFreeParams, Frames, candidate_rotations, e_step,
-                                             fit, gauss_newton_step)
+from corrlib.deformation.model import Deformation, Frames
+from corrlib.methods.divergence_free import DivergenceFreeParams, candidate_rotations, e_step, fit, gauss_newton_step
 from corrlib.progress import run
 from corrlib.shapes import TriMesh, signed_volume
 
@@ -94,6 +94,7 @@ def test_fields_are_curls_divergence_free_and_tangent_to_the_cube():
         assert np.allclose(basis.values(x[:1])[0, :, 12 + d], np.cross(grad, e))
 
 
+@pytest.mark.slow
 def test_compiled_velocity_matches_the_reference_evaluation():
     basis = DivFreeBasis(3000)
     coeffs = basis.random_coefficients(seed=2)
@@ -105,6 +106,7 @@ def test_compiled_velocity_matches_the_reference_evaluation():
 # ----------------------------------------------------------------------------- flow
 
 
+@pytest.mark.slow
 def test_flow_derivative_matches_finite_differences():
     basis = DivFreeBasis(45)
     coeffs = basis.random_coefficients(0.5, seed=3)
@@ -243,6 +245,7 @@ def warped_result(warped_wolf):
     return solve("divergence-free", wolf0, target, n_fields=1000, n_samples=1500)
 
 
+@pytest.mark.slow
 def test_recovers_a_known_deformation(warped_wolf, warped_result):
     wolf0, target, truth, warped = warped_wolf
     moved = np.linalg.norm(warped - wolf0.vertices, axis=1).mean() / wolf0.bbox_diagonal
@@ -254,7 +257,7 @@ def test_recovers_a_known_deformation(warped_wolf, warped_result):
     shape_error = np.linalg.norm(warped_result.extras["morphed_vertices"] - warped, axis=1).mean()
     assert shape_error < 0.01 * wolf0.bbox_diagonal
     assert abs(warped_result.extras["volume_change"]) < 0.01
-    trace = warped_result.extras["energy_trace"]
+    trace = warped_result.energy_trace
     assert trace[-1] < trace[0]
     # the reverse map too
     back = geodesic_errors(warped_result.map_yx, wolf0, truth, ident).summary()
@@ -262,19 +265,18 @@ def test_recovers_a_known_deformation(warped_wolf, warped_result):
 
 
 def test_result_reloads_into_the_same_deformation(warped_wolf, warped_result, tmp_path):
-    from corrlib.io import load_result
     from corrlib.methods.base import MatchResult
 
     wolf0 = warped_wolf[0]
     warped_result.save(tmp_path / "r")
-    arrays, meta = load_result(tmp_path / "r")
-    loaded = MatchResult(meta["method"], arrays["map_xy"], arrays["map_yx"], meta["energy"],
-                         params=meta["params"], extras={**meta["extras"], **arrays})
-    deformation = Deformation.from_result(loaded)
+    loaded = MatchResult.load(tmp_path / "r")
+    deformation = loaded.deformation
     assert np.allclose(deformation.positions(wolf0.vertices, 1.0), warped_result.extras["morphed_vertices"])
-    steps = warped_result.extras["trajectory"]
+    steps = deformation.source_steps.positions
     assert np.allclose(steps[20], warped_result.extras["morphed_vertices"], atol=1e-3)
-    assert float(warped_result.extras["trajectory_times"][-1]) == pytest.approx(3.0)
+    assert float(deformation.source_steps.times[-1]) == pytest.approx(3.0)
+    assert np.array_equal(loaded.map_xy, warped_result.map_xy) and loaded.energy == warped_result.energy
+    assert np.array_equal(loaded.energy_trace, warped_result.energy_trace)
 
 
 @pytest.fixture(scope="module")
@@ -282,6 +284,7 @@ def wolf_result(wolf_pair):
     return solve("divergence-free", *wolf_pair)
 
 
+@pytest.mark.slow
 def test_wolf_pair(wolf_pair, wolf_result):
     wolf0, wolf1 = wolf_pair
     ident = np.arange(wolf0.n_vertices)
@@ -329,6 +332,7 @@ def test_absurd_parameters_are_rejected(name, value):
         make_params(DivergenceFreeParams, **{name: value})
 
 
+@pytest.mark.slow
 def test_cat_pair_with_symmetric_ground_truth(cat_pair):
     """Remeshed TOSCA cats in different poses. Measured (defaults): mean 0.045, 69 % within 0.05, 91 % within
     0.1, the same with the mirrored ground truth (SHOT in the distance tells left from right). Thresholds keep

@@ -29,6 +29,7 @@ def test_neighbour_shift_has_edge_length_error(wolf_pair):
     assert diam.normalization > np.sqrt(wolf1.area) * 0.5
 
 
+@pytest.mark.slow
 def test_symmetric_ground_truth(cat_pair):
     cat0, cat1, gt = cat_pair
     # the mirrored ground truth itself as a map: large direct error, zero symmetric error

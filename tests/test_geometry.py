@@ -224,6 +224,7 @@ def test_eigensolver_retries_with_regularised_shift(monkeypatch):
         eigenpairs(stiff, mass, 10, method="eigsh")
 
 
+@pytest.mark.slow
 def test_cholesky_solver_equals_superlu_and_rejects_indefinite_matrices(cat_pair):
     import scipy.sparse.linalg as spla
 

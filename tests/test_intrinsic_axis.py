@@ -12,7 +12,7 @@ from corrlib.geometry.spectrum import eigenpairs
 from corrlib.methods import solve
 from corrlib.methods.contour3d import (Contour3DParams, axis_scale, feature_distances, prepare_mesh,
                                        prepare_query, product_graph)
-from corrlib.progress import CancelToken, run
+from corrlib.progress import run
 from corrlib.shapes import Contour2D, TriMesh
 
 
@@ -130,8 +130,8 @@ def test_both_axis_directions_are_solved_and_the_lower_energy_is_kept(energy):
     assert min(query.axis.confidence, target.axis.confidence) > 0.3  # the axis term is active
     assert result.energy == pytest.approx(min(as_is.energy, reversed_.energy), rel=1e-12)
     assert result.extras["axis_reversed"] == (reversed_.energy < as_is.energy)
-    assert result.extras["optimal"]
-    assert result.extras["lower_bound"] == pytest.approx(result.energy, rel=1e-12)
+    assert result.search.optimal
+    assert result.search.lower_bound == pytest.approx(result.energy, rel=1e-12)
     # the axis term is what made the two differ; without it there is one search
     plain = solve("contour3d", contour, mesh, n_contour=24, k=12, energy=energy, axis_weight=0)
     assert plain.extras["axis_reversed"] is False

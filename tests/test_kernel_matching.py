@@ -10,7 +10,7 @@ from corrlib.assignment import linear_assignment
 from corrlib.errors import InputError, MeshError, ParameterError
 from corrlib.evaluation import geodesic_errors
 from corrlib.methods import solve
-from corrlib.methods.kernel_matching import InitialMatch
+from corrlib.methods.base import InitialMatch
 from corrlib.shapes import TriMesh
 
 
@@ -58,6 +58,7 @@ def wolf_result(wolf_pair):
     return solve("kernel-matching", *wolf_pair)
 
 
+@pytest.mark.slow
 def test_wolf_recovers_the_identity(wolf_pair, wolf_result):
     wolf0, wolf1 = wolf_pair
     ident = np.arange(wolf0.n_vertices)
@@ -70,13 +71,14 @@ def test_wolf_recovers_the_identity(wolf_pair, wolf_result):
 
 
 def test_energy_trace_never_decreases_within_a_time(wolf_result):
-    energy = wolf_result.extras["energy_trace"]
+    energy = wolf_result.energy_trace
     taus = wolf_result.extras["tau_trace"]
     for tau in np.unique(taus):
         e = energy[taus == tau]
         assert np.all(np.diff(e) >= -1e-5 * np.abs(e).max())
 
 
+@pytest.mark.slow
 def test_cat_pair_with_symmetric_ground_truth(cat_pair):
     cat0, cat1, gt = cat_pair
     result = solve("kernel-matching", cat0, cat1)
@@ -124,6 +126,7 @@ def test_bijective_cells_option(wolf_pair):
     assert geodesic_errors(result.map_xy, wolf1, ident, ident).summary()["within_0.05"] > 0.9
 
 
+@pytest.mark.slow
 def test_result_does_not_depend_on_vertex_order(wolf_pair):
     wolf0, wolf1 = wolf_pair
     fast = dict(n_eigs=150, n_seeds=800, n_times=5, iters_per_time=2)
@@ -135,6 +138,7 @@ def test_result_does_not_depend_on_vertex_order(wolf_pair):
     assert np.mean(perm[other.map_xy] == base.map_xy) > 0.97
 
 
+@pytest.mark.slow
 def test_refinement_of_a_noisy_map_and_of_landmarks(wolf_pair):
     wolf0, wolf1 = wolf_pair
     fast = dict(n_eigs=150, n_seeds=800, n_times=5, iters_per_time=2)
@@ -156,6 +160,7 @@ def test_refinement_of_a_noisy_map_and_of_landmarks(wolf_pair):
     assert geodesic_errors(from_landmarks.map_xy, wolf1, ident, ident).summary()["within_0.05"] > 0.97
 
 
+@pytest.mark.slow
 def test_the_better_of_the_two_starts_goes_on(wolf_pair):
     fast = dict(n_eigs=150, n_seeds=800, n_times=5, iters_per_time=2)
     single = solve("kernel-matching", *wolf_pair, init_fraction=1.0, **fast)
@@ -165,7 +170,7 @@ def test_the_better_of_the_two_starts_goes_on(wolf_pair):
 
     def first_time_objective(result):  # the objective after the DC iterations of the first (largest) time
         taus = result.extras["tau_trace"]
-        return result.extras["energy_trace"][taus == taus[0]][-1]
+        return result.energy_trace[taus == taus[0]][-1]
 
     # both runs share the first start and its scale; the second start only replaces it when it ends higher
     assert first_time_objective(double) >= first_time_objective(single)
@@ -173,6 +178,7 @@ def test_the_better_of_the_two_starts_goes_on(wolf_pair):
         np.testing.assert_array_equal(double.map_xy, single.map_xy)
 
 
+@pytest.mark.slow
 def test_partial_shape_and_unequal_sizes(wolf_pair):
     wolf0, wolf1 = wolf_pair
     # the front 60 % of wolf1 (a partial shape with boundary) against the whole wolf0
@@ -211,6 +217,7 @@ def test_bad_inputs(wolf_pair):
         solve("descriptor-nn", *wolf_pair, initial=InitialMatch(map_xy=np.zeros(5, int)))
 
 
+@pytest.mark.slow
 def test_fmap_initialisation_and_final_smoothing(wolf_pair):
     wolf0, wolf1 = wolf_pair
     fast = dict(n_eigs=150, n_seeds=800, n_times=5, iters_per_time=2)
@@ -227,7 +234,7 @@ def test_fmap_initialisation_and_final_smoothing(wolf_pair):
 
 def test_scores_without_negligible_decays_equal_the_full_product(cat_pair):
     from corrlib.geometry.spectrum import mesh_spectrum
-    from corrlib.methods.kernel_matching import DECAY_CUTOFF, _score
+    from corrlib.methods.kernel_matching import DECAY_CUTOFF, kernel_score
 
     cat0, cat1 = cat_pair[0], cat_pair[1]
     s0, s1 = mesh_spectrum(cat0, 500), mesh_spectrum(cat1, 500)
@@ -236,8 +243,8 @@ def test_scores_without_negligible_decays_equal_the_full_product(cat_pair):
     d1, d0 = np.exp(-0.0259 * cat1.area * s1.evals), np.exp(-0.0259 * cat0.area * s0.evals)  # the largest time
     assert np.sum(d1 < DECAY_CUTOFF) > 100  # the cut-off does drop eigenpairs here
     full = (s1.evecs[rows] * d1) @ c @ (s0.evecs[cols] * d0).T  # float64, every eigenpair
-    fast = _score(s1.evecs[rows], s0.evecs[cols], c, d1, d0)
+    fast = kernel_score(s1.evecs[rows], s0.evecs[cols], c, d1, d0)
     assert fast.dtype == np.float32
     np.testing.assert_allclose(fast, full, rtol=0, atol=1e-5 * np.abs(full).max())
-    np.testing.assert_allclose(_score(s0.evecs[cols], s1.evecs[rows], c.T, d0, d1), fast.T, rtol=0,
+    np.testing.assert_allclose(kernel_score(s0.evecs[cols], s1.evecs[rows], c.T, d0, d1), fast.T, rtol=0,
                                atol=1e-6 * np.abs(full).max())

@@ -113,3 +113,59 @@ def test_warm_up_runs_every_kernel():
     from corrlib.warmup import warm_up
 
     warm_up()  # tiny problems through the auction, layered Dijkstra, L1 costs and SHOT
+
+
+def test_every_solver_follows_the_solver_contract():
+    """``solve_<name>(source, target, params, token)``; refining solvers add a keyword-only ``initial=None``."""
+    import inspect
+
+    from corrlib.methods import all_methods
+
+    for spec in all_methods():
+        assert spec.solve.__name__ == "solve_" + spec.name.replace("-", "_"), spec.name
+        sig = inspect.signature(spec.solve)
+        positional = [p for p in sig.parameters.values() if p.kind is p.POSITIONAL_OR_KEYWORD]
+        assert [p.name for p in positional] == ["source", "target", "params", "token"], spec.name
+        assert all(p.default is p.empty for p in positional), spec.name
+        keyword = {p.name: p for p in sig.parameters.values() if p.kind is p.KEYWORD_ONLY}
+        if spec.refines:
+            assert set(keyword) == {"initial"} and keyword["initial"].default is None, spec.name
+        else:
+            assert not keyword, spec.name
+
+
+def test_registering_a_name_twice_is_a_parameter_error():
+    from dataclasses import replace
+
+    from corrlib.errors import ParameterError
+    from corrlib.methods import get_method
+    from corrlib.methods.registry import register
+
+    spec = get_method("descriptor-nn")
+    assert register(spec) is spec  # the same spec again is harmless
+    with pytest.raises(ParameterError, match="already registered"):
+        register(replace(spec, label="another"))
+
+
+def test_typed_result_parts_survive_save_and_load(tmp_path):
+    from corrlib.methods.base import ContourPath, MatchResult, SearchCertificate
+
+    rng = np.random.default_rng(3)
+    path = ContourPath(rng.random((7, 2)), np.array([0, 4, 4, 2]), np.array([0, 2, 4, 6]), np.array([0, 2, 4, 7]),
+                       target_points=rng.random((5, 2)), product_functions={"cost": rng.random((7, 5))})
+    result = MatchResult("contour2d", np.arange(7) % 5, None, 1.5, {"total": 0.1}, {"n_source": 7},
+                         energy_meaning="path energy", energy_trace=np.array([3.0, 2.0, 1.5]), path=path,
+                         search=SearchCertificate(1.4, 1.5, 9, 12, 0.01),
+                         extras={"band_size": 0.25, "path_map_xy": np.arange(7)})
+    result.save(tmp_path / "r")
+    loaded = MatchResult.load(tmp_path / "r.json")
+    assert loaded.method == "contour2d" and loaded.energy == 1.5 and loaded.energy_meaning == "path energy"
+    assert np.array_equal(loaded.map_xy, result.map_xy) and loaded.map_yx is None
+    assert np.array_equal(loaded.energy_trace, result.energy_trace)
+    for name in ("contour_points", "vertices", "contour_index", "layers", "target_points"):
+        assert np.array_equal(getattr(loaded.path, name), getattr(path, name)), name
+    assert np.array_equal(loaded.path.product_functions["cost"], path.product_functions["cost"])
+    assert loaded.search == result.search and not loaded.search.optimal
+    assert loaded.search.gap == pytest.approx(0.1)
+    assert loaded.extras["band_size"] == 0.25 and np.array_equal(loaded.extras["path_map_xy"], np.arange(7))
+    assert loaded.deformation is None

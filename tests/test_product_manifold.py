@@ -156,7 +156,7 @@ def test_refinement_of_sparse_noisy_matches_on_the_wolf(wolf_pair):
     assignment, 86 % with maximum likelihood (the issue asks for 90 %)."""
     from corrlib.evaluation import geodesic_errors
     from corrlib.methods import solve
-    from corrlib.methods.kernel_matching import InitialMatch
+    from corrlib.methods.base import InitialMatch
 
     wolf0, wolf1 = wolf_pair
     lx, ly = noisy_landmarks(wolf0.n_vertices)
@@ -222,6 +222,7 @@ def warped_silhouette():
     return a, b, truth
 
 
+@pytest.mark.slow
 def test_localized_harmonics_beat_the_functional_map_truncation(warped_silhouette):
     """Thesis Figure 9.6 with numbers: k = 100 coefficients. Measured mean errors (fraction of the length):
     functional map 10×10 0.0029, first 100 product eigenfunctions 0.0092, localized harmonics on bands of
@@ -251,12 +252,12 @@ def test_contour_pair_with_a_known_warp(warped_silhouette):
     gap = np.abs(result.map_xy - truth)
     err = np.minimum(gap, 250 - gap) / 250
     assert err.mean() <= 0.006 and np.mean(err <= 0.01) >= 0.85 and err.max() <= 0.03, (err.mean(), err.max())
-    names = result.extras["product_functions"].split(",")
-    assert {"cost", "density", "harmonic_1"} <= set(names)
-    for name in names:
-        assert result.extras[name].shape == (200, 250)
+    functions = result.path.product_functions
+    assert {"cost", "density", "harmonic_1"} <= set(functions)
+    for values in functions.values():
+        assert values.shape == (200, 250)
     # the band harmonic is localized: zero away from the correspondence
-    assert np.count_nonzero(result.extras["harmonic_1"]) <= 0.06 * 200 * 250
+    assert np.count_nonzero(functions["harmonic_1"]) <= 0.06 * 200 * 250
 
 
 def test_contours_of_very_different_sizes_and_samplings(warped_silhouette):

@@ -9,33 +9,27 @@ import pytest
 os.environ.setdefault("QT_QPA_PLATFORM", "xcb")
 pytest.importorskip("pyvistaqt")  # the gui extra is part of the test setup (scripts/test.sh installs it)
 
-from PySide6.QtCore import QSettings  # noqa: E402
-
 from _data import SILHOUETTES, TOSCA  # noqa: E402
-from app.main_window import MainWindow  # noqa: E402
+from _studio import make_window, wait_loaded  # noqa: E402
 
 FAST_KERNEL = {"n_eigs": 100, "n_seeds": 500, "n_times": 4, "iters_per_time": 2}
 
 
-def make_window(qtbot, ini_path, interactive=False, show=True):
-    """A studio window with its own settings file (no state shared between tests)."""
-    win = MainWindow(settings=QSettings(str(ini_path), QSettings.IniFormat), interactive=interactive)
-    qtbot.addWidget(win)
-    if show:
-        win.show()
-        qtbot.waitExposed(win)
-    return win
+def load_demo(qtbot, win):
+    win.load_demo()
+    wait_loaded(qtbot, win)
 
 
-@pytest.fixture
-def window(qtbot, tmp_path):
-    win = make_window(qtbot, tmp_path / "studio.ini")
-    yield win
-    win.close()
+def load_file(qtbot, win, path, which):
+    """Load ``path`` and wait; True if it became the ``which`` shape."""
+    win.load_file(str(path), which)
+    wait_loaded(qtbot, win)
+    shape = win.source if which == "source" else win.target
+    return shape is not None and shape.name == os.path.basename(str(path))
 
 
 def set_params(win, method, **values):
-    form = win._form_of[method]
+    form = win.form_of(method)
     current = form.values()
     current.update(values)
     form.set_values(current)
@@ -47,8 +41,9 @@ def run_and_wait(qtbot, win, method, timeout=180_000):
     return blocker.args[0]
 
 
+@pytest.mark.slow
 def test_demo_pair_kernel_matching_colours_the_target(qtbot, window):
-    window.load_demo()
+    load_demo(qtbot, window)
     assert window.method_box.currentData() == "kernel-matching"  # the best method for two meshes
     set_params(window, "kernel-matching", **FAST_KERNEL)
     result = run_and_wait(qtbot, window, "kernel-matching")
@@ -71,21 +66,22 @@ def test_demo_pair_kernel_matching_colours_the_target(qtbot, window):
     assert np.allclose(moved, expected)
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("method", ["fmap-zoomout", "descriptor-nn"])
 def test_other_mesh_methods(qtbot, window, method):
-    window.load_demo()
+    load_demo(qtbot, window)
     result = run_and_wait(qtbot, window, method)
     assert result.method == method and window.pair_view.target_colors is not None
 
 
 def test_contour_to_mesh_draws_the_curve(qtbot, window):
-    assert window.load_file(str(SILHOUETTES / "mpeg7" / "dog-1.gif"), "source")
-    assert window.load_file(str(TOSCA / "wolf1.off"), "target")
+    assert load_file(qtbot, window, SILHOUETTES / "mpeg7" / "dog-1.gif", "source")
+    assert load_file(qtbot, window, TOSCA / "wolf1.off", "target")
     assert window.method_box.currentData() == "contour3d"
     set_params(window, "contour3d", n_contour=60, eps=0.05)
     result = run_and_wait(qtbot, window, "contour3d")
     curve = window.product_view.curve
-    assert curve is not None and curve.n_points == len(result.extras["path_vertices"])
+    assert curve is not None and curve.n_points == len(result.path.vertices)
     assert window.tabs.currentWidget() is window.product_view
 
 
@@ -99,6 +95,7 @@ def test_sketch_becomes_a_query(qtbot, window):
     assert window.source is contour and window.retrieval_view.query is contour
 
 
+@pytest.mark.slow
 def test_retrieval_gallery_order(qtbot, window, tmp_path):
     from corrlib.geometry.sections import render_silhouette
     from corrlib.io import load_mesh
@@ -118,8 +115,9 @@ def test_retrieval_gallery_order(qtbot, window, tmp_path):
     assert window.retrieval_view.gallery.item(0).icon().isNull() is False
 
 
+@pytest.mark.slow
 def test_compare_two_methods(qtbot, window):
-    window.load_demo()
+    load_demo(qtbot, window)
     view = window.compare_view
     for i in range(view.methods.count()):
         name = view.methods.item(i).data(0x0100)
@@ -136,7 +134,7 @@ def test_compare_two_methods(qtbot, window):
 
 
 def test_cancel_during_a_run(qtbot, window):
-    window.load_demo()
+    load_demo(qtbot, window)
     set_params(window, "kernel-matching", n_eigs=500, n_seeds=3000)
     with qtbot.waitSignal(window.runner.progress, timeout=60_000):
         window.run_method(method="kernel-matching")
@@ -149,7 +147,7 @@ def test_cancel_during_a_run(qtbot, window):
 def test_close_during_a_run(qtbot, tmp_path):
     win = make_window(qtbot, tmp_path / "s.ini")
     settings = win.settings
-    win.load_demo()
+    load_demo(qtbot, win)
     with qtbot.waitSignal(win.runner.progress, timeout=60_000):
         win.run_method(method="kernel-matching")
     win.close()  # cancels, waits for the worker, closes every plotter
@@ -165,16 +163,16 @@ def test_bad_file_shows_a_dialog(qtbot, tmp_path, monkeypatch):
     win = make_window(qtbot, tmp_path / "s.ini", interactive=True, show=False)
     bad = tmp_path / "broken.off"
     bad.write_text("OFF\n3 1 0\n0 0 0\n1 0 0\n")
-    assert not win.load_file(str(bad), "source")
+    assert not load_file(qtbot, win, bad, "source")
     assert shown and "broken.off" in shown[0]
     assert win.source is None  # nothing half-loaded, the window keeps running
-    assert win.load_file(str(TOSCA / "wolf0.off"), "source")
+    assert load_file(qtbot, win, TOSCA / "wolf0.off", "source")
     win.close()
 
 
 def test_invalid_parameters_are_flagged(qtbot, window):
-    window.load_demo()
-    form = window._form_of["kernel-matching"]
+    load_demo(qtbot, window)
+    form = window.form_of("kernel-matching")
     form.widgets["times"].setText("0.1, abc")
     assert not form.validate() and "times" in form.error.text()
     messages = []
@@ -186,10 +184,11 @@ def test_invalid_parameters_are_flagged(qtbot, window):
     assert form.validate() and form.error.text() == ""
 
 
+@pytest.mark.slow
 def test_exports_are_written(qtbot, window, tmp_path, monkeypatch):
     from corrlib.io import load_map, load_mesh
 
-    window.load_demo()
+    load_demo(qtbot, window)
     run_and_wait(qtbot, window, "descriptor-nn")
     targets = iter([str(tmp_path / "map.txt"), str(tmp_path / "colored.ply"), str(tmp_path / "shot.png")])
     monkeypatch.setattr(window, "_save_path", lambda *a: next(targets))
@@ -201,12 +200,13 @@ def test_exports_are_written(qtbot, window, tmp_path, monkeypatch):
     assert (tmp_path / "shot.png").read_bytes()[:4] == b"\x89PNG"
 
 
+@pytest.mark.slow
 def test_lines_function_texture_and_sequence_exports(qtbot, window, tmp_path, monkeypatch):
     from PIL import Image
 
     from corrlib.io import load_mesh
 
-    window.load_demo()
+    load_demo(qtbot, window)
     result = run_and_wait(qtbot, window, "descriptor-nn")
     view = window.pair_view
     view.mode.setCurrentText("lines")
@@ -238,6 +238,7 @@ def test_bundled_shapes_and_retrieved_pair(qtbot, window):
     assert "tosca/cat0.off" in labels and "silhouettes/mpeg7/dog-1.gif" in labels
     window.bundled.setCurrentIndex(labels.index("silhouettes/mpeg7/dog-1.gif"))
     window.load_bundled("source")
+    wait_loaded(qtbot, window)
     assert window.source.name == "dog-1.gif"
     set_params(window, "contour3d", n_contour=40, eps=0.1)
     with qtbot.waitSignal(window.result_ready, timeout=120_000):
@@ -246,13 +247,13 @@ def test_bundled_shapes_and_retrieved_pair(qtbot, window):
 
 
 def test_contour_pair_shows_the_torus(qtbot, window):
-    assert window.load_file(str(SILHOUETTES / "mpeg7" / "dog-1.gif"), "source")
-    assert window.load_file(str(SILHOUETTES / "mpeg7" / "horse-1.gif"), "target")
+    assert load_file(qtbot, window, SILHOUETTES / "mpeg7" / "dog-1.gif", "source")
+    assert load_file(qtbot, window, SILHOUETTES / "mpeg7" / "horse-1.gif", "target")
     assert window.method_box.currentData() == "contour2d"
     set_params(window, "contour2d", n_source=50, n_target=50)
     result = run_and_wait(qtbot, window, "contour2d")
     view = window.product_view
-    assert view.torus_curve is not None and view.torus_curve.n_points == len(result.extras["path_layers"])
+    assert view.torus_curve is not None and view.torus_curve.n_points == len(result.path.layers)
     assert view.function.currentText() == "cost"
     listed = [view.function.itemText(i) for i in range(view.function.count())]
     assert {"density", "harmonic_1"} <= set(listed)  # the product-manifold refinement's functions
@@ -268,6 +269,7 @@ def test_drag_and_drop_and_recent_files(qtbot, window):
     mime.setUrls([QUrl.fromLocalFile(str(TOSCA / "wolf0.off")), QUrl.fromLocalFile(str(TOSCA / "wolf1.off"))])
     event = QDropEvent(QPoint(10, 10), Qt.CopyAction, mime, Qt.LeftButton, Qt.NoModifier)
     window.dropEvent(event)
+    wait_loaded(qtbot, window)
     assert window.source.name == "wolf0.off" and window.target.name == "wolf1.off"
     recent = window.settings.value("recent")
     assert recent[:2] == [str(TOSCA / "wolf1.off"), str(TOSCA / "wolf0.off")]
@@ -304,11 +306,12 @@ def test_about_and_remembered_layout(qtbot, tmp_path, monkeypatch):
     second.close()
 
 
+@pytest.mark.slow
 def test_divergence_free_sequence_uses_the_flow(qtbot, window, tmp_path):
     from corrlib.io import load_mesh
     from corrlib.morph import load_glb_frames
 
-    window.load_demo()
+    load_demo(qtbot, window)
     set_params(window, "divergence-free", n_samples=400, n_fields=150, max_iter=5)
     result = run_and_wait(qtbot, window, "divergence-free")
     view = window.sequence_view

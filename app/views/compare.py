@@ -19,9 +19,13 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from app.views.scene import coordinate_colors, polydata, make_plotter
+from app.views.scene import coordinate_colors, make_plotter, polydata, transfer_colors
 
-COLUMNS = ("method", "runtime [s]", "energy", "mean error", "within 0.05", "AUC")
+COLUMNS = ("method", "runtime [s]", "energy", "mean error", "within 0.05", "AUC", "unmatched")
+METHOD_LIST_WIDTH = 220
+TABLE_CURVES_SPLIT = [520, 380]  # initial widths of the table and the error-curve plot
+VIEWS_BOTTOM_SPLIT = [500, 250]  # initial heights of the views and the table/plot row
+LABEL_FONT_SIZE = 8
 
 
 class CompareView(QWidget):
@@ -30,7 +34,7 @@ class CompareView(QWidget):
     def __init__(self, parent=None):
         super().__init__(parent)
         self.methods = QListWidget()
-        self.methods.setMaximumWidth(220)
+        self.methods.setMaximumWidth(METHOD_LIST_WIDTH)
         self.run_button = QPushButton("Run selected")
         self.table = QTableWidget(0, len(COLUMNS))
         self.table.setHorizontalHeaderLabels(COLUMNS)
@@ -49,11 +53,11 @@ class CompareView(QWidget):
         bottom = QSplitter(Qt.Horizontal)
         bottom.addWidget(self.table)
         bottom.addWidget(self.canvas)
-        bottom.setSizes([520, 380])
+        bottom.setSizes(TABLE_CURVES_SPLIT)
         right = QSplitter(Qt.Vertical)
         right.addWidget(views_w)
         right.addWidget(bottom)
-        right.setSizes([500, 250])
+        right.setSizes(VIEWS_BOTTOM_SPLIT)
         layout = QHBoxLayout(self)
         layout.addWidget(left_w)
         layout.addWidget(right, 1)
@@ -87,17 +91,22 @@ class CompareView(QWidget):
             self.plotter = make_plotter(self, shape=(1, n_methods + 1))
             self.views_box.addWidget(self.plotter.interactor)
 
-    def add_result(self, source, target, result, report=None) -> None:
-        """Add one method's result (``report``: an ErrorReport when ground truth is known)."""
+    def add_result(self, source, target, result, report=None, n_unmatched: int = 0) -> None:
+        """Add one method's result.
+
+        ``report``: an ErrorReport of the matched ground-truth rows when ground
+        truth is known; ``n_unmatched``: source vertices the map leaves unmatched
+        (-1; left out of the error columns).
+        """
         summary = report.summary() if report is not None else {}
         row = {"method": result.method, "runtime": result.timings.get("total", np.nan), "energy": result.energy,
                "mean": summary.get("mean", np.nan), "within": summary.get("within_0.05", np.nan),
-               "auc": summary.get("auc", np.nan), "result": result, "report": report}
+               "auc": summary.get("auc", np.nan), "unmatched": n_unmatched, "result": result, "report": report}
         self.rows.append(row)
         r = self.table.rowCount()
         self.table.insertRow(r)
         values = (row["method"], row["runtime"], row["energy"], row["mean"], row["within"], row["auc"])
-        for c, v in enumerate(values):
+        for c, v in enumerate(values + (str(n_unmatched),)):
             text = v if isinstance(v, str) else ("—" if v is None or not np.isfinite(v) else f"{v:.4g}")
             self.table.setItem(r, c, QTableWidgetItem(text))
         self._draw_views(source, target)
@@ -110,7 +119,7 @@ class CompareView(QWidget):
         if len(self.rows) == 1:
             self.plotter.subplot(0, 0)
             self.plotter.add_mesh(polydata(source.vertices, source.faces), scalars=colors, rgb=True)
-            self.plotter.add_text("source", font_size=8)
+            self.plotter.add_text("source", font_size=LABEL_FONT_SIZE)
         i = len(self.rows)
         if i >= self.plotter.shape[1]:
             return
@@ -118,11 +127,11 @@ class CompareView(QWidget):
         self.plotter.subplot(0, i)
         map_yx = row["result"].map_yx
         if map_yx is None:
-            self.plotter.add_text(f"{row['method']}: no target map", font_size=8)
+            self.plotter.add_text(f"{row['method']}: no target map", font_size=LABEL_FONT_SIZE)
         else:
-            tgt_colors = np.where((map_yx >= 0)[:, None], colors[np.clip(map_yx, 0, None)], 0.7)
+            tgt_colors = transfer_colors(colors, map_yx)
             self.plotter.add_mesh(polydata(target.vertices, target.faces), scalars=tgt_colors, rgb=True)
-            self.plotter.add_text(row["method"], font_size=8)
+            self.plotter.add_text(row["method"], font_size=LABEL_FONT_SIZE)
         self.plotter.link_views()
         self.plotter.reset_camera()
         self.plotter.render()

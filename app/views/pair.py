@@ -6,15 +6,33 @@ import numpy as np
 import pyvista as pv
 from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QVBoxLayout, QWidget
 
-from app.views.scene import coordinate_colors, polydata, make_plotter
+from app.views.scene import (
+    LABEL_FONT_SIZE,
+    PLAIN_COLOR,
+    UNMATCHED_GREY,
+    coordinate_colors,
+    make_plotter,
+    polydata,
+    transfer_colors,
+)
 from corrlib.geometry.uv import checkerboard, cylindrical_uv
 
 MODES = ("coordinates", "function", "texture", "lines", "error")
-N_LINES = 12
+N_LINES = 12  # correspondence lines drawn before the user picks more
+ERROR_COLOR_MAX = 0.15  # top of the error colour scale (geodesic error / sqrt(area))
+ERROR_WITHIN = 0.05  # the info line gives the share of errors up to this
+LINES_GAP = 0.9  # lines mode: the target sits this many bounding-box diagonals right of the source
+LINE_WIDTH = 2
+POINT_SIZE = 12
 
 
 class PairView(QWidget):
-    """Colour transfer (``colors_Y = colors_X[map_yx]``), texture transfer and error heat map."""
+    """Colour transfer (``colors_Y = colors_X[map_yx]``), texture transfer and error heat map.
+
+    Nothing here computes more than colours: the errors and the source function
+    arrive with the result (computed in the method's job, :func:`app.jobs.method_job`).
+    Unmatched vertices (-1 in a map) are drawn grey and have no error.
+    """
 
     def __init__(self, parent=None):
         super().__init__(parent)
@@ -37,7 +55,9 @@ class PairView(QWidget):
         layout.addWidget(self.plotter.interactor, 1)
         self.source = self.target = None
         self.result = None
-        self.errors = None  # (n_x,) per-vertex errors of the source, NaN where unknown
+        self.errors = None  # (n_x,) per-vertex errors of the source, NaN where unknown or unmatched
+        self.function = None  # (n_x,) source function of the "function" mode (from the method's job)
+        self.n_unmatched = 0  # source vertices the map leaves unmatched
         self.target_colors: np.ndarray | None = None
         self.texture_image = checkerboard()
         self.picked: list[int] = []  # source vertices with correspondence lines
@@ -45,17 +65,32 @@ class PairView(QWidget):
 
     def set_shapes(self, source, target) -> None:
         self.source, self.target, self.result, self.errors = source, target, None, None
+        self.function, self.n_unmatched = None, 0
         self.picked = []
         self.info.setText("Run a method to see the correspondence.")
         self.redraw()
 
-    def set_result(self, result, errors: np.ndarray | None = None) -> None:
-        self.result = result
-        self.errors = errors
+    def set_result(self, result, errors: np.ndarray | None = None, *, function: np.ndarray | None = None,
+                   n_unmatched: int = 0) -> None:
+        """Show ``result``.
+
+        Parameters
+        ----------
+        errors : (n_x,) float, optional
+            Geodesic error per source vertex, NaN where unknown or unmatched.
+        function : (n_x,) float, optional
+            The source function the "function" mode transfers.
+        n_unmatched : int
+            Source vertices the map leaves unmatched (reported, drawn grey).
+        """
+        self.result, self.errors, self.function, self.n_unmatched = result, errors, function, n_unmatched
         text = f"{result.method}: {result.timings.get('total', 0):.2f} s"
         if errors is not None:
             known = errors[np.isfinite(errors)]
-            text += f", mean geodesic error {known.mean():.4f}, {100 * np.mean(known <= 0.05):.1f} % within 0.05"
+            text += (f", mean geodesic error {known.mean():.4f}, {100 * np.mean(known <= ERROR_WITHIN):.1f} % "
+                     f"within {ERROR_WITHIN}" if known.size else ", no ground-truth vertex is matched")
+        if n_unmatched:
+            text += f"; {n_unmatched} source vertices unmatched (grey, left out of the error)"
         self.info.setText(text)
         self.redraw()
 
@@ -69,53 +104,83 @@ class PairView(QWidget):
         mode = self.mode.currentText()
         src = polydata(self.source.vertices, self.source.faces)
         tgt = polydata(self.target.vertices, self.target.faces)
-        map_yx = None if self.result is None else self.result.map_yx
         if mode == "lines":
             self._draw_lines(src, tgt)
             return
         p.subplot(0, 0)
-        p.add_text(f"source: {self.source.name}", font_size=9)
+        p.add_text(f"source: {self.source.name}", font_size=LABEL_FONT_SIZE)
         if mode == "texture":
-            tex = pv.numpy_to_texture(self.texture_image)
-            uv = cylindrical_uv(self.source.vertices)
-            src.active_texture_coordinates = uv
-            p.add_mesh(src, texture=tex)
-            p.subplot(0, 1)
-            if map_yx is not None:
-                tgt.active_texture_coordinates = uv[np.clip(map_yx, 0, None)]
-                p.add_mesh(tgt, texture=tex)
-            else:
-                p.add_mesh(tgt, color="lightgrey")
+            self._draw_texture(src)
         elif mode == "error" and self.errors is not None:
-            src["error"] = self.errors
-            p.add_mesh(src, scalars="error", cmap="inferno", clim=(0, 0.15), nan_color="lightgrey",
-                       scalar_bar_args={"title": "geodesic error / sqrt(area)"})
-            p.subplot(0, 1)
-            p.add_mesh(tgt, color="lightgrey")
+            self._draw_errors(src, tgt)
         else:
-            colors = coordinate_colors(self.source.vertices) if mode != "function" else self._function_colors()
-            p.add_mesh(src, scalars=colors, rgb=True)
-            p.subplot(0, 1)
-            if map_yx is not None:
-                self.target_colors = np.where((map_yx >= 0)[:, None], colors[np.clip(map_yx, 0, None)], 0.7)
-                p.add_mesh(tgt, scalars=self.target_colors, rgb=True)
-            else:
-                p.add_mesh(tgt, color="lightgrey")
-            if mode == "error":
-                self.info.setText("No ground truth loaded: File > Load ground truth (.vts) to see errors.")
-        p.add_text(f"target: {self.target.name}", font_size=9)
+            self._draw_colors(src, tgt, mode)
+        p.add_text(f"target: {self.target.name}", font_size=LABEL_FONT_SIZE)
         p.link_views()
         p.reset_camera()
         p.render()
 
-    def _function_colors(self) -> np.ndarray:
-        """Colours of the source's second eigenfunction (a smooth function to transfer)."""
+    def _map_yx(self) -> np.ndarray | None:
+        return None if self.result is None else self.result.map_yx
+
+    def _draw_texture(self, src) -> None:
+        """Texture on the source's cylindrical UV map; the target's matched faces carry it, the others are grey."""
+        p = self.plotter
+        tex = pv.numpy_to_texture(self.texture_image)
+        uv = cylindrical_uv(self.source.vertices)
+        src.active_texture_coordinates = uv
+        p.add_mesh(src, texture=tex)
+        p.subplot(0, 1)
+        map_yx = self._map_yx()
+        if map_yx is None:
+            p.add_mesh(polydata(self.target.vertices, self.target.faces), color=PLAIN_COLOR)
+            return
+        matched = map_yx >= 0
+        uv_y = np.zeros((self.target.n_vertices, 2))
+        uv_y[matched] = uv[map_yx[matched]]
+        textured = matched[self.target.faces].all(axis=1)  # faces with a partner at every corner
+        if textured.any():
+            mesh = polydata(self.target.vertices, self.target.faces[textured])
+            mesh.active_texture_coordinates = uv_y
+            p.add_mesh(mesh, texture=tex)
+        if not textured.all():
+            p.add_mesh(polydata(self.target.vertices, self.target.faces[~textured]), color=[UNMATCHED_GREY] * 3)
+
+    def _draw_errors(self, src, tgt) -> None:
+        p = self.plotter
+        src["error"] = self.errors
+        p.add_mesh(src, scalars="error", cmap="inferno", clim=(0, ERROR_COLOR_MAX), nan_color=PLAIN_COLOR,
+                   scalar_bar_args={"title": "geodesic error / sqrt(area)"})
+        p.subplot(0, 1)
+        p.add_mesh(tgt, color=PLAIN_COLOR)
+
+    def _draw_colors(self, src, tgt, mode: str) -> None:
+        """Coordinates or function colours on the source, transferred through the map (unmatched: grey)."""
+        p = self.plotter
+        colors = coordinate_colors(self.source.vertices) if mode != "function" else self._function_colors()
+        if colors is None:
+            p.add_mesh(src, color=PLAIN_COLOR)
+            self.info.setText("The function (the source's second eigenfunction) comes with a result: run a method.")
+        else:
+            p.add_mesh(src, scalars=colors, rgb=True)
+        p.subplot(0, 1)
+        map_yx = self._map_yx()
+        if map_yx is not None and colors is not None:
+            self.target_colors = transfer_colors(colors, map_yx)
+            p.add_mesh(tgt, scalars=self.target_colors, rgb=True)
+        else:
+            p.add_mesh(tgt, color=PLAIN_COLOR)
+        if mode == "error":
+            self.info.setText("No ground truth loaded: File > Load ground truth (.vts) to see errors.")
+
+    def _function_colors(self) -> np.ndarray | None:
+        """Colours of the source function computed with the result (None before a result)."""
         from matplotlib import cm
 
-        from corrlib.geometry.spectrum import mesh_spectrum
-
-        fiedler = mesh_spectrum(self.source, 3).evecs[:, 1]
-        scaled = (fiedler - fiedler.min()) / max(np.ptp(fiedler), 1e-300)
+        if self.function is None:
+            return None
+        f = self.function
+        scaled = (f - f.min()) / max(np.ptp(f), 1e-300)
         return cm.viridis(scaled)[:, :3]
 
     def _draw_lines(self, src, tgt) -> None:
@@ -132,22 +197,25 @@ class PairView(QWidget):
         right = np.cross(np.asarray(cam.focal_point) - np.asarray(cam.position), np.asarray(cam.up))
         right /= max(np.linalg.norm(right), 1e-300)
         width = max(self.source.bbox_diagonal, self.target.bbox_diagonal)
-        shift = 0.9 * width * right + self.source.vertices.mean(axis=0) - self.target.vertices.mean(axis=0)
+        shift = LINES_GAP * width * right + self.source.vertices.mean(axis=0) - self.target.vertices.mean(axis=0)
         tgt.points = tgt.points + shift
-        p.add_mesh(tgt, color="lightgrey", pickable=False)
+        p.add_mesh(tgt, color=PLAIN_COLOR, pickable=False)
         map_xy = None if self.result is None else self.result.map_xy
+        self.lines = None
         if map_xy is not None:
             if not self.picked:
                 self.picked = list(farthest_point_sampling(self.source.vertices, min(N_LINES, self.source.n_vertices)))
-            starts = self.source.vertices[self.picked]
-            ends = self.target.vertices[np.clip(map_xy[self.picked], 0, None)] + shift
-            self.lines = pv.line_segments_from_points(np.column_stack([starts, ends]).reshape(-1, 3))
-            p.add_mesh(self.lines, color="black", line_width=2)
-            p.add_points(np.vstack([starts, ends]), scalars=np.vstack([colors[self.picked]] * 2), rgb=True,
-                         point_size=12, render_points_as_spheres=True)
-        p.add_text("click the source to add a correspondence line", font_size=9)
+            shown = [v for v in self.picked if map_xy[v] >= 0]  # an unmatched vertex has no partner to draw
+            if shown:
+                starts = self.source.vertices[shown]
+                ends = self.target.vertices[map_xy[shown]] + shift
+                self.lines = pv.line_segments_from_points(np.column_stack([starts, ends]).reshape(-1, 3))
+                p.add_mesh(self.lines, color="black", line_width=LINE_WIDTH)
+                p.add_points(np.vstack([starts, ends]), scalars=np.vstack([colors[shown]] * 2), rgb=True,
+                             point_size=POINT_SIZE, render_points_as_spheres=True)
+        p.add_text("click the source to add a correspondence line", font_size=LABEL_FONT_SIZE)
         p.subplot(0, 1)
-        p.add_text("(lines mode: both shapes on the left)", font_size=9)
+        p.add_text("(lines mode: both shapes on the left)", font_size=LABEL_FONT_SIZE)
         p.subplot(0, 0)
         if not getattr(self, "_picking", False):
             p.enable_point_picking(callback=self._on_pick, show_message=False, use_picker=True,

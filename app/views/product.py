@@ -5,7 +5,10 @@ from __future__ import annotations
 import numpy as np
 from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QVBoxLayout, QWidget
 
-from app.views.scene import LazyPlotter, hue_colors, polydata, polyline
+from app.views.scene import LABEL_FONT_SIZE, PLAIN_COLOR, LazyPlotter, hue_colors, polydata, polyline
+
+CURVE_WIDTH = 4  # line width of the query contour
+CURVE_TUBE_RADIUS = 0.004  # radius of the matched curve's tube, relative to the mesh's bounding-box diagonal
 
 
 class ProductView(QWidget):
@@ -45,17 +48,17 @@ class ProductView(QWidget):
         p.subplot(0, 0)
         line = polyline(contour_points)
         line["position"] = np.arange(m) / m
-        p.add_mesh(line, scalars=hue_colors(np.arange(m) / m), rgb=True, line_width=4)
-        p.add_text("query contour", font_size=9)
+        p.add_mesh(line, scalars=hue_colors(np.arange(m) / m), rgb=True, line_width=CURVE_WIDTH)
+        p.add_text("query contour", font_size=LABEL_FONT_SIZE)
         p.view_xy()
         p.reset_camera()
         p.subplot(0, 1)
-        p.add_mesh(polydata(mesh.vertices, mesh.faces), color="lightgrey", smooth_shading=True)
+        p.add_mesh(polydata(mesh.vertices, mesh.faces), color=PLAIN_COLOR, smooth_shading=True)
         self.curve = polyline(mesh.vertices[path_vertices], closed=False)
         self.curve["colors"] = hue_colors(path_contour_index / m)  # carried onto the tube's points
-        tube = self.curve.tube(radius=0.004 * mesh.bbox_diagonal)
+        tube = self.curve.tube(radius=CURVE_TUBE_RADIUS * mesh.bbox_diagonal)
         p.add_mesh(tube, scalars="colors", rgb=True)
-        p.add_text(f"{mesh.name}: matched curve (energy {energy:.4g})", font_size=9)
+        p.add_text(f"{mesh.name}: matched curve (energy {energy:.4g})", font_size=LABEL_FONT_SIZE)
         p.reset_camera()
         p.subplot(0, 0)
         p.reset_camera()
@@ -64,8 +67,7 @@ class ProductView(QWidget):
 
     def show_contour_pair(self, result) -> None:
         """Two contours: the product torus (3D) and the flat square, with the correspondence curve."""
-        ex = result.extras
-        names = [n for n in str(ex.get("product_functions", "")).split(",") if n and n in ex]
+        names = list(result.path.product_functions)
         self._pair = result
         self.function.blockSignals(True)
         self.function.clear()
@@ -79,14 +81,14 @@ class ProductView(QWidget):
         result = self._pair
         if result is None:
             return
-        ex = result.extras
-        u = arclength_angles(ex["source_points"])
-        v = arclength_angles(ex["target_points"])
+        path = result.path
+        u = arclength_angles(path.contour_points)
+        v = arclength_angles(path.target_points)
         name = self.function.currentText()
-        values = np.asarray(ex[name], dtype=np.float64).ravel() if name else None
+        values = np.asarray(path.product_functions[name], dtype=np.float64).ravel() if name else None
         p = self.plotter
         p.clear_actors()
-        curve_uv = path_angles(ex["path_layers"], ex["path_vertices"], u, v)
+        curve_uv = path_angles(path.layers, path.vertices, u, v)
         for col, flat in ((0, False), (1, True)):
             p.subplot(0, col)
             verts, faces, index = torus_grid(u, v, flat=flat)

@@ -19,22 +19,28 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+THUMBNAIL_PX = 160  # gallery thumbnails are square, this many pixels wide
+THUMBNAIL_DPI = 80
+GALLERY_SPACING_PX = 8
+THUMBNAIL_GREY = 0.8  # colour of the mesh in a thumbnail (the matched curve is crimson)
+CURVE_LIFT = 0.01  # the matched curve is drawn this fraction of the mesh extent towards the viewer
 
-def thumbnail_png(mesh, path_vertices: np.ndarray | None, size: int = 160) -> bytes:
+
+def thumbnail_png(mesh, path_vertices: np.ndarray | None, size: int = THUMBNAIL_PX) -> bytes:
     """PNG bytes of a mesh with its matched curve (matplotlib figure, safe in a worker thread)."""
     from matplotlib.backends.backend_agg import FigureCanvasAgg
     from matplotlib.figure import Figure
 
-    from corrlib.plotting import _view_axes, draw_mesh
+    from corrlib.plotting import draw_mesh, view_axes
 
-    fig = Figure(figsize=(size / 80, size / 80), dpi=80)
+    fig = Figure(figsize=(size / THUMBNAIL_DPI, size / THUMBNAIL_DPI), dpi=THUMBNAIL_DPI)
     FigureCanvasAgg(fig)
     ax = fig.add_subplot(1, 1, 1, projection="3d")
-    draw_mesh(ax, mesh.vertices, mesh.faces, np.full((mesh.n_vertices, 3), 0.8))
+    draw_mesh(ax, mesh.vertices, mesh.faces, np.full((mesh.n_vertices, 3), THUMBNAIL_GREY))
     if path_vertices is not None:
-        axes = _view_axes(mesh.vertices)
+        axes = view_axes(mesh.vertices)
         pts = (mesh.vertices[path_vertices] - mesh.vertices.mean(axis=0)) @ axes.T
-        ax.plot(pts[:, 0], pts[:, 1] - 0.01 * np.ptp(pts), pts[:, 2], color="crimson", lw=2)
+        ax.plot(pts[:, 0], pts[:, 1] - CURVE_LIFT * np.ptp(pts), pts[:, 2], color="crimson", lw=2)
     fig.subplots_adjust(0, 0, 1, 1)
     buf = io.BytesIO()
     fig.savefig(buf, format="png")
@@ -79,9 +85,9 @@ class RetrievalView(QWidget):
         self.run_button.clicked.connect(self.run_requested)
         self.gallery = QListWidget()
         self.gallery.setViewMode(QListWidget.IconMode)
-        self.gallery.setIconSize(QSize(160, 160))
+        self.gallery.setIconSize(QSize(THUMBNAIL_PX, THUMBNAIL_PX))
         self.gallery.setResizeMode(QListWidget.Adjust)
-        self.gallery.setSpacing(8)
+        self.gallery.setSpacing(GALLERY_SPACING_PX)
         self.gallery.itemDoubleClicked.connect(self._open)
         top = QHBoxLayout()
         top.addWidget(self.query_label, 1)

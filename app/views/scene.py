@@ -7,6 +7,21 @@ import pyvista as pv
 
 from corrlib.plotting import coordinate_colors  # noqa: F401  (re-exported for the views)
 
+#: RGB grey of target vertices the map leaves unmatched (-1): neutral, never a transferred colour
+UNMATCHED_GREY = 0.7
+#: colour of a shape drawn without any data
+PLAIN_COLOR = "lightgrey"
+LABEL_FONT_SIZE = 9
+
+
+def transfer_colors(colors: np.ndarray, map_yx: np.ndarray) -> np.ndarray:
+    """(n_y, 3) ``colors[map_yx]``, :data:`UNMATCHED_GREY` where ``map_yx`` is -1 (unmatched)."""
+    map_yx = np.asarray(map_yx)
+    matched = map_yx >= 0
+    out = np.full((map_yx.shape[0], colors.shape[1]), UNMATCHED_GREY, dtype=np.float64)
+    out[matched] = colors[map_yx[matched]]
+    return out
+
 
 def polydata(vertices: np.ndarray, faces: np.ndarray) -> pv.PolyData:
     """A pyvista mesh with the given vertex order."""

@@ -17,9 +17,16 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from app.views.scene import LazyPlotter, coordinate_colors, polydata
+from app.views.scene import LABEL_FONT_SIZE, LazyPlotter, coordinate_colors, polydata
+from corrlib.methods.divergence_free import SEQUENCE_T_MAX
 
-STEPS = 1000
+STEPS = 1000  # slider positions from t = 0 to t max
+DEFAULT_T_MAX = 1.5
+T_MAX_STEP = 0.1
+SPEED_RANGE = (0.05, 5.0)  # playback speed, t per second
+DEFAULT_SPEED = 0.5
+FRAME_INTERVAL_MS = 30  # playback timer period
+PICTURE_STRIP_FRAMES = 6
 
 
 class SequenceView(QWidget):
@@ -31,13 +38,14 @@ class SequenceView(QWidget):
         self.slider.setRange(0, STEPS)
         self.slider.valueChanged.connect(self._on_slider)
         self.t_max = QDoubleSpinBox()
-        self.t_max.setRange(1.0, 3.0)
-        self.t_max.setSingleStep(0.1)
-        self.t_max.setValue(1.5)
+        # up to the t a divergence-free result stores its flow to (app.jobs.sequence_of integrates that far)
+        self.t_max.setRange(1.0, SEQUENCE_T_MAX)
+        self.t_max.setSingleStep(T_MAX_STEP)
+        self.t_max.setValue(DEFAULT_T_MAX)
         self.t_max.setToolTip("Largest t of the slider; t > 1 extrapolates beyond the target.")
         self.speed = QDoubleSpinBox()
-        self.speed.setRange(0.05, 5.0)
-        self.speed.setValue(0.5)
+        self.speed.setRange(*SPEED_RANGE)
+        self.speed.setValue(DEFAULT_SPEED)
         self.speed.setSuffix(" /s")
         self.loop = QCheckBox("loop")
         self.loop.setChecked(True)
@@ -46,7 +54,7 @@ class SequenceView(QWidget):
         self.label = QLabel("t = 0.00")
         self.kind = QLabel("")
         self.timer = QTimer(self)
-        self.timer.setInterval(30)
+        self.timer.setInterval(FRAME_INTERVAL_MS)
         self.timer.timeout.connect(self._tick)
         row = QHBoxLayout()
         for w in (self.play_button, QLabel("t max"), self.t_max, QLabel("speed"), self.speed, self.loop,
@@ -76,7 +84,7 @@ class SequenceView(QWidget):
         self.plotter.clear_actors()
         self.mesh = polydata(source.vertices, source.faces)
         self.plotter.add_mesh(self.mesh, scalars=coordinate_colors(source.vertices), rgb=True)
-        self.plotter.add_text(source.name, font_size=9)
+        self.plotter.add_text(source.name, font_size=LABEL_FONT_SIZE)
         self.plotter.reset_camera()
         self.slider.setValue(0)
         self._on_slider(0)
@@ -117,7 +125,7 @@ class SequenceView(QWidget):
         for t in np.linspace(0.0, t_max, count):
             yield float(t), self.positions(float(t))
 
-    def picture_strip(self, count: int = 6) -> np.ndarray:
+    def picture_strip(self, count: int = PICTURE_STRIP_FRAMES) -> np.ndarray:
         """(h, count * w, 3) uint8: screenshots of the view at evenly spaced t, side by side."""
         current = self.slider.value()
         images = []

@@ -12,9 +12,7 @@ orientation-reversing ones (it is the pointwise version of the
 orientation-preserving operator of Ren et al., "Continuous and
 orientation-preserving correspondences via functional maps", SIGGRAPH Asia
 2018). Evaluated for pairs of HKS scales it gives descriptors that are equal
-at corresponding points and opposite at mirrored points. Measured on the
-TOSCA cats: the direct ground-truth partner is nearer than the mirrored one
-at 85 % of the points (SHOT: 41 % nearer, 32 % farther).
+at corresponding points and opposite at mirrored points.
 
 The normals must point outward on both shapes: on a closed mesh the sign is
 taken from the enclosed volume, so an inward-oriented file gives the same

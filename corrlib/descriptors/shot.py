@@ -448,6 +448,42 @@ def local_reference_frame(points, center, radius):
     return frame
 
 
+def _unit_normals(v: np.ndarray, f: np.ndarray | None, normals) -> np.ndarray:
+    """(n, 3) float: the given normals scaled to unit length (zero rows stay zero), or area-weighted ones."""
+    if normals is None:
+        if f is None:
+            raise InputError(
+                "normals and faces are both None: pass normals, or faces to "
+                "compute area-weighted vertex normals"
+            )
+        return vertex_normals(v, f)
+    nrm = _as_points(normals, "normals", n=v.shape[0])
+    norm = np.linalg.norm(nrm, axis=1)
+    ok = norm > 0
+    nrm = nrm.copy()
+    nrm[ok] /= norm[ok, None]
+    return nrm
+
+
+def _support_radius(v: np.ndarray, f: np.ndarray | None, radius, radius_fraction) -> float:
+    """The SHOT support radius: ``radius`` if given, else ``radius_fraction · sqrt(area)``."""
+    if radius is not None:
+        return _positive_float(radius, "radius")
+    frac = _positive_float(radius_fraction, "radius_fraction")
+    if f is None:
+        raise InputError(
+            "radius is None and faces is None: the default radius "
+            "(radius_fraction * sqrt(area)) needs faces; pass radius explicitly"
+        )
+    area = float(triangle_areas(v, f).sum())
+    if not area > 0.0:
+        raise InputError(
+            "radius: the mesh has zero surface area, cannot derive the "
+            "default radius; pass radius explicitly"
+        )
+    return frac * math.sqrt(area)
+
+
 def shot(
     vertices,
     faces=None,
@@ -506,37 +542,8 @@ def shot(
     n_bins = _int_at_least(n_bins, "n_bins", 1)
     min_neighbors = _int_at_least(min_neighbors, "min_neighbors", 1)
 
-    if normals is None:
-        if f is None:
-            raise InputError(
-                "normals and faces are both None: pass normals, or faces to "
-                "compute area-weighted vertex normals"
-            )
-        nrm = vertex_normals(v, f)
-    else:
-        nrm = _as_points(normals, "normals", n=n)
-        norm = np.linalg.norm(nrm, axis=1)
-        ok = norm > 0
-        nrm = nrm.copy()
-        nrm[ok] /= norm[ok, None]
-
-    if radius is None:
-        frac = _positive_float(radius_fraction, "radius_fraction")
-        if f is None:
-            raise InputError(
-                "radius is None and faces is None: the default radius "
-                "(radius_fraction * sqrt(area)) needs faces; pass radius explicitly"
-            )
-        area = float(triangle_areas(v, f).sum())
-        if not area > 0.0:
-            raise InputError(
-                "radius: the mesh has zero surface area, cannot derive the "
-                "default radius; pass radius explicitly"
-            )
-        r = frac * math.sqrt(area)
-    else:
-        r = _positive_float(radius, "radius")
-
+    nrm = _unit_normals(v, f, normals)
+    r = _support_radius(v, f, radius, radius_fraction)
     indptr, indices = _neighbour_csr(v, r)
     out = np.zeros((n, N_CELLS * n_bins))
     _shot_all(v, np.ascontiguousarray(nrm), indptr, indices, r, n_bins, min_neighbors, out)

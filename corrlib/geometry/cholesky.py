@@ -11,10 +11,8 @@ the factorisation is this module's own supernodal multifrontal Cholesky
 (symbolic analysis and the assembly in numba, the dense fronts in SciPy's
 LAPACK/BLAS: ``dpotrf``, ``dtrsm``, ``dsyrk``), stored as supernodes — dense
 panels of columns with a common row pattern — so that the solves multiply
-whole blocks in BLAS. On the 10 % band of two 1k-vertex meshes (103k rows,
-51M entries of ``L``): factorisation 5 s instead of 16 s through CHOLMOD
-(whose bundled BLAS is single-threaded and generic), 14 ms per right-hand
-side in blocks of 16 instead of 81 ms for CHOLMOD's one-at-a-time solves.
+whole blocks in BLAS, which CHOLMOD's one-at-a-time solves (and its
+bundled single-threaded BLAS) cannot (measured: ``docs/decisions.md``).
 
 Single right-hand sides (``blocks=False``, ARPACK) use CHOLMOD's supernodal
 factorisation and solve (through ``cvxopt``).

@@ -155,15 +155,6 @@ class GeodesicSolver:
             raise ParameterError(f"unknown geodesic method {method!r} (use 'heat' or 'graph')")
         return out[0] if single else out
 
-    def distance_to_set(self, sources, method: str = "heat") -> np.ndarray:
-        """(n,) float: distance of every vertex to the nearest of ``sources``."""
-        idx = _check_sources(sources, self.mesh.n_vertices, self.mesh.name)
-        if method == "heat":
-            return np.maximum(self.heat.compute_distance_multisource([int(s) for s in idx]), 0.0)
-        if method == "graph":
-            return dijkstra(self.mesh.adjacency, directed=False, indices=idx, min_only=True)
-        raise ParameterError(f"unknown geodesic method {method!r} (use 'heat' or 'graph')")
-
     def pair_distances(self, a, b, method: str = "exact") -> np.ndarray:
         """Distances between vertex pairs ``(a[i], b[i])``.
 

@@ -106,6 +106,55 @@ def _orthonormal_block(w: np.ndarray, basis: np.ndarray, mass, scale: float, rng
     return q, r
 
 
+#: a re-orthogonalisation pass that keeps less than this share of a vector's norm is repeated (DGKS)
+DGKS_KEEP = 0.7
+
+
+def _reorthogonalise(w: np.ndarray, span: np.ndarray, h_column: np.ndarray, mass) -> bool:
+    """Full re-orthogonalisation of the block ``w`` (n, b) against the basis ``span`` (n, d), in place.
+
+    ``w ← w - Q (Qᵀ M w)``, repeated once if the first pass removed more than
+    a share ``1 - DGKS_KEEP`` of a column (Daniel–Gragg–Kaufman–Stewart). The
+    removed coefficients are added to ``h_column`` (d, b), the block column
+    of ``H = Qᵀ M K Q``. Returns whether the loss of orthogonality exceeded
+    :data:`DRIFT_LIMIT` (then every later step re-orthogonalises).
+    """
+    drifted = False
+    for _ in range(2):
+        before = np.linalg.norm(w, axis=0)
+        correction = _matmul(span.T, _mass_product(mass, w))
+        w -= _matmul(span, correction)
+        h_column += correction
+        if float(np.abs(correction).max() / before.min()) > DRIFT_LIMIT:
+            drifted = True
+        if np.all(np.linalg.norm(w, axis=0) > DGKS_KEEP * before):
+            break
+    return drifted
+
+
+def _ritz_pairs(h: np.ndarray, w: np.ndarray, k: int, block: int, mass):
+    """The ``k`` largest Ritz pairs of the basis and the M-norms of their residuals.
+
+    ``H = Qᵀ M K Q`` (d, d) is symmetrised from its upper block triangle (the
+    coefficients ``R_{j-1}ᵀ``, ``C_j`` and what re-orthogonalisation removed);
+    with ``H s = θ s`` the residual of the Ritz vector ``Q s`` is
+    ``Q_{j+1} R_j s_j = w s_j``, ``s_j`` the last block rows of ``s``.
+
+    Returns
+    -------
+    theta : (k,) float, descending
+    s : (d, k) float
+    residual : (k,) float
+    """
+    dim = h.shape[0]
+    hh = np.triu(h)
+    hh = hh + np.triu(hh, 1).T
+    theta, s = np.linalg.eigh(hh)
+    theta, s = theta[::-1][:k], np.asfortranarray(s[:, ::-1][:, :k])
+    tail = _matmul(w, s[dim - block:dim])
+    return theta, s, np.sqrt(np.einsum("ij,ij->j", tail, _mass_product(mass, tail)))
+
+
 def block_lanczos(apply: Callable[[np.ndarray], np.ndarray], n: int, k: int, *, mass=None, block: int = 32,
                   tol: float = 1e-10, max_dim: int | None = None, seed: int = 0) -> tuple[np.ndarray, np.ndarray]:
     """The ``k`` largest eigenpairs of an operator self-adjoint in the ``mass`` inner product.
@@ -172,31 +221,14 @@ def block_lanczos(apply: Callable[[np.ndarray], np.ndarray], n: int, k: int, *, 
         c = _matmul(current.T, _mass_product(mass, w))
         w -= _matmul(current, c)
         h[new, new] = c
-        # full re-orthogonalisation against the whole basis (once more if it removed much: DGKS)
         if (dim // block) % period == 0:
-            span = basis[:dim + block].T
-            for _ in range(2):
-                before = np.linalg.norm(w, axis=0)
-                correction = _matmul(span.T, _mass_product(mass, w))
-                w -= _matmul(span, correction)
-                h[:dim + block, new] += correction
-                drift = float(np.abs(correction).max() / before.min())
-                if drift > DRIFT_LIMIT:
-                    period = 1
-                if np.all(np.linalg.norm(w, axis=0) > 0.7 * before):
-                    break
+            if _reorthogonalise(w, basis[:dim + block].T, h[:dim + block, new], mass):
+                period = 1
         dim += block
         done = dim + block > max_dim  # no room for another block
         if (dim >= k + block and dim >= 1.08 * checked) or done:
             checked = dim
-            # H = Qᵀ M K Q from the coefficients of each K Q_j on the basis (its upper block triangle:
-            # R_{j-1}ᵀ, C_j and what re-orthogonalisation removed), symmetrised
-            hh = np.triu(h[:dim, :dim])
-            hh = hh + np.triu(hh, 1).T
-            theta, s = np.linalg.eigh(hh)
-            theta, s = theta[::-1][:k], np.asfortranarray(s[:, ::-1][:, :k])
-            tail = _matmul(w, s[dim - block:dim])  # = Q_{j+1} R_j s_j, the residuals of the Ritz vectors
-            residual = np.sqrt(np.einsum("ij,ij->j", tail, _mass_product(mass, tail)))
+            theta, s, residual = _ritz_pairs(h[:dim, :dim], w, k, block, mass)
             if np.all(residual <= tol * np.abs(theta)):
                 return theta, _matmul(basis[:dim].T, s)
             if done:

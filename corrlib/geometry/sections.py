@@ -42,12 +42,6 @@ class SectionLoop:
     edges: np.ndarray
     weights: np.ndarray
 
-    @property
-    def nearest_vertices(self) -> np.ndarray:
-        """(p,) int: the mesh vertex of each point's edge nearer to it."""
-        return np.where(self.weights < 0.5, self.edges[:, 0], self.edges[:, 1])
-
-
 def plane_basis(normal) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Unit normal and two in-plane axes (u, v) forming a right-handed frame."""
     nrm = np.asarray(normal, dtype=np.float64)

@@ -3,7 +3,9 @@
 A method's parameters are a frozen, keyword-only dataclass whose fields are
 made with :func:`param`; the field metadata (label, bounds, choices, help)
 lets the CLI and the studio build their forms and validate values before a
-run. A method's result is a :class:`MatchResult`.
+run. A method's result is a :class:`MatchResult`, whose method-specific parts are
+typed: a :class:`ContourPath` and a :class:`SearchCertificate` for the contour
+methods, a deformation for the divergence-free flow.
 
 Map convention: ``map_xy[i]`` is the vertex of the target Y matched to
 vertex ``i`` of the source X; ``map_yx[j]`` the vertex of X matched to
@@ -20,7 +22,7 @@ from typing import Any
 
 import numpy as np
 
-from corrlib.errors import ParameterError
+from corrlib.errors import InputError, ParameterError
 
 
 def param(default, *, label: str, help: str, low: float | None = None, high: float | None = None,
@@ -121,6 +123,117 @@ def _convert(f: dataclasses.Field, value):
 
 
 @dataclass
+class InitialMatch:
+    """A starting point for a refining method (``MethodSpec.refines``): another method's output or landmarks.
+
+    Either a dense map (``map_xy``, -1 allowed) or sparse landmarks
+    (``landmarks_x``, ``landmarks_y``). Landmarks are kept as anchors in every
+    score, so they stay matched.
+    """
+
+    map_xy: np.ndarray | None = None
+    landmarks_x: np.ndarray | None = None
+    landmarks_y: np.ndarray | None = None
+
+    def pairs(self, n_x: int, n_y: int) -> tuple[np.ndarray, np.ndarray]:
+        """The matched ``(source, target)`` vertex pairs, checked against the vertex counts."""
+        if self.map_xy is not None:
+            mp = np.asarray(self.map_xy, dtype=np.int64)
+            if mp.shape != (n_x,):
+                raise InputError(f"the initial map has {mp.shape[0]} entries, the source {n_x} vertices")
+            if mp.max() >= n_y:
+                raise InputError(f"the initial map points to vertex {mp.max()} of a {n_y}-vertex target")
+            keep = np.flatnonzero(mp >= 0)
+            if keep.size == 0:
+                raise InputError("the initial map matches no vertex")
+            return keep, mp[keep]
+        lx = np.asarray(self.landmarks_x, dtype=np.int64)
+        ly = np.asarray(self.landmarks_y, dtype=np.int64)
+        if lx.size == 0 or lx.shape != ly.shape:
+            raise InputError(f"landmarks need equally many source and target indices, got {lx.size} and {ly.size}")
+        if lx.min() < 0 or lx.max() >= n_x or ly.min() < 0 or ly.max() >= n_y:
+            raise InputError("landmark index out of range")
+        return lx, ly
+
+
+@dataclass(frozen=True)
+class ContourPath:
+    """A closed path on the product graph of a contour and a shape (thesis §7.3, Eq. 7.6).
+
+    Step ``s`` of the path pairs contour point ``contour_index[s]`` with
+    vertex ``vertices[s]`` of the target (a mesh vertex, or a point of the
+    target contour for 2D-to-2D matching).
+
+    Attributes
+    ----------
+    contour_points : (m, 2) float
+        The query contour as it was matched.
+    vertices : (k,) int
+        Target vertex (or target contour point) at every step.
+    contour_index : (k,) int
+        Contour point at every step (in ``0 .. m-1``).
+    layers : (k,) int
+        Product-graph layer at every step (the unrolled contour position).
+    target_points : (n, 2) float or None
+        The target contour, when the target is a contour.
+    product_functions : dict of str -> (m, n) float
+        Functions on the product of two contours (the torus) that the path
+        was found on or refined with, e.g. ``"cost"``; empty for a mesh target.
+    """
+
+    contour_points: np.ndarray
+    vertices: np.ndarray
+    contour_index: np.ndarray
+    layers: np.ndarray
+    target_points: np.ndarray | None = None
+    product_functions: dict[str, np.ndarray] = field(default_factory=dict)
+
+
+@dataclass(frozen=True)
+class SearchCertificate:
+    """What a branch-and-bound search proves about its path (thesis §7.4).
+
+    Attributes
+    ----------
+    lower_bound, upper_bound : float
+        Bounds on the optimal energy; the returned path attains ``upper_bound``.
+    iterations : int
+        Branch-and-bound iterations.
+    dijkstra_runs : int
+        Layered shortest-path computations.
+    seconds_per_dijkstra : float
+    """
+
+    lower_bound: float
+    upper_bound: float
+    iterations: int
+    dijkstra_runs: int = 0
+    seconds_per_dijkstra: float = 0.0
+
+    @classmethod
+    def of(cls, search) -> "SearchCertificate":
+        """The certificate of a :class:`~corrlib.geometry.cyclic_paths.BranchAndBoundResult`."""
+        return cls(float(search.lower_bound), float(search.upper_bound), int(search.iterations),
+                   int(search.dijkstra_runs), float(search.seconds_per_run))
+
+    @property
+    def optimal(self) -> bool:
+        """Whether the path is proven globally optimal (not only within the ε bound)."""
+        return bool(self.lower_bound >= self.upper_bound)
+
+    @property
+    def gap(self) -> float:
+        """``upper_bound - lower_bound`` (0 at a proven optimum)."""
+        return float(max(self.upper_bound - self.lower_bound, 0.0))
+
+
+#: array names under which :meth:`MatchResult.save` stores the typed fields
+_PATH_ARRAYS = {"contour_points": "contour_points", "vertices": "path_vertices",
+                "contour_index": "path_contour_index", "layers": "path_layers", "target_points": "target_points"}
+_DEFORMATION_ARRAYS = ("coefficients", "frames", "trajectory_times", "trajectory")
+
+
+@dataclass
 class MatchResult:
     """The outcome of a correspondence method.
 
@@ -133,14 +246,26 @@ class MatchResult:
     map_yx : (n_y,) int or None
         Source vertex for every target vertex (-1 where unmatched).
     energy : float or None
-        The method's objective at the solution (lower is better unless the
-        method says otherwise in ``extras["energy_sense"]``).
+        The method's objective at the solution.
     timings : dict of str -> float
         Seconds per stage.
     params : dict
         The parameters used.
+    energy_sense : {"min", "max"}
+        Whether the method minimises or maximises ``energy``.
+    energy_meaning : str
+        What ``energy`` measures, in the method's terms.
+    energy_trace : (i,) float or None
+        The objective after every iteration, for iterative methods.
+    path : ContourPath or None
+        The matched closed curve of a contour method.
+    search : SearchCertificate or None
+        Bounds of a branch-and-bound search.
+    deformation : corrlib.deformation.model.Deformation or None
+        The fitted flow of a deformation method.
     extras : dict
-        Method-specific arrays and values (contour path, deformation, energy trace...).
+        Method-specific diagnostics (iteration counts, traces, intermediate
+        arrays) for printing and inspection; no code path depends on them.
     """
 
     method: str
@@ -149,24 +274,78 @@ class MatchResult:
     energy: float | None = None
     timings: dict[str, float] = field(default_factory=dict)
     params: dict[str, Any] = field(default_factory=dict)
+    energy_sense: str = "min"
+    energy_meaning: str = ""
+    energy_trace: np.ndarray | None = None
+    path: ContourPath | None = None
+    search: SearchCertificate | None = None
+    deformation: Any = None
     extras: dict[str, Any] = field(default_factory=dict)
 
     def save(self, stem) -> tuple[Path, Path]:
-        """Write ``stem.npz`` (maps and array extras) and ``stem.json`` (everything else)."""
+        """Write ``stem.npz`` (maps, typed arrays and array extras) and ``stem.json`` (everything else).
+
+        :meth:`load` reads both back into an equal result.
+        """
         from corrlib.io import save_result
 
-        arrays = {}
+        arrays: dict[str, np.ndarray] = {}
         meta: dict[str, Any] = {"method": self.method, "energy": self.energy, "timings": self.timings,
-                                "params": self.params}
-        if self.map_xy is not None:
-            arrays["map_xy"] = self.map_xy
-        if self.map_yx is not None:
-            arrays["map_yx"] = self.map_yx
+                                "params": self.params, "energy_sense": self.energy_sense,
+                                "energy_meaning": self.energy_meaning}
+        for name in ("map_xy", "map_yx", "energy_trace"):
+            if getattr(self, name) is not None:
+                arrays[name] = getattr(self, name)
+        if self.path is not None:
+            for attr, key in _PATH_ARRAYS.items():
+                if getattr(self.path, attr) is not None:
+                    arrays[key] = getattr(self.path, attr)
+            arrays.update({f"product.{name}": f for name, f in self.path.product_functions.items()})
+        if self.search is not None:
+            meta["search"] = dataclasses.asdict(self.search)
+        if self.deformation is not None:
+            arrays.update(_deformation_arrays(self.deformation))
+            meta["deformation_steps"] = self.deformation.n_steps
         scalars = {}
         for key, value in self.extras.items():
             if isinstance(value, np.ndarray) and value.dtype != object:
-                arrays[key] = value
+                arrays[f"extras.{key}"] = value
             else:
                 scalars[key] = value
         meta["extras"] = scalars
         return save_result(stem, arrays, meta)
+
+    @classmethod
+    def load(cls, stem) -> "MatchResult":
+        """Read a result written by :meth:`save` (``stem``, ``stem.npz`` or ``stem.json``)."""
+        from corrlib.io import load_result
+
+        arrays, meta = load_result(stem)
+        result = cls(str(meta.get("method", "")), arrays.get("map_xy"), arrays.get("map_yx"), meta.get("energy"),
+                     dict(meta.get("timings", {})), dict(meta.get("params", {})),
+                     str(meta.get("energy_sense", "min")), str(meta.get("energy_meaning", "")),
+                     arrays.get("energy_trace"))
+        if "path_vertices" in arrays:
+            functions = {k.split(".", 1)[1]: v for k, v in arrays.items() if k.startswith("product.")}
+            result.path = ContourPath(**{attr: arrays.get(key) for attr, key in _PATH_ARRAYS.items()},
+                                      product_functions=functions)
+        if meta.get("search"):
+            result.search = SearchCertificate(**meta["search"])
+        if "coefficients" in arrays and "frames" in arrays:
+            from corrlib.deformation.model import Deformation
+
+            result.deformation = Deformation.from_arrays(
+                arrays["coefficients"], arrays["frames"], int(meta.get("deformation_steps", 20)),
+                arrays.get("trajectory_times"), arrays.get("trajectory"))
+        result.extras = dict(meta.get("extras", {}))
+        result.extras.update({k.split(".", 1)[1]: v for k, v in arrays.items() if k.startswith("extras.")})
+        return result
+
+
+def _deformation_arrays(deformation) -> dict[str, np.ndarray]:
+    """The arrays that rebuild a :class:`~corrlib.deformation.model.Deformation` (with its stored steps)."""
+    out = {"coefficients": deformation.coeffs, "frames": deformation.frames.as_array()}
+    if deformation.source_steps is not None:
+        out["trajectory_times"] = deformation.source_steps.times
+        out["trajectory"] = deformation.source_steps.positions
+    return out

@@ -18,12 +18,12 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.spatial import cKDTree
 
 from corrlib.descriptors import DESCRIPTOR_KINDS, mesh_descriptors
 from corrlib.geometry.spectrum import mesh_spectrum
 from corrlib.methods.base import MatchResult, param
 from corrlib.methods.registry import MethodSpec, register
+from corrlib.neighbours import nearest_rows
 from corrlib.progress import Progress, Stopwatch
 
 
@@ -33,26 +33,6 @@ def _standardize(desc_x: np.ndarray, desc_y: np.ndarray) -> tuple[np.ndarray, np
     scale = both.std(axis=0)
     scale[scale == 0] = 1.0
     return desc_x / scale, desc_y / scale
-
-
-def nearest_rows(query: np.ndarray, data: np.ndarray, chunk: int = 2048) -> np.ndarray:
-    """(q,) int: index of the nearest row of ``data`` (L2) for every row of ``query``.
-
-    A k-d tree for up to 8 dimensions; above that (where trees degrade to
-    brute force anyway) chunked ``||d||² - 2 q·d`` products in float32, which
-    is exact up to float32 ties.
-    """
-    query = np.asarray(query, dtype=np.float64)
-    data = np.asarray(data, dtype=np.float64)
-    if data.shape[1] <= 8:
-        return cKDTree(data).query(query, k=1, workers=-1)[1].astype(np.int64)
-    data32 = data.astype(np.float32)
-    sq = np.einsum("ij,ij->i", data32, data32)
-    out = np.empty(query.shape[0], dtype=np.int64)
-    for start in range(0, query.shape[0], chunk):
-        q = query[start:start + chunk].astype(np.float32)
-        out[start:start + chunk] = np.argmin(sq[None, :] - 2.0 * (q @ data32.T), axis=1)
-    return out
 
 
 # ----------------------------------------------------------------------------- descriptor NN
@@ -92,7 +72,7 @@ def solve_descriptor_nn(source, target, params: DescriptorNNParams, token):
     energy = float(np.mean(np.linalg.norm(desc_x - desc_y[map_xy], axis=1)))
     yield Progress("done", 1.0)
     return MatchResult("descriptor-nn", map_xy, map_yx, energy, watch.times,
-                       extras={"energy_meaning": "mean descriptor distance"})
+                       energy_meaning="mean descriptor distance")
 
 
 register(MethodSpec(
@@ -223,8 +203,8 @@ def solve_fmap_zoomout(source, target, params: FmapZoomOutParams, token):
     energy = float(np.linalg.norm(c_yx.T @ c_yx - np.eye(k)) / k)
     yield Progress("done", 1.0)
     return MatchResult("fmap-zoomout", map_xy, map_yx, energy, watch.times,
-                       extras={"c_yx": c_yx, "energy_meaning": "orthogonality defect of C",
-                               "off_diagonal_norm": float(np.linalg.norm(off))})
+                       energy_meaning="orthogonality defect of C",
+                       extras={"c_yx": c_yx, "off_diagonal_norm": float(np.linalg.norm(off))})
 
 
 register(MethodSpec(

@@ -15,13 +15,11 @@ manifold (``refine``, :mod:`.product_manifold`): its matches diffused on
 the torus and extracted by assignment (optionally followed by localized
 Dirichlet harmonics on shrinking ``bands``); the density and the first
 localized harmonics of a band around the final map are stored as torus
-functions for the product view. On resampled silhouettes with a smooth
-synthetic warp the path is already at the sampling resolution (mean error
-0.4 % of the length at 250 points) and the refinement keeps it there.
+functions for the product view.
 
 Map convention: ``map_xy[i]`` = point of (resampled) B matched to point i of
 (resampled) A; ``map_yx[j]`` the point of A first matched to point j of B.
-``extras["cost"]`` is the (m, n) node cost on the torus.
+``result.path.product_functions["cost"]`` is the (m, n) node cost on the torus.
 """
 
 from __future__ import annotations
@@ -32,7 +30,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from corrlib.geometry.cyclic_paths import ProductGraph, branch_and_bound
-from corrlib.methods.base import MatchResult, param
+from corrlib.methods.base import ContourPath, MatchResult, SearchCertificate, param
 from corrlib.methods.contour3d import Contour3DParams, node_costs, prepare_query
 from corrlib.methods.registry import MethodSpec, register
 from corrlib.progress import Progress, Stopwatch
@@ -90,20 +88,27 @@ def solve_contour2d(source, target, params: Contour2DParams, token):
         if layer < graph.m:
             map_xy[layer] = vertex
         map_yx[vertex] = layer % graph.m
-    extras = {"path_vertices": vertices, "path_layers": path.layers, "cost": cost.astype(np.float32),
-              "source_points": qa.contour.points, "target_points": qb.contour.points,
-              "lower_bound": bb.lower_bound, "iterations": bb.iterations,
-              "product_functions": "cost", "energy_meaning": "path energy on the product torus (unit areas)"}
+    functions = {"cost": cost.astype(np.float32)}
+    extras = {}
     if params.refine:
         extras["path_map_xy"] = map_xy.copy()
         map_xy, map_yx = yield from _refine_on_torus(qa.contour.points, qb.contour.points, map_xy, params, token,
-                                                     watch, extras)
+                                                     watch, functions, extras)
+    path = ContourPath(qa.contour.points, vertices, path.layers % graph.m, path.layers,
+                       target_points=qb.contour.points, product_functions=functions)
     yield Progress("done", 1.0, f"energy {bb.energy:.6g}")
-    return MatchResult("contour2d", map_xy, map_yx, bb.energy, watch.times, extras=extras)
+    return MatchResult("contour2d", map_xy, map_yx, bb.energy, watch.times, path=path,
+                       search=SearchCertificate.of(bb), extras=extras,
+                       energy_meaning="path energy on the product torus (unit areas)")
 
 
-def _refine_on_torus(points_a, points_b, map_xy, params: Contour2DParams, token, watch, extras):
-    """Product-manifold refinement of the path's map; the torus functions go into ``extras``."""
+def _refine_on_torus(points_a, points_b, map_xy, params: Contour2DParams, token, watch, functions, extras):
+    """Product-manifold refinement of the path's map.
+
+    The density and the localized harmonics of a band around the refined
+    map are added to ``functions`` (for the product view), the band's share
+    of the torus to ``extras``.
+    """
     from corrlib.geometry import product as pm
     from corrlib.methods.product_manifold import ProductManifoldParams, refine
 
@@ -116,7 +121,6 @@ def _refine_on_torus(points_a, points_b, map_xy, params: Contour2DParams, token,
                                       t_local=2e-4)
     refined_xy, refined_yx, info = yield from refine(fx, fy, keep, map_xy[keep], points_b, pm_params, token, watch)
     shape = (fx.n, fy.n)
-    names = ["cost", "density"]
     if "band_pairs" in info:
         pairs, density_band = info["band_pairs"], info["band_density"]
         harmonics = info["band_harmonics"]
@@ -127,14 +131,12 @@ def _refine_on_torus(points_a, points_b, map_xy, params: Contour2DParams, token,
         with watch("harmonics"):  # for the view: the localized harmonics of a band around the final map
             pairs = pm.largest_piece(fx, fy, pm.band_around_map(refined_xy, points_b, params.view_band))
             harmonics = pm.localized_harmonics(fx, fy, pairs, min(6, len(pairs) - 1))[1]
-    extras["density"] = density
+    functions["density"] = density
     for col in range(harmonics.shape[1]):
         harmonic = np.zeros(shape, dtype=np.float32)
         harmonic[pairs[:, 0], pairs[:, 1]] = harmonics[:, col]
-        extras[f"harmonic_{col + 1}"] = harmonic
-        names.append(f"harmonic_{col + 1}")
+        functions[f"harmonic_{col + 1}"] = harmonic
     extras["band_size"] = float(len(pairs) / (fx.n * fy.n))
-    extras["product_functions"] = ",".join(names)
     return refined_xy, refined_yx
 
 

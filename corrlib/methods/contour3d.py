@@ -79,7 +79,7 @@ from corrlib.geometry.intrinsic_axis import IntrinsicAxis, axis_mismatch, intrin
 from corrlib.geometry.laplacian import mesh_laplacian
 from corrlib.geometry.spectrum import eigenpairs, mesh_spectrum
 from corrlib.geometry.triangulate import fill_contour
-from corrlib.methods.base import MatchResult, param
+from corrlib.methods.base import ContourPath, MatchResult, SearchCertificate, param
 from corrlib.methods.registry import MethodSpec, register
 from corrlib.progress import Progress, Stopwatch
 from corrlib.shapes import Contour2D, TriMesh
@@ -338,17 +338,13 @@ def match_prepared(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams,
                                                max_iterations=params.max_iterations)
     path = bb.path
     matched = path.matched_vertices(graphs[bb.graph_index].m)
-    extras = {
-        "path_vertices": path.vertices, "path_contour_index": path.curve_index, "path_layers": path.layers,
-        "contour_points": query.contour.points, "lower_bound": bb.lower_bound, "upper_bound": bb.upper_bound,
-        "iterations": bb.iterations, "dijkstra_runs": bb.dijkstra_runs, "seconds_per_dijkstra": bb.seconds_per_run,
-        "optimal": bool(bb.lower_bound >= bb.upper_bound), "axis_reversed": bool(directions[bb.graph_index]),
-        "energy_meaning": f"{params.energy} product-graph path energy (unit-area mesh, contour area "
-                          f"{params.area_ratio:g}, axis weight {params.axis_weight:g})",
-    }
+    extras = {"axis_reversed": bool(directions[bb.graph_index])}
     yield Progress("done", 1.0, f"energy {bb.energy:.6g} after {bb.iterations} iterations")
     return MatchResult("contour3d", map_xy=matched, map_yx=None, energy=bb.energy, timings=watch.times,
-                       extras=extras)
+                       path=ContourPath(query.contour.points, path.vertices, path.curve_index, path.layers),
+                       search=SearchCertificate.of(bb), extras=extras,
+                       energy_meaning=f"{params.energy} product-graph path energy (unit-area mesh, contour area "
+                                      f"{params.area_ratio:g}, axis weight {params.axis_weight:g})")
 
 
 def solve_contour3d(source: Contour2D, target: TriMesh, params: Contour3DParams, token):

@@ -26,9 +26,8 @@ correspondence and the coefficients are estimated jointly by EM:
   penalty ``ρ`` (threshold ``r₀``, §C.2.2, by iteratively reweighted least
   squares) and the prior variances ``λ_k`` of Eq. 10.18. The data term is
   averaged over the N samples (the paper sums it; β = 0.1 here is β = 0.1 N
-  there), so β does not depend on the sample count; β = 0.1 keeps the
-  enclosed volume of fitted TOSCA flows within 0.1 % at T = 20, a weaker
-  prior lets high frequencies grow until RK2 no longer follows the field.
+  there), so β does not depend on the sample count; a weaker prior lets
+  high frequencies grow until RK2 no longer follows the field.
 * Annealing (our addition, documented): the E-step variance starts at σ²
   and is multiplied by ``anneal`` after every iteration down to
   ``sigma2_min``; the feature term of the E-step distance is scaled by the
@@ -57,14 +56,15 @@ import scipy.linalg
 from scipy.spatial.distance import cdist
 
 from corrlib.deformation.basis import DivFreeBasis
-from corrlib.deformation.flow import check_points, flow_with_jacobian, trajectory
+from corrlib.deformation.flow import check_points, flow_with_jacobian
+from corrlib.deformation.model import Deformation, Frames, StoredSteps
 from corrlib.errors import InputError
 from corrlib.geometry.sampling import farthest_point_sampling
 from corrlib.methods.base import MatchResult, param
 from corrlib.methods.registry import MethodSpec, register
+from corrlib.neighbours import nearest_rows
 from corrlib.progress import Progress, Stopwatch
 from corrlib.shapes import signed_volume
-
 
 #: the result stores the flow of the source vertices at every RK2 step up to this time (scrubbing, export)
 SEQUENCE_T_MAX = 3.0
@@ -103,43 +103,6 @@ class DivergenceFreeParams:
     margin: float = param(0.15, label="Margin", low=0.0, high=0.45,
                           help="Free border of the unit cube around the shapes.")
     seed: int = param(0, label="Seed", low=0, high=2 ** 31 - 1, help="Start of the farthest-point sampling.")
-
-
-# ----------------------------------------------------------------------------- frames
-
-
-@dataclass(frozen=True)
-class Frames:
-    """The similarity transforms placing both shapes in the unit cube.
-
-    ``u = scale · (x @ rotation.T - centre_x) + 0.5`` for the source,
-    ``u = scale · (y - centre_y) + 0.5`` for the target.
-    """
-
-    rotation: np.ndarray  # (3, 3)
-    scale: float
-    centre_x: np.ndarray  # (3,)
-    centre_y: np.ndarray  # (3,)
-
-    def source_to_cube(self, points: np.ndarray) -> np.ndarray:
-        return self.scale * (np.asarray(points, dtype=np.float64) @ self.rotation.T - self.centre_x) + 0.5
-
-    def target_to_cube(self, points: np.ndarray) -> np.ndarray:
-        return self.scale * (np.asarray(points, dtype=np.float64) - self.centre_y) + 0.5
-
-    def cube_to_target(self, points: np.ndarray) -> np.ndarray:
-        return (np.asarray(points, dtype=np.float64) - 0.5) / self.scale + self.centre_y
-
-    def as_array(self) -> np.ndarray:
-        """(16,) float: rotation (row-major), scale, centre_x, centre_y (how results store it)."""
-        return np.concatenate([self.rotation.ravel(), [self.scale], self.centre_x, self.centre_y])
-
-    @classmethod
-    def from_array(cls, arr) -> "Frames":
-        a = np.asarray(arr, dtype=np.float64).ravel()
-        if a.shape != (16,):
-            raise InputError(f"a frame record has 16 numbers, got {a.size}")
-        return cls(a[:9].reshape(3, 3), float(a[9]), a[10:13], a[13:16])
 
 
 def _bbox_centre(p: np.ndarray) -> np.ndarray:
@@ -198,6 +161,12 @@ def feature_factor(coords_x, coords_y, feats_x, feats_y) -> float:
 # ----------------------------------------------------------------------------- EM
 
 
+#: E-step terms below e^SMALLEST_EXPONENT of their row's best are exact zeros (no slow subnormals)
+SMALLEST_EXPONENT = -60.0
+#: the outlier term's exponent is clipped below the float64 overflow of exp (e^709.8)
+LARGEST_EXPONENT = 700.0
+
+
 def e_step(dist: np.ndarray, sigma2: float, outlier: float) -> np.ndarray:
     """Soft correspondences of Eq. 10.14.
 
@@ -217,13 +186,12 @@ def e_step(dist: np.ndarray, sigma2: float, outlier: float) -> np.ndarray:
     n, m = dist.shape
     shift = dist.min(axis=1, keepdims=True)  # stabilise: multiply numerator and denominator by e^{shift/2σ²}
     z = (dist - shift) * (-0.5 / sigma2)
-    # terms below e^-60 (relative to the row's best) are dropped: exact zeros instead of slow subnormals
     p = np.zeros_like(z)
-    np.exp(z, out=p, where=z > -60.0)
+    np.exp(z, out=p, where=z > SMALLEST_EXPONENT)
     denom = p.sum(axis=1, keepdims=True)
     if outlier > 0:
         log_const = 1.5 * math.log(2.0 * math.pi * sigma2) + math.log(outlier / (1.0 - outlier) * m / n)
-        denom += np.exp(np.minimum(log_const + shift / (2.0 * sigma2), 700.0))
+        denom += np.exp(np.minimum(log_const + shift / (2.0 * sigma2), LARGEST_EXPONENT))
     return p / denom
 
 
@@ -341,7 +309,7 @@ class FitResult:
     converged: bool
 
 
-def _prepare(points_x, points_y, feats_x, feats_y, params, watch):
+def prepare_fit(points_x, points_y, feats_x, feats_y, params, watch):
     """Frames (pre-alignment), samples and the fixed feature distances."""
     rng_start = params.seed % len(points_x)
     with watch("sampling"):
@@ -406,7 +374,7 @@ def fit(points_x, points_y, params: DivergenceFreeParams | None = None, token=No
             raise InputError(f"feature arrays {feats_x.shape} and {feats_y.shape} do not fit the point counts "
                              f"{len(px)} and {len(py)}")
     yield Progress("preparing", 0.02, "samples and pre-alignment")
-    sx, sy, feat_dist, frames, w = _prepare(px, py, feats_x, feats_y, params, watch)
+    sx, sy, feat_dist, frames, w = prepare_fit(px, py, feats_x, feats_y, params, watch)
     basis = DivFreeBasis(params.n_fields)
     start = frames.source_to_cube(px[sx])
     targets_y = frames.target_to_cube(py[sy])
@@ -435,64 +403,6 @@ def fit(points_x, points_y, params: DivergenceFreeParams | None = None, token=No
     return FitResult(basis, coeffs, frames, w * sigma2_e / params.sigma2, trace, it, converged)
 
 
-# ----------------------------------------------------------------------------- deformation
-
-
-class Deformation:
-    """The fitted flow, evaluable at any time and resolution.
-
-    Parameters
-    ----------
-    basis : DivFreeBasis
-    coeffs : (K,) float
-    frames : Frames
-    n_steps : int
-        T (steps per unit time).
-    """
-
-    def __init__(self, basis: DivFreeBasis, coeffs, frames: Frames, n_steps: int):
-        self.basis = basis
-        self.coeffs = np.asarray(coeffs, dtype=np.float64)
-        self.frames = frames
-        self.n_steps = int(n_steps)
-
-    @classmethod
-    def from_result(cls, result: MatchResult) -> "Deformation":
-        """The deformation stored in a divergence-free :class:`MatchResult` (also after loading it)."""
-        ex = result.extras
-        if "coefficients" not in ex or "frames" not in ex:
-            raise InputError(f"the result of {result.method!r} holds no divergence-free deformation")
-        coeffs = np.asarray(ex["coefficients"], dtype=np.float64)
-        return cls(DivFreeBasis(coeffs.size), coeffs, Frames.from_array(ex["frames"]),
-                   int(result.params.get("n_steps", 20)))
-
-    def positions(self, points, t: float = 1.0) -> np.ndarray:
-        """(n, 3) float: source points (original coordinates) flowed to time ``t``, in target coordinates.
-
-        t = 0 is the source after the rigid pre-alignment (placed on the
-        target), t = 1 the deformed source, t > 1 extrapolates.
-        """
-        u = self.frames.source_to_cube(points)
-        return self.frames.cube_to_target(trajectory(self.basis, u, self.coeffs, t, self.n_steps, keep=False))
-
-    def trajectory(self, points, t_max: float = 1.5) -> tuple[np.ndarray, np.ndarray]:
-        """Every RK2 step from 0 to ``t_max``: times (s + 1,) and positions (s + 1, n, 3) in target coordinates."""
-        u = self.frames.source_to_cube(points)
-        steps = trajectory(self.basis, u, self.coeffs, t_max, self.n_steps, keep=True)
-        times = np.linspace(0.0, t_max, len(steps))
-        return times, self.frames.cube_to_target(steps)
-
-    def interpolator(self, points, t_max: float = 1.5):
-        """A cheap ``positions(t)`` for scrubbing: the trajectory at every RK2 step, linear in between.
-
-        Exact at the step times; in between it is the piecewise-linear path
-        of the integrator (the step size is the flow's own resolution).
-        """
-        from corrlib.morph import step_interpolator
-
-        return step_interpolator(*self.trajectory(points, t_max))
-
-
 # ----------------------------------------------------------------------------- dense maps
 
 
@@ -514,7 +424,6 @@ def dense_maps(frames: Frames, morphed, points_y, w: float, feats_x=None, feats_
     map_xy : (n_x,) int
     map_yx : (n_y,) int
     """
-    from corrlib.methods.baselines import nearest_rows
 
     ux = frames.target_to_cube(morphed)
     uy = frames.target_to_cube(points_y)
@@ -524,7 +433,7 @@ def dense_maps(frames: Frames, morphed, points_y, w: float, feats_x=None, feats_
     return nearest_rows(ux, uy), nearest_rows(uy, ux)
 
 
-def divergence_free(source, target, params: DivergenceFreeParams, token=None):
+def solve_divergence_free(source, target, params: DivergenceFreeParams, token):
     """Registered solver: fit, dense maps, deformation record (generator returning a MatchResult)."""
     watch = Stopwatch()
     feats_x = feats_y = None
@@ -540,16 +449,12 @@ def divergence_free(source, target, params: DivergenceFreeParams, token=None):
     deformation = Deformation(fitted.basis, fitted.coeffs, fitted.frames, params.n_steps)
     yield Progress("dense map", 0.95, f"flowing {source.n_vertices} vertices")
     with watch("trajectory"):  # every RK2 step up to SEQUENCE_T_MAX; step T is t = 1 (same step size)
-        traj_times, traj = deformation.trajectory(source.vertices, SEQUENCE_T_MAX)
-    morphed = traj[params.n_steps]
+        steps = deformation.trajectory(source.vertices, SEQUENCE_T_MAX)
+        deformation.source_steps = StoredSteps(steps.times, steps.positions.astype(np.float32))
+    morphed = steps.positions[params.n_steps]
     with watch("dense map"):
         map_xy, map_yx = dense_maps(fitted.frames, morphed, target.vertices, fitted.feature_factor, feats_x, feats_y)
     extras = {
-        "coefficients": fitted.coeffs,
-        "trajectory": traj.astype(np.float32),
-        "trajectory_times": traj_times,
-        "frames": fitted.frames.as_array(),
-        "energy_trace": np.asarray(fitted.energy_trace),
         "morphed_vertices": morphed,
         "iterations": fitted.iterations,
         "converged": bool(fitted.converged),
@@ -559,12 +464,14 @@ def divergence_free(source, target, params: DivergenceFreeParams, token=None):
     if volume is not None:
         extras["volume_change"] = float(signed_volume(morphed, source.faces) / volume - 1.0)
     yield Progress("done", 1.0, f"{fitted.iterations} EM iterations, energy {fitted.energy_trace[-1]:.6g}")
-    return MatchResult("divergence-free", map_xy, map_yx, fitted.energy_trace[-1], watch.times, extras=extras)
+    return MatchResult("divergence-free", map_xy, map_yx, fitted.energy_trace[-1], watch.times,
+                       energy_meaning="EM objective: weighted data term plus the Eq. 10.18 prior",
+                       energy_trace=np.asarray(fitted.energy_trace), deformation=deformation, extras=extras)
 
 
 register(MethodSpec(
     name="divergence-free", label="Divergence-free deformation", inputs=("mesh", "mesh"),
-    params=DivergenceFreeParams, solve=divergence_free, rank=15,
+    params=DivergenceFreeParams, solve=solve_divergence_free, rank=15,
     description="Volume-preserving deformation of the source into the target by the flow of a divergence-free "
                 "field (closed-form curl basis on the unit cube), fitted jointly with soft correspondences by EM; "
                 "the flow gives interpolation and extrapolation sequences at any resolution.",

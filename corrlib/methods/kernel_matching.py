@@ -9,99 +9,66 @@ kernel between vertices; Φ M-orthonormal). ``f`` is convex (both kernels are
 positive semi-definite), so the DC algorithm — maximise the linearisation
 ``G = ∇f(Π_k) = K_Y Π_k K_X + μ F_Y F_Xᵀ`` (Eq. 8.13) by one linear
 assignment — never decreases it (checked and reported per iteration). The
-score is formed in spectral form only on the rows and columns of the current
-problem: ``G = (Ψ_r e^{-tΛ_Y}) C (Φ_c e^{-tΛ_X})ᵀ`` with the k×k matrix
-``C = Ψ[map]ᵀ Φ`` summed over the current matches, in float32. (Weighting
-the matches by their sample areas was measured and dropped: with the exact
-gradient, row weights of 0.05–5 on the wolf's seeds sent it to a mirrored
-optimum; weighting only the anchors is no longer a DC step.)
+score is formed in spectral form on the rows and columns of the current
+problem only: ``G = (Ψ_r e^{-tΛ_Y}) C (Φ_c e^{-tΛ_X})ᵀ`` with the k×k matrix
+``C = Ψ[map]ᵀ Φ`` summed over the current matches, in float32.
 
-Diffusion times decrease over a schedule (coarse, global alignment first;
-detail last). Times are relative to the surface area (``t = τ · area``, the
-heat kernel is then scale-invariant); the default τ from 0.0259 to 5.18e-4
-equals 500 → 10 at the TOSCA area scale of 1.93e4.
+The stages, each a function below sharing one :class:`KernelState`:
 
-Initialisation: a linear assignment on descriptors (SHOT by default). The
-kernels cannot tell left from right, so the DC iterations keep the
-orientation each region starts with; SHOT alone starts the TOSCA cats with a
-mixture (41 % of the points nearer their true partner, 32 % nearer the
-mirrored one), which ends as regions matched left-to-right next to regions
-matched left-to-left, with seams of large error between them. Orientation-
-aware descriptors (:mod:`corrlib.descriptors.orientation`, weight
-``orientation``) in the initial assignment fix the orientation of most of
-the shape. They are not used in the μ term of the iterations, where their
-local noise costs accuracy (cats: 75.7 % instead of 78.8 % within 0.05,
-cells of 3000).
+1. :func:`prepare` — spectra, surface seeds, sample orders of the finer scales.
+2. :func:`initial_seed_map` — the seeds' initial assignment (descriptors, the
+   functional-maps baseline, or a given map / landmarks).
+3. :func:`seed_problem` — eigenfunctions, descriptor similarities and the
+   anchors' alignment at the seeds (:class:`SeedProblem`).
+4. :func:`choose_start` — DC iterations of the first (largest) time from the
+   initial map and from the aligned start (:func:`aligned_start`); the higher
+   objective goes on.
+5. :func:`dc_iterations` — DC iterations at one diffusion time, each one
+   :func:`dc_step` (objective :func:`dc_objective`, score :func:`seed_score`);
+   run over the decreasing time schedule (coarse, global alignment first).
+6. :func:`multiscale_refinement` — finer vertex samples solved in Voronoi
+   cells (§8.3.2).
+7. :func:`kernel_result` — final energy, optional pointwise smoothing, result.
 
-Initial alignment (``init_fraction``): even so, the initial assignment on
-thin parts is close to a coin flip (the cats' front legs: 31 % of the seeds
-nearer the true partner, 39 % nearer the mirrored one), and a DC iteration
-from the whole initial map keeps such a local majority: the front legs ended
-swapped (cats: 77 % within 0.05 without symmetry, 84 % with). A second start
-is therefore formed from only the most similar initial matches (default
-30 %): their kernel score at the largest time spreads their alignment over
-the whole shape, and the legs follow the body across the shoulders (87 % and
-87 %; fractions from 0.1 to 0.6 give the same, 0.03 is too few, 0.7 keeps the
-swap). Both starts run the DC iterations of the first time, and the one with
-the higher objective goes on — a multi-start of the same DC problem, so no
-start is trusted blindly: on a partial wolf (60 % of wolf1 against wolf0) the
-aligned start is worse (39 % within 0.1 against 64 %) and loses. With
-landmarks as the initialisation, the second start is the landmarks' kernel
-score alone (instead of every seed taking its nearest landmark's partner):
-15 random landmarks on the wolves, 99.5 % within 0.05 instead of 83 %.
+Design choices, in brief (the measurements behind them are in
+``docs/decisions.md``, "Kernel matching: measured design choices"):
 
-Seeds: farthest points of the surfaces, not of their vertices
-(:func:`~corrlib.geometry.sampling.surface_farthest_points`; eigenfunctions
-and descriptors are interpolated inside the triangles). A vertex sample
-follows the vertex density once it takes a good part of the vertices (3000
-of the cats' 5000), and independently remeshed shapes differ in it: the tail
-of cat1 carries 173 vertex seeds, the same part of cat0 98. A bijection of
-the seeds then has to slide matches along the shape to absorb the
-difference, a smooth distortion that the kernel energy hardly penalises
-(the DC seeds had higher energy than the ground truth projected onto them,
-yet only 79 % of them within 0.05). With surface seeds the projected ground
-truth is 93 % within 0.05 (vertex seeds: 87 %), and the DC iterations
-started from it reach a higher energy than those started from the
-descriptors at the larger times (418.5 against 416.2 at the first).
-
-Multiscale (§8.3.2): the seeds (default 3000) are matched first with the
-full schedule. Then a vertex sample is grown by ``growth`` per scale
-(farthest-point prefixes) until every vertex is included; there is always at
-least one finer scale, whose first pass takes the seeds' matches as anchors
-(their interpolated eigenfunctions). At each scale
-the source sample is split into geodesic Voronoi cells of at most
-``max_cell`` points around matched centres; the cells are transferred to the
-target through the current map (Voronoi cells around the centres' images,
-widened across their borders by ``cell_overlap`` so that a source vertex
-near a border can still reach its partner beyond the transferred border —
-with disjoint cells the cats lose 4 points within 0.05), and every cell is
-an independent partial assignment whose score uses the kernel alignment with
-all current matches as anchors. Cells are redrawn around different centres
-at every refinement pass; cells run in threads (the auction releases the
-GIL).
-
-Area capacities (``capacity="area"``, default): at the finer scales the
-samples are no longer uniform (the last scale is every vertex, and
-independently remeshed shapes differ in vertex density by up to two orders of
-magnitude), so a bijection has to slide vertices to absorb the density
-difference. There the assignment couples the area measures instead of the
-vertex counts: a target sample of area ``m_y`` may take up to
-``ceil(n_x · m_y / A_Y)`` source samples (``n_x`` source samples; the mass
-of a sample is the area of its Euclidean Voronoi cell), a transportation
-problem solved exactly as an assignment on copies of the columns. Measured
-on the TOSCA cats: their ground truth projected onto the nearest bijection
-has only 68 % of points within 0.05; onto the nearest map with area
-capacities, 99 %. The seeds stay matched by a permutation: with capacities
-the QAP gains by piling several seeds onto one target (``k_Y(y, y)`` is the
-kernel's maximum) and the DC iterations collapse (measured: 36 %).
-
-A last pointwise step (``smooth_k``) projects the map onto the first
-eigenfunctions and gives every vertex its best-scoring partner; the maps are
-then no longer bijective, which suits independently remeshed shapes.
-
-Unequal vertex counts: rectangular assignments are padded; with
-``partial=True`` slack variables (Eq. 8.15–8.16) let low-scoring vertices
-stay unmatched (-1 in the maps, reported).
+* Times are relative to the surface area (``t = τ · area``), so the heat
+  kernel is scale-invariant; the default τ from 0.0259 to 5.18e-4 equals
+  500 → 10 at the TOSCA area scale of 1.93e4.
+* The kernels cannot tell left from right, so the DC iterations keep the
+  orientation each region starts with. Orientation-aware descriptors
+  (:mod:`corrlib.descriptors.orientation`) therefore enter the initial
+  assignment; the μ term of the iterations uses the plain descriptor (their
+  local noise costs accuracy there).
+* A second start is formed from the kernel score of only the most similar
+  initial matches (``init_fraction``; with landmarks: the landmarks alone),
+  which spreads their alignment over the shape where the initial assignment
+  is a coin flip (thin parts). Both starts run the first time's DC iterations
+  and the higher objective goes on: a multi-start of the same DC problem, no
+  start is trusted blindly.
+* Seeds are farthest points of the surfaces, not of their vertices
+  (:func:`~corrlib.geometry.sampling.surface_farthest_points`): independently
+  remeshed shapes differ in vertex density, and a bijection of vertex seeds
+  must slide matches to absorb it, which the kernel energy hardly penalises.
+* Multiscale (§8.3.2): after the seeds, a vertex sample grows by ``growth``
+  per scale until every vertex is included. Each pass splits the source
+  sample into geodesic Voronoi cells around matched centres, transfers them
+  through the current map and widens the target cells by ``cell_overlap`` (a
+  vertex near a border can reach its partner beyond it); every cell is an
+  independent partial assignment scored with all current matches as anchors.
+* Area capacities (``capacity="area"``): at the finer scales a target sample
+  of area ``m_y`` may take up to ``ceil(n_x · m_y / A_Y)`` source samples, a
+  transportation problem that couples the area measures instead of the
+  vertex counts (for differently meshed shapes). The seeds stay matched by a
+  permutation: with capacities the QAP gains by piling seeds onto one target
+  (``k_Y(y, y)`` is the kernel's maximum).
+* ``smooth_k``: a last pointwise step projects the map onto the first
+  eigenfunctions and gives every vertex its best-scoring partner (no longer
+  bijective, which suits independently remeshed shapes).
+* Unequal vertex counts: rectangular assignments are padded; with
+  ``partial=True`` slack variables (Eq. 8.15–8.16) let low-scoring vertices
+  stay unmatched (-1 in the maps, reported).
 
 Map convention: ``map_xy[i]`` = vertex of Y matched to vertex i of X.
 """
@@ -109,19 +76,49 @@ Map convention: ``map_xy[i]`` = vertex of Y matched to vertex i of X.
 from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 
 import numpy as np
 
 from corrlib.assignment import linear_assignment
 from corrlib.descriptors import DESCRIPTOR_KINDS, mesh_descriptors
 from corrlib.descriptors.orientation import orientation_descriptors
-from corrlib.errors import InputError, ParameterError
-from corrlib.geometry.sampling import farthest_point_sampling, surface_farthest_points, voronoi_bands, voronoi_cells
-from corrlib.geometry.spectrum import mesh_spectrum
-from corrlib.methods.base import MatchResult, param
+from corrlib.errors import ParameterError
+from corrlib.geometry.sampling import (
+    SurfaceSample,
+    farthest_point_sampling,
+    surface_farthest_points,
+    voronoi_bands,
+    voronoi_cells,
+)
+from corrlib.geometry.spectrum import Spectrum, mesh_spectrum
+from corrlib.methods.base import InitialMatch, MatchResult, param
 from corrlib.methods.registry import MethodSpec, register
 from corrlib.progress import Progress, Stopwatch
+
+#: threads solving the cells of a refinement pass: the auction releases the GIL, so cells can overlap; two,
+#: for the two-core development machine (every cell in flight also holds its dense score block)
+CELL_THREADS = 2
+#: cells per pass: enough that an average cell holds this fraction of ``max_cell`` (headroom: geodesic Voronoi
+#: cells are uneven)
+CELL_FILL = 0.7
+#: pass ``p`` starts its farthest-point cell centres at the ``p × CENTRE_STRIDE``-th matched vertex farthest
+#: from the centroid, so that every pass draws its cells around different centres (no border stays fixed)
+CENTRE_STRIDE = 7
+#: first ε of the auction when the score is far from the last one (first iteration of a new time, or after
+#: the aligned start); ``None`` (the auction's own choice) otherwise
+WARM_EPS_START = 1e-2
+#: a DC step that lowers the objective by more than this fraction of it clears the ``monotone`` flag (the
+#: auction is ε-optimal and the score is float32)
+MONOTONE_RTOL = 1e-5
+#: the finer scales' samples are farthest-point prefixes up to ``n_seed × growth ** FPS_SCALES`` vertices
+#: (the first finer scales); the rest, only in the last dense scales, are ordered by distance from the centroid
+FPS_SCALES = 2
+#: progress bar layout (start, width): DC iterations on the seeds, then the finer scales
+PROGRESS_DC = (0.1, 0.6)
+PROGRESS_MULTISCALE = (0.7, 0.3)
+#: progress fractions of the initial-map computation and of the final smoothing step
+PROGRESS_INIT, PROGRESS_SMOOTHING = 0.05, 0.98
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -191,39 +188,6 @@ class KernelMatchingParams:
             diffusion_times(self)  # raises ParameterError on a bad schedule, before any run
 
 
-@dataclass
-class InitialMatch:
-    """A starting point for kernel matching (refinement of another method's output).
-
-    Either a dense map (``map_xy``, -1 allowed) or sparse landmarks
-    (``landmarks_x``, ``landmarks_y``). Landmarks are kept as anchors in every
-    score, so they stay matched.
-    """
-
-    map_xy: np.ndarray | None = None
-    landmarks_x: np.ndarray | None = None
-    landmarks_y: np.ndarray | None = None
-
-    def pairs(self, n_x: int, n_y: int) -> tuple[np.ndarray, np.ndarray]:
-        if self.map_xy is not None:
-            mp = np.asarray(self.map_xy, dtype=np.int64)
-            if mp.shape != (n_x,):
-                raise InputError(f"the initial map has {mp.shape[0]} entries, the source {n_x} vertices")
-            if mp.max() >= n_y:
-                raise InputError(f"the initial map points to vertex {mp.max()} of a {n_y}-vertex target")
-            keep = np.flatnonzero(mp >= 0)
-            if keep.size == 0:
-                raise InputError("the initial map matches no vertex")
-            return keep, mp[keep]
-        lx = np.asarray(self.landmarks_x, dtype=np.int64)
-        ly = np.asarray(self.landmarks_y, dtype=np.int64)
-        if lx.size == 0 or lx.shape != ly.shape:
-            raise InputError(f"landmarks need equally many source and target indices, got {lx.size} and {ly.size}")
-        if lx.min() < 0 or lx.max() >= n_x or ly.min() < 0 or ly.max() >= n_y:
-            raise InputError("landmark index out of range")
-        return lx, ly
-
-
 def diffusion_times(params: KernelMatchingParams) -> np.ndarray:
     """(n_times,) float: relative times τ, decreasing."""
     if params.times.strip():
@@ -269,15 +233,15 @@ def _alignment(psi_rows, phi_rows):
 
 #: decays below this (relative to 1) are dropped from the spectral products: their terms are far below float32
 #: precision, and e^{-tλ} of the high eigenvalues at large times would otherwise be float32 subnormals, on which
-#: the products run ~15x slower (measured: 1.1 s instead of 0.076 s per 3000 x 3000 score at the largest time)
+#: the products run an order of magnitude slower
 DECAY_CUTOFF = 1e-12
 
 
-def _score(psi_rows, phi_cols, c, decay_y, decay_x):
+def kernel_score(psi_rows, phi_cols, c, decay_y, decay_x):
     """(r, c) float32 kernel score block ``(Ψ_r D_Y) C (Φ_c D_X)ᵀ``.
 
     Only the eigenpairs with a decay above :data:`DECAY_CUTOFF` enter. The transposed block is
-    ``_score(phi_cols, psi_rows, c.T, decay_x, decay_y)``.
+    ``kernel_score(phi_cols, psi_rows, c.T, decay_x, decay_y)``.
     """
     k_y = max(1, int(np.count_nonzero(decay_y > DECAY_CUTOFF)))
     k_x = max(1, int(np.count_nonzero(decay_x > DECAY_CUTOFF)))
@@ -319,14 +283,14 @@ def _with_orientation(desc_x, desc_y, source, target, spec_x, spec_y, weight: fl
 def _sample_order(points: np.ndarray, n_seed: int, growth: float) -> np.ndarray:
     """Vertex order whose prefixes are the samples of the successive scales.
 
-    Farthest-point order for the first ``n_seed × growth²`` vertices (the
+    Farthest-point order for the first ``n_seed × growth ** FPS_SCALES`` vertices (the
     first finer scales; the seeds themselves are surface points, see
     :func:`~corrlib.geometry.sampling.surface_farthest_points`); the rest
     follow ordered by their distance from the centroid (they only enter the
     last, dense scales).
     """
     n = points.shape[0]
-    n_fps = int(min(n, n_seed * growth ** 2))
+    n_fps = int(min(n, n_seed * growth ** FPS_SCALES))
     radius = np.linalg.norm(points - points.mean(axis=0), axis=1)
     # start at the vertex farthest from the centroid and order the rest by that distance: the samples
     # do not depend on the vertex order of the file
@@ -392,7 +356,7 @@ def _solve_cells(x_cells, y_cells, psi, phi, c, decay_y, decay_x, params, cancel
         xs, ys = x_cells[cid], y_cells[cid]
         if xs.size == 0 or ys.size == 0:
             return None
-        g = _score(phi[xs], psi[ys], c.T, decay_x, decay_y)  # (xs, ys)
+        g = kernel_score(phi[xs], psi[ys], c.T, decay_x, decay_y)  # (xs, ys)
         slack = None
         if params.partial:
             slack = float(np.quantile(g.max(axis=1), params.slack_quantile))
@@ -403,7 +367,7 @@ def _solve_cells(x_cells, y_cells, psi, phi, c, decay_y, decay_x, params, cancel
     # reverse map, merged over overlapping cells: an assigned source beats an unassigned one, then the score
     rank_y = np.full((n_y, 2), -np.inf)
     map_yx = -np.ones(n_y, dtype=np.int64)
-    with ThreadPoolExecutor(max_workers=2) as pool:
+    with ThreadPoolExecutor(max_workers=CELL_THREADS) as pool:
         for cid, out in enumerate(pool.map(cell, range(len(x_cells)))):
             xs, ys = x_cells[cid], y_cells[cid]
             if out is None:
@@ -427,10 +391,263 @@ def _solve_cells(x_cells, y_cells, psi, phi, c, decay_y, decay_x, params, cancel
     return np.concatenate(map_x), map_yx
 
 
-def kernel_matching(source, target, params: KernelMatchingParams, token, initial: InitialMatch | None = None):
-    """Solver generator (see the module docstring); returns a :class:`MatchResult`."""
+# ---- the objective on the seeds and one DC step ---------------------------------------------------------------
+
+
+@dataclass(frozen=True)
+class SeedProblem:
+    """The quadratic assignment on the seeds, without its diffusion time.
+
+    Attributes
+    ----------
+    phi_s : (n_seed, k) float
+        Source eigenfunctions Φ at the source seeds.
+    psi_s : (n_seed, k) float
+        Target eigenfunctions Ψ at the target seeds.
+    anchor_c : (k, k) float or 0.0
+        Alignment ``Ψ[anchors_y]ᵀ Φ[anchors_x]`` of fixed matches (landmarks), added to every ``C``.
+    desc_block : (n_seed, n_seed) float32 or None
+        Descriptor similarity ``F_Y F_Xᵀ`` as (seed x, seed y), scaled to [-1, 0]; None without μ term.
+    mu : float
+        Weight μ of the descriptor term.
+    """
+
+    phi_s: np.ndarray
+    psi_s: np.ndarray
+    anchor_c: np.ndarray | float
+    desc_block: np.ndarray | None
+    mu: float
+
+
+def seed_alignment(problem: SeedProblem, seed_map: np.ndarray) -> np.ndarray:
+    """(k, k) float: ``C = Ψ_s[seed_map]ᵀ Φ_s + C_anchors``, the spectral form of Π (and the anchors)."""
+    return _alignment(problem.psi_s[seed_map], problem.phi_s) + problem.anchor_c
+
+
+def dc_objective(seed_map: np.ndarray, c: np.ndarray, kernel_scale: float, decay_y: np.ndarray,
+                 decay_x: np.ndarray, desc_block: np.ndarray | None = None, mu: float = 0.0) -> float:
+    """The function the DC steps of one time maximise.
+
+    ``f(Π) = ½ <Π, K_Y Π K_X> / s + μ <Π, F_Y F_Xᵀ>``, the kernel term in spectral form
+    ``<Π, K_Y Π K_X> = trace(D_Y C D_X Cᵀ)`` (:func:`kernel_energy`) and ``s`` a constant of the time (the
+    kernel score's maximum, see :func:`seed_score`). The ½ makes ``K_Y Π K_X / s`` its exact gradient.
+
+    Parameters
+    ----------
+    seed_map : (n_seed,) int
+        Seed x -> seed y (Π).
+    c : (k, k) float
+        ``Ψ_s[seed_map]ᵀ Φ_s`` (plus the anchors), see :func:`seed_alignment`.
+    kernel_scale : float
+        ``s``.
+    decay_y, decay_x : (k,) float
+        ``e^{-tΛ_Y}``, ``e^{-tΛ_X}``.
+    desc_block : (n_seed, n_seed) float32, optional
+        ``F_Y F_Xᵀ`` as (seed x, seed y); None: no descriptor term.
+    mu : float
+        μ.
+    """
+    value = 0.5 * kernel_energy(c, decay_y, decay_x) / kernel_scale
+    if desc_block is not None:
+        value += mu * float(desc_block[np.arange(seed_map.size), seed_map].sum())
+    return value
+
+
+def seed_score(phi_s: np.ndarray, psi_s: np.ndarray, c: np.ndarray, decay_y: np.ndarray, decay_x: np.ndarray,
+               kernel_scale: float | None = None, desc_block: np.ndarray | None = None,
+               mu: float = 0.0) -> tuple[np.ndarray, float]:
+    """The linearisation (Eq. 8.13) of :func:`dc_objective` on the seeds, as an assignment score.
+
+    ``G = (K_Y Π K_X)ᵀ / s + μ (F_Y F_Xᵀ)ᵀ``, rows the x seeds, formed in spectral form as
+    ``(Φ_s D_X) Cᵀ (Ψ_s D_Y)ᵀ / s + μ desc_block`` (:func:`kernel_score`, float32).
+
+    Parameters
+    ----------
+    phi_s, psi_s : (n_seed, k) float
+        Eigenfunctions at the source and target seeds.
+    c : (k, k) float
+        Current alignment ``C``.
+    decay_y, decay_x : (k,) float
+        ``e^{-tΛ_Y}``, ``e^{-tΛ_X}``.
+    kernel_scale : float, optional
+        ``s``; None: the kernel term's own largest magnitude.
+    desc_block : (n_seed, n_seed) float32, optional
+        ``F`` as (seed x, seed y); None: the kernel term alone, unscaled.
+    mu : float
+        μ.
+
+    Returns
+    -------
+    g : (n_seed, n_seed) float32
+        Score (seed x, seed y).
+    kernel_scale : float
+        ``s`` (as given, or the one found).
+    """
+    g = kernel_score(phi_s, psi_s, c.T, decay_x, decay_y)  # the assignment's rows are the x seeds
+    if kernel_scale is None:
+        kernel_scale = max(float(np.abs(g).max()), 1e-30)
+    if desc_block is not None:
+        g = g / np.float32(kernel_scale) + np.float32(mu) * desc_block
+    return g, kernel_scale
+
+
+@dataclass(frozen=True)
+class DCStep:
+    """One DC step: the new map and the objective before and after (same ``kernel_scale``)."""
+
+    seed_map: np.ndarray
+    before: float
+    value: float
+    changed: int
+    kernel_scale: float
+    from_permutation: bool
+
+    @property
+    def decreased(self) -> bool:
+        """The objective fell (beyond :data:`MONOTONE_RTOL`) from a permutation, against the DC guarantee."""
+        return self.from_permutation and self.value < self.before - MONOTONE_RTOL * abs(self.before)
+
+
+def dc_step(problem: SeedProblem, seed_map: np.ndarray, decay_y: np.ndarray, decay_x: np.ndarray,
+            kernel_scale: float | None = None, *, prices: np.ndarray | None = None,
+            eps_start: float | None = None, backend: str = "auction", cancel: np.ndarray | None = None,
+            watch: Stopwatch | None = None) -> DCStep:
+    """One DC step (Eq. 8.13): ``Π_{k+1} = argmax_Π <Π, ∇f(Π_k)>``, one linear assignment on :func:`seed_score`.
+
+    ``f`` (:func:`dc_objective`) is convex, so ``f(Π_{k+1}) ≥ f(Π_k) + <Π_{k+1} - Π_k, ∇f(Π_k)> ≥ f(Π_k)``
+    when ``Π_k`` is a permutation (the assignment's optimum is at least the score of ``Π_k`` itself).
+
+    Parameters
+    ----------
+    seed_map : (n_seed,) int
+        ``Π_k``, seed x -> seed y.
+    kernel_scale : float, optional
+        ``s`` of the time; None: from this step's score.
+    prices : (n_seed,) float, optional
+        The auction's prices (warm start), updated in place.
+    eps_start : float, optional
+        The auction's first ε.
+    """
+    watch = Stopwatch() if watch is None else watch
+    with watch("kernels"):
+        c = seed_alignment(problem, seed_map)
+        g, kernel_scale = seed_score(problem.phi_s, problem.psi_s, c, decay_y, decay_x, kernel_scale,
+                                     problem.desc_block, problem.mu)
+        before = dc_objective(seed_map, c, kernel_scale, decay_y, decay_x, problem.desc_block, problem.mu)
+    with watch("assignment"):
+        new_map = linear_assignment(g, method=backend, cancel=cancel, prices=prices, eps_start=eps_start)
+    changed = int(np.sum(new_map != seed_map))
+    value = dc_objective(new_map, seed_alignment(problem, new_map), kernel_scale, decay_y, decay_x,
+                         problem.desc_block, problem.mu)
+    # the DC guarantee holds from a permutation (a given initial map may map seeds together)
+    from_permutation = np.unique(seed_map).size == seed_map.size
+    return DCStep(new_map, before, value, changed, kernel_scale, from_permutation)
+
+
+def heat_decays(evals: np.ndarray, area: float, tau: float) -> np.ndarray:
+    """(k,) float: ``e^{-tλ}`` at the time ``t = τ · area`` (relative times make the kernel scale-invariant)."""
+    return np.exp(-tau * area * evals)
+
+
+def most_similar_matches(confidence: np.ndarray, fraction: float) -> np.ndarray:
+    """Indices of the ``max(1, round(fraction · n))`` matches with the highest ``confidence`` (n,), best first."""
+    return np.argsort(-confidence, kind="stable")[:max(1, round(fraction * confidence.size))]
+
+
+# ---- the state the stages share -------------------------------------------------------------------------------
+
+
+@dataclass(eq=False)
+class KernelState:
+    """What the stages of :func:`kernel_matching` share.
+
+    Set by :func:`prepare`: the inputs, the spectra (Φ = ``spec_x.evecs`` (n_x, k), Ψ = ``spec_y.evecs``
+    (n_y, k)), the relative times ``taus`` (n_times,), the surface seeds and the sample orders (n_x,), (n_y,)
+    of the finer scales. Then, stage by stage: the anchors and the initial ``seed_map`` (n_seed,) with its
+    descriptor ``confidence``, the :class:`SeedProblem`, the current ``seed_map`` with its auction
+    ``prices``, the ``trace`` of the DC iterations (one dict per iteration), the ``monotone`` flag and the
+    start that won.
+    """
+
+    source: object
+    target: object
+    params: KernelMatchingParams
+    token: object
+    watch: Stopwatch
+    taus: np.ndarray
+    spec_x: Spectrum
+    spec_y: Spectrum
+    seeds_x: SurfaceSample
+    seeds_y: SurfaceSample
+    order_x: np.ndarray
+    order_y: np.ndarray
+    n_seed: int
+    anchors_x: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    anchors_y: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
+    landmarks_only: bool = False
+    desc_x: np.ndarray | None = None  # standardised plain descriptors, once computed
+    desc_y: np.ndarray | None = None
+    confidence: np.ndarray | None = None  # (n_seed,) similarity of every initial descriptor match
+    seed_map: np.ndarray | None = None  # (n_seed,) seed x -> seed y
+    problem: SeedProblem | None = None
+    prices: np.ndarray | None = None
+    trace: list = field(default_factory=list)
+    monotone: bool = True
+    dc_start: str = "initial map"
+    step: int = 0  # DC iterations counted for the progress bar
+    seed_vertices_x: np.ndarray | None = None  # the seeds' matches snapped to vertices (reported)
+    seed_vertices_y: np.ndarray | None = None
+
+    @property
+    def n_x(self) -> int:
+        return self.source.n_vertices
+
+    @property
+    def n_y(self) -> int:
+        return self.target.n_vertices
+
+    @property
+    def k(self) -> int:
+        return self.params.n_eigs
+
+    @property
+    def phi(self) -> np.ndarray:
+        return self.spec_x.evecs
+
+    @property
+    def psi(self) -> np.ndarray:
+        return self.spec_y.evecs
+
+    @property
+    def cancel(self) -> np.ndarray:
+        return self.token.flag
+
+    @property
+    def has_second_start(self) -> bool:
+        """A descriptor initialisation with ``init_fraction < 1``, or landmarks."""
+        return (self.confidence is not None and self.params.init_fraction < 1) or self.landmarks_only
+
+    @property
+    def total_steps(self) -> int:
+        return (len(self.taus) + self.has_second_start) * self.params.iters_per_time
+
+    def decays(self, tau: float) -> tuple[np.ndarray, np.ndarray]:
+        """``(e^{-tΛ_Y}, e^{-tΛ_X})`` at the relative time ``tau``, each (k,)."""
+        return heat_decays(self.spec_y.evals, self.target.area, tau), \
+            heat_decays(self.spec_x.evals, self.source.area, tau)
+
+
+# ---- stages ---------------------------------------------------------------------------------------------------
+
+
+def prepare(source, target, params: KernelMatchingParams, token):
+    """Stage 1: spectra (k eigenpairs per shape), relative times, surface seeds, sample orders.
+
+    A generator (yields :class:`Progress`); returns a :class:`KernelState`. The seeds are
+    ``min(n_seeds, n_x, n_y)`` farthest points of each surface; the finer scales' samples are prefixes of
+    :func:`_sample_order`.
+    """
     watch = Stopwatch()
-    cancel = token.flag
     n_x, n_y = source.n_vertices, target.n_vertices
     for mesh in (source, target):
         if params.n_eigs >= mesh.n_vertices:
@@ -442,236 +659,304 @@ def kernel_matching(source, target, params: KernelMatchingParams, token, initial
     with watch("eigen"):
         spec_x = mesh_spectrum(source, k)
         spec_y = mesh_spectrum(target, k)
-    phi, psi = spec_x.evecs, spec_y.evecs
-    mass_y = spec_y.mass.diagonal()
     token.raise_if_cancelled()
-
-    def decays(tau):
-        return np.exp(-tau * target.area * spec_y.evals), np.exp(-tau * source.area * spec_x.evals)
-
-    # farthest-point orders: every prefix is a well-spread sample
     with watch("sampling"):
         n_seed = min(params.n_seeds, n_x, n_y)
-        # the seeds are points of the surfaces (see the module docstring); the finer scales sample vertices
         seeds_x = surface_farthest_points(source, n_seed)
         seeds_y = surface_farthest_points(target, n_seed)
         order_x = _sample_order(source.vertices, n_seed, params.growth)
         order_y = _sample_order(target.vertices, n_seed, params.growth)
+    return KernelState(source, target, params, token, watch, taus, spec_x, spec_y, seeds_x, seeds_y,
+                       order_x, order_y, n_seed)
 
-    anchors_x = anchors_y = np.zeros(0, dtype=np.int64)
-    desc_x = desc_y = None
-    confidence = None  # (n_seed,) similarity of every initial descriptor match
+
+def initial_seed_map(state: KernelState, initial: InitialMatch | None):
+    """Stage 2: the seeds' initial assignment (sets ``seed_map``, and ``confidence`` or the anchors).
+
+    A given map or landmarks: every source seed follows its nearest matched vertex, whose partner snaps to
+    the nearest target seed (landmarks also become anchors). ``init="fmap"``: the same from the
+    functional-maps baseline's map. Otherwise one linear assignment on the descriptor similarity
+    (:func:`_descriptor_similarity`, with the orientation block), whose row values are the ``confidence``.
+    A generator (yields :class:`Progress`).
+    """
+    params, source, target = state.params, state.source, state.target
     if initial is not None:
-        ix, iy = initial.pairs(n_x, n_y)
-        if initial.map_xy is None:
-            anchors_x, anchors_y = ix, iy
-        yield Progress("initial map", 0.1, f"{ix.size} given matches")
-        # each seed follows its nearest matched vertex; the partner snaps to the nearest target seed
-        partner_of = -np.ones(n_x, dtype=np.int64)
+        ix, iy = initial.pairs(state.n_x, state.n_y)
+        state.landmarks_only = initial.map_xy is None
+        if state.landmarks_only:
+            state.anchors_x, state.anchors_y = ix, iy
+        yield Progress("initial map", PROGRESS_DC[0], f"{ix.size} given matches")
+        partner_of = -np.ones(state.n_x, dtype=np.int64)
         partner_of[ix] = iy
-        partner = partner_of[ix[_nearest_point(source.vertices[ix], seeds_x.points)]]
-        seed_map = _nearest_point(seeds_y.points, target.vertices[partner])
+        partner = partner_of[ix[_nearest_point(source.vertices[ix], state.seeds_x.points)]]
+        state.seed_map = _nearest_point(state.seeds_y.points, target.vertices[partner])
     elif params.init == "fmap":
         from corrlib.methods.baselines import FmapZoomOutParams, solve_fmap_zoomout
         from corrlib.progress import run
 
-        yield Progress("initial map", 0.05, "functional maps + ZoomOut")
-        with watch("init"):
-            fm = run(solve_fmap_zoomout(source, target, FmapZoomOutParams(), token))
-        partner = fm.map_xy[seeds_x.nearest_corners(source)]
-        seed_map = _nearest_point(seeds_y.points, target.vertices[partner])
+        yield Progress("initial map", PROGRESS_INIT, "functional maps + ZoomOut")
+        with state.watch("init"):
+            fm = run(solve_fmap_zoomout(source, target, FmapZoomOutParams(), state.token))
+        partner = fm.map_xy[state.seeds_x.nearest_corners(source)]
+        state.seed_map = _nearest_point(state.seeds_y.points, target.vertices[partner])
     else:
-        yield Progress("descriptors", 0.05, params.descriptor)
-        with watch("descriptors"):
-            desc_x, desc_y = _descriptors(source, target, spec_x, spec_y, params.descriptor)
-            init_x, init_y = _with_orientation(desc_x, desc_y, source, target, spec_x, spec_y, params.orientation)
-        with watch("assignment"):
-            sim = _descriptor_similarity(seeds_x.interpolate(source, init_x), seeds_y.interpolate(target, init_y))
-            seed_map = linear_assignment(sim, method=params.backend, cancel=cancel)  # seed x -> seed y
-            confidence = sim[np.arange(n_seed), seed_map]
-    token.raise_if_cancelled()
+        yield Progress("descriptors", PROGRESS_INIT, params.descriptor)
+        with state.watch("descriptors"):
+            state.desc_x, state.desc_y = _descriptors(source, target, state.spec_x, state.spec_y,
+                                                      params.descriptor)
+            init_x, init_y = _with_orientation(state.desc_x, state.desc_y, source, target, state.spec_x,
+                                               state.spec_y, params.orientation)
+        with state.watch("assignment"):
+            sim = _descriptor_similarity(state.seeds_x.interpolate(source, init_x),
+                                         state.seeds_y.interpolate(target, init_y))
+            state.seed_map = linear_assignment(sim, method=params.backend, cancel=state.cancel)
+            state.confidence = sim[np.arange(state.n_seed), state.seed_map]
+    state.token.raise_if_cancelled()
 
-    # ---- coarse scale: DC iterations over the time schedule on the seeds
-    psi_s, phi_s = seeds_y.interpolate(target, psi), seeds_x.interpolate(source, phi)  # eigenfunctions at the seeds
+
+def seed_problem(state: KernelState) -> SeedProblem:
+    """Stage 3: the :class:`SeedProblem` — eigenfunctions interpolated at the seeds, ``F_Y F_Xᵀ`` of the plain
+    descriptor (the orientation block only decides the initial orientation), the anchors' ``C``."""
+    params, source, target = state.params, state.source, state.target
+    psi_s = state.seeds_y.interpolate(target, state.psi)
+    phi_s = state.seeds_x.interpolate(source, state.phi)
     desc_block = None
     if params.mu > 0:
-        # the plain descriptor: the orientation features only decide the initial orientation (see the module
-        # docstring)
-        if desc_x is None:
-            desc_x, desc_y = _descriptors(source, target, spec_x, spec_y, params.descriptor)
-        desc_block = _descriptor_similarity(seeds_x.interpolate(source, desc_x),
-                                            seeds_y.interpolate(target, desc_y))  # (seed x, seed y)
-    anchor_c = _alignment(psi[anchors_y], phi[anchors_x]) if anchors_x.size else 0.0
-    trace, monotone = [], True
-    landmarks_only = initial is not None and initial.map_xy is None
-    aligned = (confidence is not None and params.init_fraction < 1) or landmarks_only
-    total_steps = (len(taus) + aligned) * params.iters_per_time
-    step = 0
-    seed_cols = np.arange(n_seed)
+        if state.desc_x is None:
+            state.desc_x, state.desc_y = _descriptors(source, target, state.spec_x, state.spec_y,
+                                                      params.descriptor)
+        desc_block = _descriptor_similarity(state.seeds_x.interpolate(source, state.desc_x),
+                                            state.seeds_y.interpolate(target, state.desc_y))  # (seed x, seed y)
+    anchor_c = _alignment(state.psi[state.anchors_y], state.phi[state.anchors_x]) if state.anchors_x.size else 0.0
+    state.problem = SeedProblem(phi_s, psi_s, anchor_c, desc_block, params.mu)
+    return state.problem
 
-    def objective(mapping, c_mat, scale, decay_y, decay_x):
-        # the function the DC steps maximise at this time: ½ kernel term (its gradient is K_Y Π K_X)
-        # plus μ × descriptor similarity, with the kernel term scaled by a constant of this time
-        value = 0.5 * kernel_energy(c_mat, decay_y, decay_x) / scale
-        if desc_block is not None:
-            value += params.mu * float(desc_block[seed_cols, mapping].sum())
-        return value
 
-    def seed_score(c, decay_y, decay_x, kernel_scale):
-        """(n_seed, n_seed) float32 score (seed x, seed y) of the alignment ``c``, and the time's kernel scale.
+@dataclass(frozen=True)
+class DCRun:
+    """DC iterations at one time: the last map, the time's kernel scale, one trace entry per iteration and
+    the last objective."""
 
-        The kernel term is divided by ``kernel_scale`` (None: its own maximum) before μ × descriptor term is added.
-        """
-        g = _score(phi_s, psi_s, c.T, decay_x, decay_y)  # the assignment's rows are the x seeds
-        if kernel_scale is None:
-            kernel_scale = max(float(np.abs(g).max()), 1e-30)
-        if desc_block is not None:
-            g = g / np.float32(kernel_scale) + np.float32(params.mu) * desc_block
-        return g, kernel_scale
+    seed_map: np.ndarray
+    kernel_scale: float
+    entries: list
+    value: float | None
 
-    def dc_iterations(seed_map, prices, t_index, kernel_scale, warm_first):
-        """DC iterations at one time (a generator: yields progress, returns the map and the time's state).
 
-        ``prices`` (the auction's warm start) is updated in place; ``kernel_scale`` None: set from the first
-        score; ``warm_first``: the first score is far from the last one (a larger first ε).
-        """
-        nonlocal step, monotone
-        tau = taus[t_index]
-        decay_y, decay_x = decays(tau)
-        entries, value = [], None
-        for it in range(params.iters_per_time):
-            token.raise_if_cancelled()
-            with watch("kernels"):
-                c = _alignment(psi_s[seed_map], phi_s) + anchor_c
-                g, kernel_scale = seed_score(c, decay_y, decay_x, kernel_scale)
-                before = objective(seed_map, c, kernel_scale, decay_y, decay_x)
-            with watch("assignment"):
-                # the first score of a new time, or after the initial alignment, is further from the last one: a
-                # larger first ε (measured on the cats: 1.1 s instead of 3.3 s for the first change of time,
-                # 0.85 s instead of 5.1 s after the initial alignment, no cost later)
-                new_map = linear_assignment(g, method=params.backend, cancel=cancel, prices=prices,
-                                            eps_start=1e-2 if it == 0 and warm_first else None)
-            changed = int(np.sum(new_map != seed_map))
-            value = objective(new_map, _alignment(psi_s[new_map], phi_s) + anchor_c, kernel_scale, decay_y, decay_x)
-            # the DC guarantee holds from a permutation (a given initial map may map seeds together)
-            if np.unique(seed_map).size == seed_map.size and value < before - 1e-5 * abs(before):
-                monotone = False
-            seed_map = new_map
-            entries.append({"tau": float(tau), "iteration": it, "energy": value, "changed": changed})
-            step += 1
-            yield Progress("kernel matching", 0.1 + 0.6 * step / total_steps,
-                           f"time {t_index + 1}/{len(taus)}, iteration {it + 1}: energy {value:.6g}, "
-                           f"{changed} changed")
-            if changed == 0:
-                step += params.iters_per_time - it - 1
-                break
-        return seed_map, kernel_scale, entries, value
+def dc_iterations(state: KernelState, seed_map: np.ndarray, prices: np.ndarray, t_index: int,
+                  kernel_scale: float | None = None, warm_first: bool = True):
+    """Stage 5: up to ``iters_per_time`` :func:`dc_step` at the time ``taus[t_index]``; stops when the map
+    no longer changes.
 
-    # ---- coarse scale, first time: DC from the initial map, and (descriptor or landmark initialisation) DC from
-    # the initial alignment; the start that ends with the higher objective goes on (see the module docstring)
-    prices = np.zeros(n_seed)  # auction prices carried from one assignment to the next (warm start)
-    start_map = seed_map
-    seed_map, kernel_scale, entries, value = yield from dc_iterations(start_map, prices, 0, None, False)
+    A generator (yields :class:`Progress`); returns a :class:`DCRun`. ``prices`` (the auction's warm start) is
+    updated in place; ``kernel_scale`` None: set from the first score; ``warm_first``: the first score is far
+    from the last one (the auction starts at :data:`WARM_EPS_START`). Clears ``state.monotone`` if a step
+    lowers the objective.
+    """
+    params = state.params
+    tau = state.taus[t_index]
+    decay_y, decay_x = state.decays(tau)
+    entries, value = [], None
+    for it in range(params.iters_per_time):
+        state.token.raise_if_cancelled()
+        step = dc_step(state.problem, seed_map, decay_y, decay_x, kernel_scale, prices=prices,
+                       eps_start=WARM_EPS_START if it == 0 and warm_first else None, backend=params.backend,
+                       cancel=state.cancel, watch=state.watch)
+        kernel_scale, value, seed_map = step.kernel_scale, step.value, step.seed_map
+        if step.decreased:
+            state.monotone = False
+        entries.append({"tau": float(tau), "iteration": it, "energy": value, "changed": step.changed})
+        state.step += 1
+        yield Progress("kernel matching", PROGRESS_DC[0] + PROGRESS_DC[1] * state.step / state.total_steps,
+                       f"time {t_index + 1}/{len(state.taus)}, iteration {it + 1}: energy {value:.6g}, "
+                       f"{step.changed} changed")
+        if step.changed == 0:
+            state.step += params.iters_per_time - it - 1
+            break
+    return DCRun(seed_map, kernel_scale, entries, value)
+
+
+def aligned_start(state: KernelState, start_map: np.ndarray):
+    """The second start: one assignment on the kernel score at the largest time of only the most similar
+    initial matches (``init_fraction`` of them; with landmarks: the anchors alone), i.e. ``G`` of
+    :func:`seed_score` with ``C = Ψ_s[start_map[keep]]ᵀ Φ_s[keep] + C_anchors``.
+
+    A generator (yields :class:`Progress`); returns the start map (n_seed,) and its auction prices.
+    """
+    problem = state.problem
+    if state.landmarks_only:
+        keep = np.zeros(0, dtype=np.int64)  # the landmarks (anchors) alone
+        yield Progress("initial alignment", PROGRESS_DC[0], f"kernel score of the {state.anchors_x.size} landmarks")
+    else:
+        keep = most_similar_matches(state.confidence, state.params.init_fraction)
+        yield Progress("initial alignment", PROGRESS_DC[0],
+                       f"kernel score of the {keep.size} most similar initial matches")
+    with state.watch("kernels"):
+        c = _alignment(problem.psi_s[start_map[keep]], problem.phi_s[keep]) + problem.anchor_c
+        g, _ = seed_score(problem.phi_s, problem.psi_s, c, *state.decays(state.taus[0]), None,
+                          problem.desc_block, problem.mu)
+    prices = np.zeros(state.n_seed)
+    with state.watch("assignment"):
+        other_start = linear_assignment(g, method=state.params.backend, cancel=state.cancel, prices=prices)
+    return other_start, prices
+
+
+def choose_start(state: KernelState):
+    """Stage 4: DC iterations of the first time from the initial map and (descriptor or landmark
+    initialisation) from the :func:`aligned_start`; the start with the higher :func:`dc_objective` goes on
+    (both at the first start's kernel scale). A generator; sets ``seed_map``, ``prices``, ``dc_start``.
+    """
+    prices = np.zeros(state.n_seed)  # auction prices carried from one assignment to the next (warm start)
+    start_map = state.seed_map
+    best = yield from dc_iterations(state, start_map, prices, 0, None, warm_first=False)
     dc_start = "initial map"
-    if aligned:
-        if landmarks_only:
-            keep = np.zeros(0, dtype=np.int64)  # the landmarks (anchors) alone
-            yield Progress("initial alignment", 0.1, f"kernel score of the {anchors_x.size} landmarks")
-        else:
-            keep = np.argsort(-confidence, kind="stable")[:max(1, int(round(params.init_fraction * n_seed)))]
-            yield Progress("initial alignment", 0.1, f"kernel score of the {keep.size} most similar initial matches")
-        with watch("kernels"):
-            g, _ = seed_score(_alignment(psi_s[start_map[keep]], phi_s[keep]) + anchor_c, *decays(taus[0]), None)
-        other_prices = np.zeros(n_seed)
-        with watch("assignment"):
-            other_start = linear_assignment(g, method=params.backend, cancel=cancel, prices=other_prices)
-        other = yield from dc_iterations(other_start, other_prices, 0, kernel_scale, True)
-        if other[3] > value:
-            seed_map, _, entries, value = other
-            prices, dc_start = other_prices, "initial alignment"
-    trace.extend(entries)
-    for t_index in range(1, len(taus)):
-        seed_map, _, entries, _ = yield from dc_iterations(seed_map, prices, t_index, None, True)
-        trace.extend(entries)
+    if state.has_second_start:
+        other_start, other_prices = yield from aligned_start(state, start_map)
+        other = yield from dc_iterations(state, other_start, other_prices, 0, best.kernel_scale, warm_first=True)
+        if other.value > best.value:
+            best, prices, dc_start = other, other_prices, "initial alignment"
+    state.seed_map, state.prices, state.dc_start = best.seed_map, prices, dc_start
+    state.trace.extend(best.entries)
 
-    # ---- finer scales: grow the vertex sample, solve Voronoi cells with all current matches as anchors; there
-    # is always at least one (the seeds are surface points, the last scale is every vertex)
-    rows_y, rows_x = psi_s[seed_map], phi_s  # eigenfunctions at the current matches (first: the seeds)
-    matched_x = seeds_x.nearest_corners(source)  # vertices of the matches (cell centres)
-    matched_y = seeds_y.nearest_corners(target)[seed_map]
-    seed_vertices_x, seed_vertices_y = matched_x.copy(), matched_y.copy()
-    decay_y, decay_x = decays(taus[-1])
-    size = n_seed
-    last = False
+
+def cell_centres(vertices: np.ndarray, matched_x: np.ndarray, matched_y: np.ndarray, n_cells: int,
+                 pass_index: int) -> tuple[np.ndarray, np.ndarray]:
+    """Centres of the cells of one pass: farthest points among the matched source vertices.
+
+    The farthest-point set starts at the ``pass_index × CENTRE_STRIDE``-th matched vertex farthest from their
+    centroid, so every pass draws different centres; centres are made distinct on both sides (seeds
+    snapped to their vertices may share one).
+
+    Returns
+    -------
+    centres_x, centres_y : (c,) int
+        Source vertices and their matched target vertices, ``c ≤ n_cells``.
+    """
+    matched_pts = vertices[matched_x]
+    radius = np.linalg.norm(matched_pts - matched_pts.mean(axis=0), axis=1)
+    start = int(np.argsort(-radius, kind="stable")[min(pass_index * CENTRE_STRIDE, radius.size - 1)])
+    centres_pos = farthest_point_sampling(matched_pts, min(n_cells, matched_x.size), start=start)
+    _, first_x = np.unique(matched_x[centres_pos], return_index=True)
+    centres_pos = centres_pos[np.sort(first_x)]
+    _, first_y = np.unique(matched_y[centres_pos], return_index=True)
+    centres_pos = centres_pos[np.sort(first_y)]
+    return matched_x[centres_pos], matched_y[centres_pos]
+
+
+def transferred_cells(source, target, centres_x, centres_y, x_idx, y_idx, overlap: float):
+    """Geodesic Voronoi cells of the source sample ``x_idx`` around ``centres_x``, and the target cells: the
+    Voronoi cells of the sample ``y_idx`` around the centres' images ``centres_y``, widened across their
+    borders by about ``overlap × √area / 2`` (a source vertex near a border can reach its partner beyond the
+    transferred border). Returns two lists of index arrays, one entry per centre.
+    """
+    lab_x, _ = voronoi_cells(source, centres_x)
+    _, band_y = voronoi_bands(target, centres_y, overlap * np.sqrt(target.area))
+    in_y = np.zeros(target.n_vertices, dtype=bool)
+    in_y[y_idx] = True
+    x_cells = [x_idx[lab_x[x_idx] == cid] for cid in range(centres_x.size)]
+    y_cells = [members[in_y[members]] for members in band_y]
+    return x_cells, y_cells
+
+
+def multiscale_refinement(state: KernelState):
+    """Stage 6 (§8.3.2): grow the vertex sample by ``growth`` per scale until every vertex is included; at
+    each scale run ``passes`` refinement passes, each solving Voronoi cells (:func:`cell_centres`,
+    :func:`transferred_cells`, :func:`_solve_cells`) at the smallest time with all current matches as anchors.
+
+    There is always at least one finer scale (the seeds are surface points); its first pass takes the seeds'
+    matches (interpolated eigenfunctions) as anchors. A generator; returns ``map_xy`` (n_x,) and ``map_yx``
+    (n_y,) of the last pass (-1: unmatched).
+    """
+    params, source, target, watch = state.params, state.source, state.target, state.watch
+    n_x, n_y, psi, phi = state.n_x, state.n_y, state.psi, state.phi
+    rows_y, rows_x = state.problem.psi_s[state.seed_map], state.problem.phi_s  # eigenfunctions at the matches
+    matched_x = state.seeds_x.nearest_corners(source)  # vertices of the matches (cell centres)
+    matched_y = state.seeds_y.nearest_corners(target)[state.seed_map]
+    state.seed_vertices_x, state.seed_vertices_y = matched_x.copy(), matched_y.copy()
+    decay_y, decay_x = state.decays(state.taus[-1])
+    mass_y = state.spec_y.mass.diagonal()
+    size, last = state.n_seed, False
     while not last:
         size = int(min(max(n_x, n_y), np.ceil(size * params.growth)))
         last = size >= max(n_x, n_y)
-        x_idx = order_x[:size]
-        y_idx = order_y[:size]
+        x_idx, y_idx = state.order_x[:size], state.order_y[:size]
         capacity_y = None
         if params.capacity == "area":
             capacity_y = np.ones(n_y, dtype=np.int64)
             capacity_y[y_idx] = _capacities(x_idx.size, _sample_masses(target, mass_y, y_idx))
         for p in range(params.passes):
-            token.raise_if_cancelled()
+            state.token.raise_if_cancelled()
             with watch("kernels"):
-                c = _alignment(rows_y, rows_x) + anchor_c
-            n_cells = max(1, int(np.ceil(x_idx.size / (0.7 * params.max_cell))))
-            # cell centres: matched vertices, a different farthest-point set every pass
-            matched_pts = source.vertices[matched_x]
-            radius = np.linalg.norm(matched_pts - matched_pts.mean(axis=0), axis=1)
-            start = int(np.argsort(-radius, kind="stable")[min(p * 7, radius.size - 1)])
-            centres_pos = farthest_point_sampling(matched_pts, min(n_cells, matched_x.size), start=start)
-            # distinct centres on both sides (seeds snapped to their vertices may share one)
-            _, first_x = np.unique(matched_x[centres_pos], return_index=True)
-            centres_pos = centres_pos[np.sort(first_x)]
-            _, first_y = np.unique(matched_y[centres_pos], return_index=True)
-            centres_pos = centres_pos[np.sort(first_y)]
-            centres_x, centres_y = matched_x[centres_pos], matched_y[centres_pos]
+                c = _alignment(rows_y, rows_x) + state.problem.anchor_c
+            n_cells = max(1, int(np.ceil(x_idx.size / (CELL_FILL * params.max_cell))))
+            centres_x, centres_y = cell_centres(source.vertices, matched_x, matched_y, n_cells, p)
             with watch("cells"):
-                lab_x, _ = voronoi_cells(source, centres_x)
-                # target cells widened across their borders: a source vertex near a border can reach its
-                # partner beyond the transferred border
-                _, band_y = voronoi_bands(target, centres_y, params.cell_overlap * np.sqrt(target.area))
-                in_y = np.zeros(n_y, dtype=bool)
-                in_y[y_idx] = True
-                x_cells = [x_idx[lab_x[x_idx] == cid] for cid in range(centres_x.size)]
-                y_cells = [members[in_y[members]] for members in band_y]
+                x_cells, y_cells = transferred_cells(source, target, centres_x, centres_y, x_idx, y_idx,
+                                                     params.cell_overlap)
             with watch("assignment"):
                 cell_map, cell_map_yx = _solve_cells(x_cells, y_cells, psi, phi, c, decay_y, decay_x, params,
-                                                     cancel, n_y, capacity_y)
+                                                     state.cancel, n_y, capacity_y)
             keys = np.concatenate(x_cells)
             ok = cell_map >= 0
             matched_x, matched_y = keys[ok], cell_map[ok]
             rows_y, rows_x = psi[matched_y], phi[matched_x]
-            yield Progress("multiscale", 0.7 + 0.3 * size / max(n_x, n_y),
+            yield Progress("multiscale", PROGRESS_MULTISCALE[0] + PROGRESS_MULTISCALE[1] * size / max(n_x, n_y),
                            f"{size} samples, pass {p + 1}/{params.passes}: {centres_x.size} cells")
     full_map_xy = -np.ones(n_x, dtype=np.int64)
     full_map_xy[keys] = cell_map
-    full_map_yx = cell_map_yx
+    return full_map_xy, cell_map_yx
+
+
+def kernel_result(state: KernelState, full_map_xy: np.ndarray, full_map_yx: np.ndarray):
+    """Stage 7: the kernel energy ``<Π, K_Y Π K_X>`` of the final map at the smallest time, the optional
+    pointwise smoothing (:func:`_pointwise_from_basis`), the :class:`MatchResult`. A generator."""
+    params, k, watch = state.params, state.k, state.watch
+    psi, phi, anchor_c, trace = state.psi, state.phi, state.problem.anchor_c, state.trace
+    monotone, dc_start, n_seed = state.monotone, state.dc_start, state.n_seed
+    seed_vertices_x, seed_vertices_y = state.seed_vertices_x, state.seed_vertices_y
+    decay_y, decay_x = state.decays(state.taus[-1])
     c = _alignment(psi[full_map_xy[full_map_xy >= 0]], phi[full_map_xy >= 0]) + anchor_c
     energy = kernel_energy(c, decay_y, decay_x)
     if params.smooth_k > 0:
-        yield Progress("smoothing", 0.98, f"pointwise map from a {min(params.smooth_k, k)}-dimensional basis")
+        yield Progress("smoothing", PROGRESS_SMOOTHING,
+                       f"pointwise map from a {min(params.smooth_k, k)}-dimensional basis")
         with watch("smoothing"):
             full_map_xy, full_map_yx = _pointwise_from_basis(full_map_xy, full_map_yx, phi, psi,
                                                              min(params.smooth_k, k))
     extras = {
-        "energy_trace": np.array([e["energy"] for e in trace]),
         "changed_trace": np.array([e["changed"] for e in trace]),
         "tau_trace": np.array([e["tau"] for e in trace]),
         "monotone": monotone, "start": dc_start, "unmatched_x": int(np.sum(full_map_xy < 0)),
         "unmatched_y": int(np.sum(full_map_yx < 0)), "n_eigs": k, "n_seeds": n_seed,
         "seeds_x": seed_vertices_x, "seeds_matched_y": seed_vertices_y,
-        "energy_meaning": "QAP kernel energy <Π, K_Y Π K_X> at the smallest time (higher is better); "
-                          "energy_trace: the objective of each time (½ scaled kernel term + μ descriptor term)",
-        "energy_sense": "max",
     }
     yield Progress("done", 1.0, f"energy {energy:.6g}")
-    return MatchResult("kernel-matching", full_map_xy, full_map_yx, energy, watch.times, extras=extras)
+    return MatchResult("kernel-matching", full_map_xy, full_map_yx, energy, watch.times, energy_sense="max",
+                       energy_meaning="QAP kernel energy <Π, K_Y Π K_X> at the smallest time (higher is better); "
+                                      "energy_trace: the objective after each DC iteration (½ scaled kernel term "
+                                      "+ μ descriptor term)",
+                       energy_trace=np.array([e["energy"] for e in trace]), extras=extras)
 
 
-def solve_kernel_matching(source, target, params: KernelMatchingParams, token,
+def kernel_matching(source, target, params: KernelMatchingParams, token, initial: InitialMatch | None = None):
+    """Solver generator (thesis ch. 8, see the module docstring); returns a :class:`MatchResult`.
+
+    Prepare the spectra and seeds, assign the seeds initially, run the DC iterations of the first time from
+    one or two starts and keep the better, continue over the decreasing times, refine on finer scales.
+    """
+    state = yield from prepare(source, target, params, token)
+    yield from initial_seed_map(state, initial)
+    seed_problem(state)
+    yield from choose_start(state)
+    for t_index in range(1, len(state.taus)):
+        run = yield from dc_iterations(state, state.seed_map, state.prices, t_index)
+        state.seed_map = run.seed_map
+        state.trace.extend(run.entries)
+    full_map_xy, full_map_yx = yield from multiscale_refinement(state)
+    return (yield from kernel_result(state, full_map_xy, full_map_yx))
+
+
+def solve_kernel_matching(source, target, params: KernelMatchingParams, token, *,
                           initial: InitialMatch | None = None):
     """Registered solver (``initial``: optional :class:`InitialMatch` for refinement)."""
     return (yield from kernel_matching(source, target, params, token, initial))

@@ -22,14 +22,11 @@ baseline's map is refined). Output: a dense map.
    likely partner within the band. Matches outside the band (outliers far
    from the current map) drop out.
 
-Measured on wolf0 → wolf1 from 10 % of the ground-truth matches with 20 % of
-them corrupted: the global stage with the assignment puts 99.7 % of the
-vertices within 0.05 (maximum likelihood: 86 %, it snaps to the partners of
-the nearest matches). On meshes ``bands`` is empty by default: a localized
-stage on a 0.2 % band with 60 harmonics did not improve the ML map (84 %)
-— a few dozen harmonics of a band that covers a whole surface are too
-smooth to sharpen it. On curves (:mod:`.contour2d`) the bands are narrow
-and the localized stage is used.
+The assignment extracts the map because the maximum-likelihood map snaps
+to the partners of the nearest matches. On meshes ``bands`` is empty by
+default (a few dozen harmonics of a band covering a whole surface are too
+smooth to sharpen a map); on curves (:mod:`.contour2d`) the bands are narrow
+and the localized stage is used. Measurements: ``docs/decisions.md``.
 
 Times are relative: ``t`` multiplies eigenvalues scaled by the area of a
 surface or the squared length of a curve.
@@ -170,8 +167,8 @@ def refine(fx: pm.Factor, fy: pm.Factor, ix, iy, target_points: np.ndarray, para
     return map_xy, map_yx, extras
 
 
-def solve_product_manifold(source, target, params: ProductManifoldParams, token=None, *, initial=None):
-    from corrlib.methods.kernel_matching import InitialMatch
+def solve_product_manifold(source, target, params: ProductManifoldParams, token, *, initial=None):
+    from corrlib.methods.base import InitialMatch
 
     watch = Stopwatch()
     if initial is None:  # nothing given (e.g. from the studio): refine the functional-maps baseline

@@ -1,26 +1,52 @@
 """The one registry of correspondence methods, used by the CLI, the studio and the benchmarks.
 
 A method registers a :class:`MethodSpec`: its name, the input kinds it
-accepts, its parameter dataclass and its solver generator
+accepts, its parameter dataclass and its solver generator, a :class:`Solver`
 
-``solve(source, target, params, token) -> Generator[Progress, None, MatchResult]``.
+``solve_<name>(source, target, params, token) -> Generator[Progress, None, MatchResult]``
+
+(a :class:`RefiningSolver` also takes a keyword-only ``initial=``).
 
 :func:`solve` runs one to completion; the studio iterates the generator in a
-worker thread.
+worker thread. The registry does not import the methods: the package
+``corrlib.methods`` does (its ``__init__`` runs before any of its modules,
+this one included, is imported), so the registry is complete whenever it is
+reachable.
 """
 
 from __future__ import annotations
 
 import time
-from collections.abc import Callable, Generator
+from collections.abc import Generator
 from dataclasses import asdict, dataclass
+from typing import Any, Protocol
 
 from corrlib.errors import InputError, ParameterError
 from corrlib.methods.base import MatchResult, make_params, validate_params
 from corrlib.progress import CancelToken, Progress, run
 from corrlib.shapes import Contour2D, TriMesh
 
-SolveFn = Callable[..., Generator[Progress, None, MatchResult]]
+
+
+class Solver(Protocol):
+    """A method's solver: a generator of progress reports that returns the result.
+
+    ``token`` is always given (the registry makes one); the solver checks it
+    between stages and raises :class:`~corrlib.errors.Cancelled` through it.
+    """
+
+    def __call__(self, source: Any, target: Any, params: Any, token: CancelToken
+                 ) -> Generator[Progress, None, MatchResult]: ...
+
+
+class RefiningSolver(Protocol):
+    """A solver that can also start from another map or landmarks (``MethodSpec.refines``)."""
+
+    def __call__(self, source: Any, target: Any, params: Any, token: CancelToken, *, initial: Any = None
+                 ) -> Generator[Progress, None, MatchResult]: ...
+
+
+SolveFn = Solver | RefiningSolver
 
 
 @dataclass(frozen=True)
@@ -62,24 +88,18 @@ _REGISTRY: dict[str, MethodSpec] = {}
 def register(spec: MethodSpec) -> MethodSpec:
     """Add a method to the registry (a name can be registered once)."""
     if spec.name in _REGISTRY and _REGISTRY[spec.name] is not spec:
-        raise ValueError(f"method {spec.name!r} is already registered")
+        raise ParameterError(f"method {spec.name!r} is already registered")
     _REGISTRY[spec.name] = spec
     return spec
 
 
-def _ensure_loaded() -> None:
-    import corrlib.methods  # noqa: F401  (its __init__ imports every method module)
-
-
 def all_methods() -> list[MethodSpec]:
     """Every registered method, best-ranked first."""
-    _ensure_loaded()
     return sorted(_REGISTRY.values(), key=lambda s: (-s.rank, s.name))
 
 
 def get_method(name: str) -> MethodSpec:
     """The method called ``name``; :class:`ParameterError` lists the known names otherwise."""
-    _ensure_loaded()
     if name not in _REGISTRY:
         raise ParameterError(f"unknown method {name!r} (available: {', '.join(sorted(_REGISTRY))})")
     return _REGISTRY[name]
@@ -121,7 +141,7 @@ def solve_iter(method: str | MethodSpec, source, target, params=None, token: Can
     if initial is not None and not spec.refines:
         raise InputError(f"method {spec.name!r} does not take an initial map")
     start = time.perf_counter()
-    gen = spec.solve(source, target, params, token, initial=initial) if initial is not None else \
+    gen = spec.solve(source, target, params, token, initial=initial) if spec.refines else \
         spec.solve(source, target, params, token)
     result = yield from gen
     result.timings.setdefault("total", time.perf_counter() - start)
@@ -145,7 +165,7 @@ def solve(method: str | MethodSpec, source, target, params=None, *, callback=Non
     token : CancelToken, optional
     initial : optional
         Starting point for methods that refine a map (``spec.refines``), e.g.
-        :class:`corrlib.methods.kernel_matching.InitialMatch`.
+        :class:`corrlib.methods.base.InitialMatch`.
 
     Returns
     -------

@@ -1,0 +1,192 @@
+"""The studio's job factories: every computation the GUI needs runs here, in the worker thread.
+
+Each ``*_job`` function returns a factory ``factory(token) -> Generator[Progress, None, payload]``
+for :meth:`app.worker.JobRunner.start`. Payloads hold numpy arrays and corrlib objects only;
+the GUI-thread slots turn them into widgets and VTK objects without computing anything.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from corrlib.errors import CorrError, FileFormatError
+from corrlib.progress import Progress
+from corrlib.shapes import Contour2D, TriMesh
+
+#: geodesic distance method of the studio's error figures (fast enough to run after every solve)
+ERROR_GEODESICS = "heat"
+#: eigenpairs computed for the pair view's "function" mode (the second one is drawn)
+FUNCTION_EIGENPAIRS = 3
+
+
+def describe(shape) -> str:
+    """One-paragraph summary of a shape for the Shapes dock (runs the mesh validation report)."""
+    if isinstance(shape, TriMesh):
+        warnings = [f.message for f in shape.report() if f.level == "warning"]
+        text = f"{shape.name}: {shape.n_vertices} vertices, {shape.n_faces} faces, area {shape.area:.4g}"
+        return text + ("\n  " + "\n  ".join(warnings) if warnings else "\n  validation: no problems")
+    if isinstance(shape, Contour2D):
+        return f"{shape.name}: contour, {shape.n_points} points, length {shape.length:.4g}"
+    return "none"
+
+
+# ---------------------------------------------------------------------- loading
+
+
+@dataclass
+class LoadedShape:
+    """Payload of :func:`load_job`: the shape and its description (validation included)."""
+
+    path: str
+    shape: TriMesh | Contour2D
+    description: str
+
+
+def read_shape(path: str) -> TriMesh | Contour2D:
+    """A mesh (by suffix) or a contour/silhouette; any failure becomes a :class:`CorrError` naming the file."""
+    from corrlib.io import load_shape
+
+    try:
+        return load_shape(path)
+    except CorrError:
+        raise
+    except Exception as exc:  # anything unexpected from a third-party reader
+        raise FileFormatError(f"{path}: cannot load: {exc}") from exc
+
+
+def load_job(path: str):
+    """Job factory: read and validate ``path``; returns a :class:`LoadedShape`."""
+
+    def factory(_token):
+        yield Progress("loading", -1.0, str(path))
+        shape = read_shape(path)
+        yield Progress("validating", -1.0, shape.name)
+        return LoadedShape(str(path), shape, describe(shape))
+
+    return factory
+
+
+# ---------------------------------------------------------------------- methods
+
+
+@dataclass
+class MapErrors:
+    """Geodesic errors of a map against ground truth, unmatched vertices left out.
+
+    Attributes
+    ----------
+    report : ErrorReport or None
+        Errors of the ground-truth rows whose source vertex is matched (None if none is).
+    per_vertex : (n_x,) float
+        Error of every ground-truth source vertex; NaN elsewhere and where unmatched.
+    n_unmatched : int
+        Ground-truth rows left out because the map leaves their source vertex unmatched (-1).
+    n_rows : int
+        Ground-truth rows in total.
+    """
+
+    report: object
+    per_vertex: np.ndarray
+    n_unmatched: int
+    n_rows: int
+
+
+def map_errors(map_xy, target: TriMesh, gt_source, gt_target) -> MapErrors:
+    """Errors of ``map_xy`` on the ground-truth rows it matches; unmatched rows are counted, not scored."""
+    from corrlib.evaluation import geodesic_errors
+
+    map_xy = np.asarray(map_xy)
+    gt_source, gt_target = np.asarray(gt_source), np.asarray(gt_target)
+    predicted = map_xy[gt_source]
+    matched = predicted >= 0
+    per_vertex = np.full(map_xy.shape[0], np.nan)
+    report = None
+    if matched.any():
+        # the matched rows as a map of their own: row i of the sub-map is ground-truth row i
+        report = geodesic_errors(predicted[matched], target, np.arange(int(matched.sum())), gt_target[matched],
+                                 method=ERROR_GEODESICS)
+        per_vertex[gt_source[matched]] = report.errors
+    return MapErrors(report, per_vertex, int(np.count_nonzero(~matched)), int(gt_source.size))
+
+
+def source_function(source: TriMesh) -> np.ndarray:
+    """(n_x,) the source's second Laplace-Beltrami eigenfunction (the pair view's "function" mode)."""
+    from corrlib.geometry.spectrum import mesh_spectrum
+
+    return np.asarray(mesh_spectrum(source, FUNCTION_EIGENPAIRS).evecs[:, 1])
+
+
+def sequence_of(result, source: TriMesh, target: TriMesh) -> tuple:
+    """``(positions, description)`` for the sequence view: the method's deformation, else linear."""
+    from corrlib.methods.divergence_free import SEQUENCE_T_MAX
+    from corrlib.morph import FLOW_DESCRIPTION, LINEAR_DESCRIPTION, has_deformation, sequence_positions
+
+    description = FLOW_DESCRIPTION if has_deformation(result) else LINEAR_DESCRIPTION
+    return sequence_positions(result, source, target, t_max=SEQUENCE_T_MAX), description
+
+
+@dataclass
+class MethodOutcome:
+    """Payload of :func:`method_job`: the result and everything the views need to show it.
+
+    Attributes
+    ----------
+    result : MatchResult
+    source, target
+        The shapes the method ran on (a result is shown only if they are still loaded).
+    errors : MapErrors or None
+        With ground truth on a target mesh and a vertex map.
+    function : (n_x,) float or None
+        Source function for the pair view (see :func:`source_function`).
+    n_unmatched : int
+        Source vertices the map leaves unmatched (-1).
+    note : str
+        Why the errors are missing although ground truth was given (else empty).
+    sequence : tuple (callable, str) or None
+        ``positions(t) -> (n_x, 3)`` for the sequence view (the flow integrated up to
+        :data:`~corrlib.methods.divergence_free.SEQUENCE_T_MAX` for a divergence-free
+        result, else linear) and a one-line description of it.
+    """
+
+    result: object
+    source: object = None
+    target: object = None
+    errors: MapErrors | None = None
+    function: np.ndarray | None = None
+    n_unmatched: int = 0
+    note: str = ""
+    sequence: tuple | None = None
+
+    @property
+    def report(self):
+        """The :class:`~corrlib.evaluation.ErrorReport` of the matched rows, or None."""
+        return None if self.errors is None else self.errors.report
+
+
+def method_job(name: str, source, target, params, gt=None, *, view_data: bool = True):
+    """Job factory: run method ``name``, then its error report (with ``gt``) and, with
+    ``view_data``, the pair view's source function; returns a :class:`MethodOutcome`."""
+    from corrlib.methods import solve_iter
+
+    def factory(token):
+        result = yield from solve_iter(name, source, target, params, token)
+        outcome = MethodOutcome(result, source, target)
+        map_xy = result.map_xy
+        if map_xy is not None:
+            outcome.n_unmatched = int(np.count_nonzero(np.asarray(map_xy) < 0))
+        if gt is not None and map_xy is not None and isinstance(target, TriMesh):
+            yield Progress("geodesic errors", -1.0, f"{np.asarray(gt[0]).size} ground-truth rows")
+            try:
+                outcome.errors = map_errors(map_xy, target, gt[0], gt[1])
+            except CorrError as exc:  # a bad ground truth must not lose the result
+                outcome.note = f"no error figures: {exc}"
+        if view_data and isinstance(source, TriMesh) and isinstance(target, TriMesh):
+            yield Progress("source function", -1.0, "eigenfunction for the pair view")
+            outcome.function = source_function(source)
+            yield Progress("sequence", -1.0, "positions between the poses")
+            outcome.sequence = sequence_of(result, source, target)
+        return outcome
+
+    return factory

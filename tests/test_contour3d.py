@@ -320,7 +320,8 @@ def test_elastic_energy_does_not_collapse_where_the_paper_energy_does():
     scores = {}
     for energy in ("paper", "elastic"):
         # the paper's node cost, so that only the path energy differs
-        result = solve("contour3d", query.contour, lion, n_contour=60, energy=energy, features="paper", axis_weight=0)
+        result = solve("contour3d", query.contour, lion, n_contour=60, energy=energy, features="paper", axis_weight=0,
+                       model="whole")
         assert result.search.optimal
         gt = query.ground_truth(result.path.contour_points, lion.vertices)
         scores[energy] = score_curve(result.map_xy, result.path.vertices, gt, lion, query.length_3d)

@@ -110,9 +110,9 @@ def capsule_and_ellipse():
     return contour, mesh
 
 
-def solve_direction(query, target, mesh, params, flipped):
-    distances = feature_distances(query.features, target.features)
-    scale = axis_scale(query, target, distances, params)
+def solve_direction(query, target, mesh, params, flipped, model="half", unit_model="half"):
+    distances = feature_distances(query.features, target.features[model])
+    scale = axis_scale(query, target, feature_distances(query.features, target.features[unit_model]).mean(), params)
     cost = distances + scale * axis_mismatch(query.axis.coordinate, target.axis.coordinate, flipped=flipped)
     graph = product_graph(cost, query.points, target.vertices, mesh.adjacency, params, float(distances.mean()))
     return run(branch_and_bound(graph))
@@ -136,6 +136,22 @@ def test_both_axis_directions_are_solved_and_the_lower_energy_is_kept(energy):
     plain = solve("contour3d", contour, mesh, n_contour=24, k=12, energy=energy, axis_weight=0)
     assert plain.extras["axis_reversed"] is False
     assert plain.energy < result.energy
+
+
+def test_auto_model_keeps_the_lower_energy_of_both_shape_models():
+    """model=auto searches the half-shape and the whole-surface readings (both axis directions each) at once:
+    its optimum is the lowest of the four searched independently, in one unit (the whole model's)."""
+    contour, mesh = capsule_and_ellipse()
+    params = Contour3DParams(n_contour=24, k=12, model="auto")
+    result = solve("contour3d", contour, mesh, n_contour=24, k=12, model="auto")
+    query, target = prepare_query(contour, params), prepare_mesh(mesh, params)
+    assert set(target.features) == {"whole", "half"}
+    energies = {(model, flipped): solve_direction(query, target, mesh, params, flipped, model, "whole").energy
+                for model in ("whole", "half") for flipped in (False, True)}
+    best = min(energies, key=energies.get)
+    assert result.energy == pytest.approx(energies[best], rel=1e-12)
+    assert (result.extras["model"], result.extras["axis_reversed"]) == best
+    assert result.search.optimal
 
 
 @pytest.mark.parametrize("seeds", [(0, 1), (2, 3, 4), (5,)])

@@ -43,6 +43,24 @@ graphs of both ``a_2D`` and ``1 − a_2D`` and keeps the lower energy. A
 closed curve on the mesh may run either way, so the contour's orientation
 and its mirror image need no extra search.
 
+Shape model (ours; ``model``): what the filled silhouette is matched as.
+A silhouette of a bilaterally symmetric shape seen across its plane of
+symmetry (an animal or a person from the side) is one half of the surface,
+cut open along its curve of intrinsic symmetry and flattened: the outline
+runs along that curve (back, belly, head, tail) and round the near limbs,
+and the filled interior is a disk with a free (Neumann) boundary. Functions
+on that half are the functions the reflection leaves unchanged, so its
+spectrum is the even part of the surface's spectrum
+(:mod:`corrlib.descriptors.symmetry`: the reflection from descriptors that
+are even and odd under it, then Rayleigh–Ritz on the even subspace).
+``model="half"`` (default) computes the mesh features from those even
+eigenpairs, so that both sides of every feature distance describe a disk
+with a boundary; ``"whole"`` uses the closed surface's eigenpairs (the
+paper); ``"auto"`` searches both and keeps the lower energy (both measured
+in the unit of the whole model). Half features are the same at a point and
+at its mirror image, so the matched curve may pass on either side of the
+body, as a silhouette cannot tell them apart either.
+
 Scale normalisation (our definition, documented because the paper's edge
 length mixes 2D and 3D units): the mesh is scaled to unit surface area and
 the contour to enclose area ``area_ratio`` (default 1/2: a silhouette covers
@@ -51,7 +69,8 @@ before the features are computed (the WKS energy range
 ``log λ_max / 1.02`` is not scale-covariant, so without this the features
 would depend on the input units). The matching and its energy therefore do
 not depend on the units, position or orientation of either input, and
-energies are comparable across meshes (retrieval ranks by them).
+energies are comparable across meshes (retrieval ranks by them). The half
+shape has half the surface's area, the same as the contour's.
 
 Energies (``energy``): ``paper`` is the CVPR 2016 energy on the first-order
 product graph; ``elastic`` adds stretching, bending and the rule against
@@ -72,6 +91,7 @@ import numba
 import numpy as np
 
 from corrlib.descriptors.spectral import hks, wks
+from corrlib.descriptors.symmetry import K_FINAL, even_spectrum, mesh_reflection
 from corrlib.errors import ContourError, InputError
 from corrlib.geometry.cyclic_paths import ProductGraph, branch_and_bound_union
 from corrlib.geometry.elastic_paths import ElasticProductGraph
@@ -83,6 +103,12 @@ from corrlib.methods.base import ContourPath, MatchResult, SearchCertificate, pa
 from corrlib.methods.registry import MethodSpec, register
 from corrlib.progress import Progress, Stopwatch
 from corrlib.shapes import Contour2D, TriMesh
+
+
+#: the shape models that each value of ``model`` matches against
+MODELS = {"auto": ("whole", "half"), "half": ("half",), "whole": ("whole",)}
+#: eigenpairs of the mesh per even eigenpair asked for (about half of the eigenfunctions are even)
+HALF_EIGENPAIRS_PER_K = 3
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -112,6 +138,11 @@ class Contour3DParams:
     axis_weight: float = param(1.0, label="Axis weight", low=0.0, high=1e3,
                                help="Weight of the intrinsic-axis node cost, in units of the mean feature distance "
                                     "(0: the paper's node cost).")
+    model: str = param("half", label="Shape model", choices=("auto", "half", "whole"),
+                       help="What the filled silhouette is matched as: half: one half of the mesh cut along its "
+                            "curve of intrinsic symmetry (a view across the plane of symmetry, e.g. an animal "
+                            "from the side); whole: the whole surface flattened (the paper); auto: both, the "
+                            "lower energy wins.")
     energy: str = param("paper", label="Energy", choices=("paper", "elastic"),
                         help="paper: feature cost times product length (CVPR 2016); elastic: plus stretching, "
                              "bending and no immediate reversal on the curve (second order, Roetzer et al. 2023).")
@@ -234,12 +265,13 @@ class PreparedMesh:
     ----------
     vertices : (n, 3) float
         Centred and scaled to unit surface area.
-    features : (n, d) float
+    features : dict of str -> (n, d) float
+        The features of every shape model asked for (``"whole"``, ``"half"``).
     axis : IntrinsicAxis
     """
 
     vertices: np.ndarray
-    features: np.ndarray
+    features: dict[str, np.ndarray]
     axis: IntrinsicAxis
 
 
@@ -283,18 +315,30 @@ def prepare_mesh(mesh: TriMesh, params: Contour3DParams) -> PreparedMesh:
     if mesh.n_vertices <= params.k:
         raise InputError(f"{mesh.name}: {mesh.n_vertices} vertices are too few for k={params.k} Laplace–Beltrami "
                          f"eigenpairs (at most {mesh.n_vertices - 1}); lower k or use a finer mesh")
-    spectrum = mesh_spectrum(mesh, params.k)
+    models = MODELS[params.model]
+    k_mesh = params.k if models == ("whole",) else max(HALF_EIGENPAIRS_PER_K * params.k, K_FINAL)
+    if mesh.n_vertices <= k_mesh:
+        raise InputError(f"{mesh.name}: {mesh.n_vertices} vertices are too few for the {k_mesh} eigenpairs that "
+                         f"model={params.model!r} needs; use model='whole', lower k or a finer mesh")
+    spectrum = mesh_spectrum(mesh, k_mesh)
+    mass = spectrum.mass.diagonal()
+    features = {}
     # eigenvalues of the mesh scaled to unit area (see the module docstring)
-    feats = spectral_features(spectrum.evals * mesh.area, spectrum.evecs, spectrum.mass.diagonal(), params)
+    if "whole" in models:
+        features["whole"] = spectral_features(spectrum.evals[:params.k] * mesh.area, spectrum.evecs[:, :params.k],
+                                              mass, params)
+    if "half" in models:
+        evals, evecs = even_spectrum(spectrum, mesh_reflection(mesh, spectrum), params.k)
+        features["half"] = spectral_features(evals * mesh.area, evecs, mass, params)
     verts = (mesh.vertices - mesh.vertices.mean(axis=0)) / np.sqrt(mesh.area)
-    axis = intrinsic_axis(spectrum.evals, spectrum.evecs, spectrum.mass.diagonal())
-    return PreparedMesh(verts, feats, axis)
+    axis = intrinsic_axis(spectrum.evals[:params.k], spectrum.evecs[:, :params.k], mass)
+    return PreparedMesh(verts, features, axis)
 
 
-def axis_scale(query: PreparedQuery, mesh: PreparedMesh, distances: np.ndarray, params: Contour3DParams) -> float:
+def axis_scale(query: PreparedQuery, mesh: PreparedMesh, mean_distance: float, params: Contour3DParams) -> float:
     """Factor ``w c d̄`` of the axis term (see the module docstring); 0 turns the term off."""
     confidence = min(query.axis.confidence, mesh.axis.confidence)
-    return float(params.axis_weight * confidence * distances.mean())
+    return float(params.axis_weight * confidence * mean_distance)
 
 
 def product_graph(cost: np.ndarray, contour_points: np.ndarray, mesh_vertices: np.ndarray, adjacency,
@@ -320,31 +364,36 @@ def match_prepared(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams,
     yield Progress("mesh features", 0.05)
     with watch("features"):
         target = prepare_mesh(mesh, params)
-        distances = feature_distances(query.features, target.features)
-        cost = distances + label_penalty(query.labels, mesh.labels, params.tau)
-        scale = axis_scale(query, target, distances, params)
+        distances = {model: feature_distances(query.features, feats) for model, feats in target.features.items()}
+        labels = label_penalty(query.labels, mesh.labels, params.tau)
+        # one unit for every model, so that their energies compare: the mean distance of the first model
+        unit_distance = float(next(iter(distances.values())).mean())
+        scale = axis_scale(query, target, unit_distance, params)
     token.raise_if_cancelled()
-    # the axis has no direction: one branch-and-bound over both readings
+    # the axis has no direction, the model is chosen by energy: one branch-and-bound over every combination
     directions = (False, True) if scale > 0 else (False,)
-    unit_cost = float(cost.mean())
-    graphs = [product_graph(cost + scale * axis_mismatch(query.axis.coordinate, target.axis.coordinate,
-                                                         flipped=flipped) if scale > 0 else cost,
+    readings = [(model, flipped) for model in distances for flipped in directions]
+    unit_cost = float(np.mean(next(iter(distances.values())) + labels))
+    graphs = [product_graph(distances[model] + labels
+                            + (scale * axis_mismatch(query.axis.coordinate, target.axis.coordinate, flipped=flipped)
+                               if scale > 0 else 0.0),
                             query.points, target.vertices, mesh.adjacency, params, unit_cost)
-              for flipped in directions]
-    yield Progress("branch and bound", 0.1, f"{graphs[0].m} x {graphs[0].n} product graph"
-                   + (", both directions of the axis" if scale > 0 else ""))
+              for model, flipped in readings]
+    yield Progress("branch and bound", 0.1, f"{graphs[0].m} x {graphs[0].n} product graph, {len(graphs)} readings "
+                                            "(shape model, direction of the axis)")
     with watch("search"):
         bb = yield from branch_and_bound_union(graphs, eps=params.eps, token=token,
                                                max_iterations=params.max_iterations)
     path = bb.path
     matched = path.matched_vertices(graphs[bb.graph_index].m)
-    extras = {"axis_reversed": bool(directions[bb.graph_index])}
+    model, flipped = readings[bb.graph_index]
+    extras = {"axis_reversed": bool(flipped), "model": model}
     yield Progress("done", 1.0, f"energy {bb.energy:.6g} after {bb.iterations} iterations")
     return MatchResult("contour3d", map_xy=matched, map_yx=None, energy=bb.energy, timings=watch.times,
                        path=ContourPath(query.contour.points, path.vertices, path.curve_index, path.layers),
                        search=SearchCertificate.of(bb), extras=extras,
-                       energy_meaning=f"{params.energy} product-graph path energy (unit-area mesh, contour area "
-                                      f"{params.area_ratio:g}, axis weight {params.axis_weight:g})")
+                       energy_meaning=f"{params.energy} product-graph path energy ({model} shape model, unit-area "
+                                      f"mesh, contour area {params.area_ratio:g}, axis weight {params.axis_weight:g})")
 
 
 def solve_contour3d(source: Contour2D, target: TriMesh, params: Contour3DParams, token):

@@ -1,0 +1,147 @@
+"""The intrinsic left–right reflection of a shape and the spectrum of its half.
+
+**The reflection.** An intrinsic isometry ``S`` of a shape onto itself
+commutes with the Laplace–Beltrami operator, so its functional map in the
+eigenbasis, ``C = Φᵀ M Φ∘S``, is block diagonal over the eigenspaces and
+``±1`` on simple eigenvalues (Ovsjanikov, Sun, Guibas, "Global intrinsic
+symmetries of shapes", SGP 2008). For a reflection it is found like any
+functional map (Ovsjanikov et al. 2012), with descriptors whose behaviour
+under ``S`` is known:
+
+* intrinsic descriptors (HKS, WKS) are invariant under every isometry:
+  ``F ∘ S = F``;
+* signed area forms ``n · (∇f × ∇g)`` of HKS pairs change sign under an
+  orientation-reversing isometry (:mod:`corrlib.descriptors.orientation`):
+  ``O ∘ S = -O``.
+
+So ``C`` minimises ``‖C [F, O] − [F, −O]‖² + w ‖CΛ − ΛC‖²`` (coefficients
+of the descriptors; no search over sign sequences), and ZoomOut (Melzi et
+al. 2019) turns it into the pointwise map :func:`reflection_map`.
+
+**The half shape.** Functions with ``f ∘ S = f`` are the functions on the
+quotient ``X / S``, one half of the shape cut open along the curve of
+symmetry, with a Neumann condition on that cut; their eigenpairs are the
+even eigenpairs of ``X`` (:func:`even_spectrum`). A silhouette of a
+bilaterally symmetric shape seen across its plane of symmetry (an animal
+from the side, a human from the side) is that half, flattened: its outline
+is the curve of symmetry (back, belly, head, tail) with the near limbs, and
+its filled interior has the Neumann spectrum of a flat disk with boundary.
+The spectral features of the even eigenpairs are therefore the 3D
+counterpart of a filled silhouette's features, the boundary included, which
+the features of the whole closed surface are not.
+"""
+
+from __future__ import annotations
+
+import numpy as np
+
+from corrlib import cache
+from corrlib.descriptors.orientation import orientation_descriptors
+from corrlib.descriptors.spectral import hks, wks
+from corrlib.errors import InputError, ParameterError
+from corrlib.geometry.fmaps import fmap_least_squares, zoomout
+
+#: scales of the even probes (HKS and WKS each) and of the HKS whose pairs give the odd probes
+EVEN_SCALES = 16
+ODD_SCALES = 8
+#: the reflection's functional map is estimated on this many eigenfunctions, then refined by ZoomOut
+K_INIT = 20
+K_FINAL = 60
+ZOOMOUT_STEP = 5
+#: Laplacian commutativity weight (eigenvalues scaled to [0, 1]), as in the functional-maps baseline
+COMMUTATIVITY = 0.1
+
+
+def _normalised(functions: np.ndarray, mass: np.ndarray) -> np.ndarray:
+    """Mean-free columns of unit M-norm."""
+    centred = functions - (mass @ functions) / mass.sum()
+    return centred / np.maximum(np.sqrt(mass @ centred ** 2), 1e-300)[None, :]
+
+
+def reflection_map(mesh, spectrum, *, k_init: int = K_INIT, k_final: int = K_FINAL) -> np.ndarray:
+    """The intrinsic orientation-reversing self-map of a closed mesh.
+
+    Parameters
+    ----------
+    mesh : TriMesh
+    spectrum : Spectrum
+        At least ``k_final`` eigenpairs of ``mesh``.
+    k_init, k_final : int
+        Size of the estimated functional map and of the ZoomOut result.
+
+    Returns
+    -------
+    (n,) int
+        ``mirror[x]``: the vertex that ``x`` is mirrored to (for a shape
+        without a reflection: the map that best reverses orientation while
+        keeping the intrinsic descriptors).
+    """
+    if not 3 <= k_init <= k_final <= spectrum.k:
+        raise ParameterError(f"the reflection needs 3 <= k_init <= k_final <= {spectrum.k} eigenpairs, "
+                             f"got k_init={k_init}, k_final={k_final}")
+    spectrum = spectrum.truncated(k_final)  # the result depends on these eigenpairs only
+    mass = spectrum.mass.diagonal()
+    even = np.hstack([hks(spectrum.evals, spectrum.evecs, EVEN_SCALES),
+                      wks(spectrum.evals, spectrum.evecs, EVEN_SCALES)])
+    odd = orientation_descriptors(mesh, spectrum, ODD_SCALES)
+    probes = _normalised(np.hstack([even, odd]), mass)
+    mirrored = probes * np.r_[np.ones(even.shape[1]), -np.ones(odd.shape[1])][None, :]
+    phi = spectrum.evecs[:, :k_init]
+    c = fmap_least_squares(phi.T @ (mass[:, None] * probes), phi.T @ (mass[:, None] * mirrored),
+                           spectrum.evals[:k_init], spectrum.evals[:k_init], COMMUTATIVITY)
+    steps = zoomout(spectrum.evecs, spectrum.evecs, spectrum.mass, c, k_final, ZOOMOUT_STEP)
+    while True:
+        try:
+            next(steps)
+        except StopIteration as stop:
+            return stop.value[0]
+
+
+def even_spectrum(spectrum, mirror: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:
+    """The lowest ``k`` eigenpairs of the functions that the reflection leaves unchanged.
+
+    The even subspace of the span of the eigenfunctions is the range of the
+    projector ``P = (I + C_s) / 2``, ``C_s`` the symmetrised functional map
+    of the reflection; the Laplacian is diagonalised on it (Rayleigh–Ritz).
+
+    Parameters
+    ----------
+    spectrum : Spectrum
+        Eigenpairs of the mesh; about twice ``k`` of them are needed.
+    mirror : (n,) int
+        The reflection (:func:`reflection_map`).
+    k : int
+
+    Returns
+    -------
+    evals : (k,) float
+        Ascending, the first ≈ 0 (the constant is even).
+    evecs : (n, k) float
+        M-orthonormal even eigenfunctions.
+    """
+    phi = spectrum.evecs
+    mirror = np.asarray(mirror)
+    if mirror.shape != (phi.shape[0],):
+        raise InputError(f"the reflection must map each of the {phi.shape[0]} vertices, got shape {mirror.shape}")
+    mass = spectrum.mass.diagonal()
+    c = phi.T @ (mass[:, None] * phi[mirror])
+    projector_evals, projector_evecs = np.linalg.eigh(0.5 * np.eye(c.shape[0]) + 0.25 * (c + c.T))
+    basis = projector_evecs[:, projector_evals > 0.5]
+    if basis.shape[1] < k:
+        raise ParameterError(f"only {basis.shape[1]} of {spectrum.k} eigenfunctions are even; "
+                             f"{k} even eigenpairs need more eigenpairs of the mesh")
+    laplacian = basis.T @ (spectrum.evals[:, None] * basis)
+    evals, ritz = np.linalg.eigh(0.5 * (laplacian + laplacian.T))
+    return evals[:k], phi @ (basis @ ritz[:, :k])
+
+
+def mesh_reflection(mesh, spectrum) -> np.ndarray:
+    """:func:`reflection_map` with the default sizes, cached on disk by mesh content like the spectra."""
+    key = cache.make_key("reflection-v1", mesh.content_hash, K_INIT, K_FINAL, EVEN_SCALES, ODD_SCALES, ZOOMOUT_STEP,
+                         COMMUTATIVITY)
+    entry = cache.load("reflections", key)
+    if entry is not None and entry.get("mirror", np.empty(0)).shape == (mesh.n_vertices,):
+        return entry["mirror"].astype(np.int64)
+    mirror = reflection_map(mesh, spectrum)
+    cache.store("reflections", key, {"mirror": mirror})
+    return mirror

@@ -306,6 +306,12 @@ def test_too_few_eigenpairs_is_a_named_error():
     # with fewer eigenpairs both are accepted
     result = solve("contour3d", circle, TriMesh(sphere.vertices, sphere.faces), n_contour=10, k=8)
     assert np.isfinite(result.energy)
+    # the half-shape model needs about three times as many eigenpairs of the mesh as k
+    small = trimesh.creation.icosphere(2)  # 162 vertices
+    with pytest.raises(InputError, match=r"ico162: 162 vertices are too few for the 165 eigenpairs .*model='whole'"):
+        solve("contour3d", circle, TriMesh(small.vertices, small.faces, name="ico162"), n_contour=40, k=55)
+    whole = solve("contour3d", circle, TriMesh(small.vertices, small.faces), n_contour=40, k=20, model="whole")
+    assert whole.extras["model"] == "whole" and np.isfinite(whole.energy)
 
 
 @pytest.mark.slow

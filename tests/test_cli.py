@@ -70,7 +70,7 @@ def test_match_writes_outputs(tmp_path, capsys):
 def test_methods_listing(capsys):
     assert main(["methods"]) == 0
     out = capsys.readouterr().out
-    assert "fmap-zoomout" in out and "descriptor-nn" in out and "--param k_init=30" in out
+    assert "fmap-zoomout" in out and "descriptor-nn" in out and "--param k_init=35" in out
 
 
 @pytest.mark.slow

@@ -66,7 +66,7 @@ def test_run_and_cancel():
         run(gen(token), cancel_at_two, token)
 
 
-@pytest.mark.parametrize("method, threshold", [("descriptor-nn", 0.6), ("fmap-zoomout", 0.45)])
+@pytest.mark.parametrize("method, threshold", [("descriptor-nn", 0.6), ("fmap-zoomout", 0.95)])
 def test_baselines_on_wolf(wolf_pair, method, threshold):
     wolf0, wolf1 = wolf_pair
     reports = []
@@ -75,7 +75,8 @@ def test_baselines_on_wolf(wolf_pair, method, threshold):
     assert result.map_xy.shape == (wolf0.n_vertices,) and result.map_yx.shape == (wolf1.n_vertices,)
     ident = np.arange(wolf0.n_vertices)
     err = geodesic_errors(result.map_xy, wolf1, ident, ident).summary()
-    # baselines: intrinsic descriptors confuse left and right, so only a majority is near-exact
+    # descriptor-nn: intrinsic descriptors confuse left and right, so only a majority is near-exact; the
+    # functional map's orientation term keeps left on left (measured: 99.4 % within 0.025, mean 0.002)
     assert err["within_0.025"] > threshold, err
     assert result.timings["total"] > 0 and result.params
 

@@ -117,3 +117,41 @@ def orientation_descriptors(mesh, spectrum, n_channels: int = 8) -> np.ndarray:
         raise InputError(f"orientation descriptors need at least 2 HKS scales, got {n_channels}")
     # the heat-trace-normalised HKS scales like 1 / area: HKS · area is scale-invariant, and so are the features
     return orientation_features(mesh, mesh.area * hks(spectrum.evals, spectrum.evecs, n_channels))
+
+
+def orientation_operators(mesh, evecs: np.ndarray, functions: np.ndarray) -> np.ndarray:
+    """Orientation-preserving operators in the eigenbasis (Ren, Poulenard, Ovsjanikov, Guibas 2018).
+
+    For a function ``f`` the operator ``g ↦ n · (∇f × ∇g)`` commutes with
+    the pull-back of every orientation-preserving isometry and anticommutes
+    with a reflection; its matrix in the basis is ``Φᵀ M (n · (∇f × ∇Φ))``
+    (face values given to the corners by a third of the face's area, like
+    the lumped mass). A functional map asked to commute with these operators
+    keeps left on left.
+
+    Parameters
+    ----------
+    mesh : TriMesh
+    evecs : (n, k) float
+    functions : (n, d) float
+
+    Returns
+    -------
+    (d, k, k) float
+    """
+    grad_basis = face_gradients(mesh.vertices, mesh.faces, evecs)  # (f, k, 3)
+    grad_f = face_gradients(mesh.vertices, mesh.faces, functions)  # (f, d, 3)
+    normals = mesh.face_normals
+    volume = mesh.enclosed_volume() if mesh.is_closed else None
+    if volume is not None and volume < 0:  # inward-facing normals: flip
+        normals = -normals
+    # n · (∇f × ∇φ) = (n × ∇f) · ∇φ
+    values = np.einsum("fdc,fkc->fdk", np.cross(normals[:, None, :], grad_f), grad_basis)
+    corner_weight = (mesh.face_areas / 3.0)[:, None]
+    out = np.empty((functions.shape[1], evecs.shape[1], evecs.shape[1]))
+    for d in range(functions.shape[1]):
+        at_vertices = np.zeros((mesh.n_vertices, evecs.shape[1]))
+        for corner in range(3):
+            np.add.at(at_vertices, mesh.faces[:, corner], values[:, d, :] * corner_weight)
+        out[d] = evecs.T @ at_vertices
+    return out

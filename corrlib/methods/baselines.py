@@ -2,9 +2,11 @@
 
 * ``descriptor-nn``: each vertex is matched to the vertex with the nearest
   descriptor (L2) on the other shape, in both directions.
-* ``fmap-zoomout``: functional maps (Ovsjanikov et al. 2012) by least squares
-  with descriptor preservation and Laplacian commutativity, refined by
-  ZoomOut (Melzi et al. 2019).
+* ``fmap-zoomout``: functional maps (Ovsjanikov et al. 2012) from descriptor
+  preservation, resolvent Laplacian commutativity (Ren et al. 2019),
+  descriptor commutativity (Nogneng & Ovsjanikov 2017) and
+  orientation-preserving operators (Ren et al. 2018), solved exactly (the
+  energy is quadratic), refined by ZoomOut (Melzi et al. 2019).
 
 The functional-map building blocks (least squares, ZoomOut) and their
 convention are in :mod:`corrlib.geometry.fmaps`.
@@ -17,7 +19,8 @@ from dataclasses import dataclass
 import numpy as np
 
 from corrlib.descriptors import DESCRIPTOR_KINDS, mesh_descriptors
-from corrlib.geometry.fmaps import fmap_least_squares, zoomout
+from corrlib.descriptors.orientation import orientation_operators
+from corrlib.geometry.fmaps import functional_map, multiplication_operators, resolvent_mask, zoomout
 from corrlib.geometry.spectrum import mesh_spectrum
 from corrlib.methods.base import MatchResult, param
 from corrlib.methods.registry import MethodSpec, register
@@ -87,14 +90,46 @@ class FmapZoomOutParams:
     descriptor: str = param("wks", label="Descriptor", choices=DESCRIPTOR_KINDS,
                             help="Descriptor whose preservation constrains the functional map.")
     n_descriptors: int = param(20, label="Descriptor functions", low=1, high=200,
-                               help="How many descriptor scales (evenly picked) enter the least squares.")
-    k_init: int = param(30, label="Initial basis size", low=2, high=500,
-                        help="Size of the functional map solved by least squares.")
-    k_final: int = param(120, label="ZoomOut final size", low=2, high=1000,
+                               help="How many descriptor scales (evenly picked from 100) enter the functional map.")
+    k_init: int = param(35, label="Initial basis size", low=2, high=200,
+                        help="Size of the functional map solved from the descriptors.")
+    k_final: int = param(100, label="ZoomOut final size", low=2, high=1000,
                          help="ZoomOut upsamples the map from k_init to this spectral size.")
     step: int = param(5, label="ZoomOut step", low=1, high=100, help="Basis functions added per ZoomOut iteration.")
-    commutativity: float = param(1e-1, label="Commutativity weight", low=0.0, high=1e6,
-                                 help="Weight of the Laplacian commutativity term (eigenvalues scaled to [0,1]).")
+    commutativity: float = param(1.0, label="Laplacian commutativity", low=0.0, high=1e6,
+                                 help="Weight of the resolvent Laplacian commutativity (Ren et al. 2019), relative "
+                                      "to descriptor preservation.")
+    descriptor_commutativity: float = param(1.0, label="Descriptor commutativity", low=0.0, high=1e6,
+                                            help="Weight of the commutativity with the descriptors' multiplication "
+                                                 "operators (Nogneng & Ovsjanikov 2017).")
+    orientation: float = param(1.0, label="Orientation term", low=0.0, high=1e6,
+                               help="Weight of the commutativity with orientation-preserving operators (Ren et "
+                                    "al. 2018): keeps left on left; 0 leaves the map free to mirror.")
+
+
+#: every n-th descriptor function also gives an orientation operator (they are close neighbours in scale)
+ORIENTATION_EVERY = 4
+
+
+def descriptor_functional_map(source, target, spec_x, spec_y, desc_x, desc_y, k: int,
+                              params: FmapZoomOutParams) -> np.ndarray:
+    """The ``k × k`` functional map of the standard pipeline, solved exactly.
+
+    Descriptor preservation, resolvent Laplacian commutativity, commutativity
+    with the descriptors' multiplication operators and with their
+    orientation-preserving operators (:func:`~corrlib.geometry.fmaps.functional_map`).
+    """
+    phi, psi = spec_x.evecs[:, :k], spec_y.evecs[:, :k]
+    mass_x, mass_y = spec_x.mass.diagonal(), spec_y.mass.diagonal()
+    coef_x = phi.T @ (mass_x[:, None] * desc_x)
+    coef_y = psi.T @ (mass_y[:, None] * desc_y)
+    pairs = [(multiplication_operators(phi, mass_x, desc_x), multiplication_operators(psi, mass_y, desc_y))]
+    weights = [1.0, params.commutativity, params.descriptor_commutativity]
+    if params.orientation > 0:
+        pairs.append((orientation_operators(source, phi, desc_x[:, ::ORIENTATION_EVERY]),
+                      orientation_operators(target, psi, desc_y[:, ::ORIENTATION_EVERY])))
+        weights.append(params.orientation)
+    return functional_map(coef_x, coef_y, resolvent_mask(spec_x.evals[:k], spec_y.evals[:k]), pairs, weights)
 
 
 def solve_fmap_zoomout(source, target, params: FmapZoomOutParams, token):
@@ -108,16 +143,14 @@ def solve_fmap_zoomout(source, target, params: FmapZoomOutParams, token):
     with watch("descriptors"):
         pick = np.unique(np.linspace(0, desc_x.shape[1] - 1, params.n_descriptors).round().astype(int))
         desc_x, desc_y = desc_x[:, pick], desc_y[:, pick]
-        norm = np.sqrt(np.asarray(spec_x.mass.sum(axis=0)).ravel() @ desc_x ** 2)
-        desc_x, desc_y = desc_x / norm, desc_y / norm
+        # unit M-norm on each shape: the terms compare shapes of any scale and vertex density
+        desc_x = desc_x / np.sqrt(spec_x.mass.diagonal() @ desc_x ** 2)
+        desc_y = desc_y / np.sqrt(spec_y.mass.diagonal() @ desc_y ** 2)
     yield Progress("functional map", 0.4)
     with watch("fmap"):
-        phi, psi = spec_x.evecs, spec_y.evecs
-        coef_x = phi[:, :k_init].T @ (spec_x.mass @ desc_x)
-        coef_y = psi[:, :k_init].T @ (spec_y.mass @ desc_y)
-        c_yx = fmap_least_squares(coef_x, coef_y, spec_x.evals[:k_init], spec_y.evals[:k_init],
-                                  params.commutativity)
+        c_yx = descriptor_functional_map(source, target, spec_x, spec_y, desc_x, desc_y, k_init, params)
     with watch("zoomout"):
+        phi, psi = spec_x.evecs, spec_y.evecs
         gen = zoomout(phi, psi, spec_y.mass, c_yx, k_final, params.step, token)
         while True:
             try:
@@ -140,5 +173,5 @@ def solve_fmap_zoomout(source, target, params: FmapZoomOutParams, token):
 register(MethodSpec(
     name="fmap-zoomout", label="Functional maps + ZoomOut", inputs=("mesh", "mesh"),
     params=FmapZoomOutParams, solve=solve_fmap_zoomout, rank=10,
-    description="Least-squares functional map from descriptors and Laplacian commutativity, "
-                "refined by ZoomOut spectral upsampling."))
+    description="Functional map from descriptor preservation and commutativity with the Laplacian, the "
+                "descriptors and orientation operators, refined by ZoomOut spectral upsampling."))

@@ -1,0 +1,105 @@
+"""Functional maps: the quadratic energy and its operators (corrlib.geometry.fmaps, orientation operators)."""
+
+import numpy as np
+import pytest
+
+from corrlib.descriptors.orientation import orientation_operators
+from corrlib.geometry.fmaps import functional_map, multiplication_operators, resolvent_mask
+from corrlib.geometry.spectrum import mesh_spectrum
+from corrlib.io import load_mesh, load_vts
+from corrlib.methods import solve
+from corrlib.evaluation import evaluate
+from corrlib.shapes import TriMesh
+
+from _data import TOSCA
+
+
+def _residual_rows(coef_x, coef_y, mask, operator_pairs, weights):
+    """The energy as an explicit least-squares system ``‖R vec(C) − r‖²`` with every term scaled by
+    the square root of its weight over its Hessian trace (an independent implementation)."""
+    k_y, k_x = coef_y.shape[0], coef_x.shape[0]
+    n = k_y * k_x
+    blocks = []
+    # descriptor preservation, entry (i, d): Σ_j C_ij A_jd − B_id
+    rows = np.zeros((k_y * coef_x.shape[1], n))
+    rhs = np.zeros(k_y * coef_x.shape[1])
+    for i in range(k_y):
+        for d in range(coef_x.shape[1]):
+            rows[i * coef_x.shape[1] + d, i * k_x:(i + 1) * k_x] = coef_x[:, d]
+            rhs[i * coef_x.shape[1] + d] = coef_y[i, d]
+    blocks.append((rows, rhs))
+    blocks.append((np.diag(np.sqrt(mask.ravel())), np.zeros(n)))
+    for ops_x, ops_y in operator_pairs:
+        rows = []
+        for ox, oy in zip(ops_x, ops_y):
+            # entry (i, j) of C X − Y C, column by column of the unit matrices E_ab
+            op = np.zeros((n, n))
+            for a in range(k_y):
+                for b in range(k_x):
+                    e = np.zeros((k_y, k_x))
+                    e[a, b] = 1.0
+                    op[:, a * k_x + b] = (e @ ox - oy @ e).ravel()
+            rows.append(op)
+        stacked = np.vstack(rows)
+        blocks.append((stacked, np.zeros(stacked.shape[0])))
+    system, target = [], []
+    for w, (rows, rhs) in zip(weights, blocks):
+        scale = np.sqrt(w / np.sum(rows ** 2))  # the trace of RᵀR is the squared Frobenius norm of R
+        system.append(scale * rows)
+        target.append(scale * rhs)
+    return np.vstack(system), np.concatenate(target)
+
+
+def test_functional_map_is_the_least_squares_minimiser():
+    rng = np.random.default_rng(0)
+    k_x, k_y, d = 5, 4, 7
+    coef_x, coef_y = rng.normal(size=(k_x, d)), rng.normal(size=(k_y, d))
+    mask = resolvent_mask(np.sort(rng.random(k_x)) * 10, np.sort(rng.random(k_y)) * 10)
+    pairs = [(rng.normal(size=(3, k_x, k_x)), rng.normal(size=(3, k_y, k_y))),
+             (rng.normal(size=(2, k_x, k_x)), rng.normal(size=(2, k_y, k_y)))]
+    weights = (1.0, 0.3, 2.0, 0.7)
+    c = functional_map(coef_x, coef_y, mask, pairs, weights)
+    system, target = _residual_rows(coef_x, coef_y, mask, pairs, weights)
+    reference = np.linalg.lstsq(system, target, rcond=None)[0].reshape(k_y, k_x)
+    np.testing.assert_allclose(c, reference, rtol=1e-7, atol=1e-9)
+    with pytest.raises(ValueError, match="weights"):
+        functional_map(coef_x, coef_y, mask, pairs, (1.0, 1.0))
+
+
+def test_resolvent_mask_vanishes_between_equal_eigenvalues_and_grows_apart():
+    evals = np.array([0.0, 1.0, 4.0, 9.0])
+    mask = resolvent_mask(evals, evals)
+    np.testing.assert_allclose(np.diag(mask), 0.0, atol=1e-15)
+    np.testing.assert_allclose(mask, mask.T)
+    assert np.all(mask[0, 1:] > 0) and mask[0, 3] > mask[0, 1]
+
+
+def test_operators_of_a_shape_to_itself():
+    wolf = load_mesh(TOSCA / "wolf0.off")
+    spectrum = mesh_spectrum(wolf, 20)
+    mass = spectrum.mass.diagonal()
+    ones = multiplication_operators(spectrum.evecs, mass, np.ones((wolf.n_vertices, 1)))
+    np.testing.assert_allclose(ones[0], np.eye(20), atol=1e-8)  # multiplying by 1 is the identity
+    f = spectrum.evecs[:, 1:4] ** 2
+    ops = orientation_operators(wolf, spectrum.evecs, f)
+    # n · (∇f × ∇g) integrated against h is skew in (g, h) on a closed surface (integration by parts)
+    skew = np.linalg.norm(ops + ops.transpose(0, 2, 1)) / np.linalg.norm(ops)
+    assert skew < 0.05, skew
+    # a mirror image reverses the orientation: the operators change sign
+    mirrored = TriMesh(wolf.vertices * [-1.0, 1.0, 1.0], wolf.faces, name="mirror")
+    np.testing.assert_allclose(orientation_operators(mirrored, spectrum.evecs, f), -ops, atol=1e-9 * np.abs(ops).max())
+
+
+@pytest.mark.slow
+def test_fmap_zoomout_keeps_left_on_left_on_the_cats_and_their_mirror_image():
+    """cat0 -> cat1 (remeshed independently): measured mean 0.023, 90 % within 0.05, the same error with the
+    mirrored partner accepted; without the orientation term the map is the mirror image (0.22 direct).
+    Matching cat0 to the mirror image of cat1 gives the mirrored map: its error against the mirrored
+    ground truth is as small."""
+    cat0, cat1 = load_mesh(TOSCA / "cat0.off"), load_mesh(TOSCA / "cat1.off")
+    rows0, rows1, rows1_sym = (load_vts(TOSCA / f) for f in ("cat0.vts", "cat1.vts", "cat1.sym.vts"))
+    direct = evaluate(solve("fmap-zoomout", cat0, cat1), cat1, rows0, rows1).summary()
+    assert direct["mean"] < 0.05 and direct["within_0.05"] > 0.8, direct
+    mirror = TriMesh(cat1.vertices * [-1.0, 1.0, 1.0], cat1.faces[:, ::-1], name="cat1-mirror")
+    mirrored = evaluate(solve("fmap-zoomout", cat0, mirror), mirror, rows0, rows1_sym).summary()
+    assert mirrored["mean"] < 0.05 and mirrored["within_0.05"] > 0.8, mirrored

@@ -250,3 +250,18 @@ def test_scores_without_negligible_decays_equal_the_full_product(cat_pair):
     np.testing.assert_allclose(fast, full, rtol=0, atol=1e-5 * np.abs(full).max())
     np.testing.assert_allclose(kernel_score(s0.evecs[cols], s1.evecs[rows], c.T, d0, d1), fast.T, rtol=0,
                                atol=1e-6 * np.abs(full).max())
+
+
+@pytest.mark.slow
+def test_non_isometric_pair_from_the_functional_map():
+    """The Sumner lion -> cat (approximate ground truth lion2cat): from the orientation-aware functional map
+    the kernel matching reaches mean 0.059, median 0.042 (measured); from the descriptors mean 0.27, median
+    0.048 (whole legs on the wrong leg)."""
+    from _data import SUMNER
+    from corrlib.io import load_mesh
+
+    lion, cat = load_mesh(SUMNER / "lion-00.off"), load_mesh(SUMNER / "cat-00.off")
+    truth = np.loadtxt(SUMNER / "lion2cat", dtype=np.int64)
+    result = solve("kernel-matching", lion, cat, init="fmap")
+    report = geodesic_errors(result.map_xy, cat, np.arange(lion.n_vertices), truth).summary()
+    assert report["median"] <= 0.05 and report["mean"] <= 0.15, report

@@ -207,8 +207,8 @@ def _auction_solve(s: np.ndarray, eps_final: float | None, eps_start: float | No
     span = float(s.max() - s.min())
     if eps_final is None:
         eps_final = max(span, 1e-300) * 1e-9 / n
-    if eps_final <= 0:
-        raise ParameterError(f"eps_final must be positive, got {eps_final}")
+    if not (np.isfinite(eps_final) and eps_final > 0):  # NaN would never stop the ε-scaling
+        raise ParameterError(f"eps_final must be positive and finite, got {eps_final}")
     # a bid below the floating-point resolution of the scores does not move a price: two rows would
     # outbid each other forever on tied columns (e.g. equal scores, or the copies of a column)
     eps_final = max(float(eps_final), 16.0 * float(np.spacing(float(np.abs(s).max()))))

@@ -120,6 +120,11 @@ def test_assignment_errors():
         linear_assignment(np.eye(3), eps_start=2.0)
     with pytest.raises(ParameterError, match="eps_final must be positive"):
         linear_assignment(np.eye(3), eps_final=-1.0)
+    for bad in (float("nan"), float("inf")):  # NaN used to loop forever
+        with pytest.raises(ParameterError, match="eps_final must be positive and finite"):
+            linear_assignment(np.random.default_rng(1).random((5, 5)), eps_final=bad)
+        with pytest.raises(ParameterError, match="eps_start must lie in"):
+            linear_assignment(np.random.default_rng(1).random((5, 5)), eps_start=bad)
     flag = np.ones(1, dtype=np.int8)
     with pytest.raises(Cancelled):
         linear_assignment(np.random.default_rng(0).random((20, 20)), cancel=flag)

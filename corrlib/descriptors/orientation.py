@@ -120,7 +120,7 @@ def orientation_descriptors(mesh, spectrum, n_channels: int = 8) -> np.ndarray:
 
 
 def orientation_operators(mesh, evecs: np.ndarray, functions: np.ndarray) -> np.ndarray:
-    """Orientation-preserving operators in the eigenbasis (Ren, Poulenard, Ovsjanikov, Guibas 2018).
+    """Orientation-preserving operators in the eigenbasis (Ren, Poulenard, Wonka, Ovsjanikov 2018).
 
     For a function ``f`` the operator ``g ↦ n · (∇f × ∇g)`` commutes with
     the pull-back of every orientation-preserving isometry and anticommutes

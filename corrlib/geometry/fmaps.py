@@ -90,7 +90,7 @@ def zoomout(evecs_x: np.ndarray, evecs_y: np.ndarray, mass_y, c_yx: np.ndarray, 
 
 
 def resolvent_mask(evals_x: np.ndarray, evals_y: np.ndarray, gamma: float = 0.5) -> np.ndarray:
-    """Penalty weights of the resolvent Laplacian commutativity (Ren, Melzi, Ovsjanikov, Wonka 2019, Eq. 9).
+    """Penalty weights of the resolvent Laplacian commutativity (Ren, Panine, Wonka, Ovsjanikov 2019).
 
     With the eigenvalues scaled by the larger maximum of both shapes,
     ``M_ij = (μ_i^γ/(μ_i^{2γ}+1) − λ_j^γ/(λ_j^{2γ}+1))² + (1/(μ_i^{2γ}+1) − 1/(λ_j^{2γ}+1))²``

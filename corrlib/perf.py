@@ -121,9 +121,9 @@ def suite_contour3d(repeat: int, quick: bool = False) -> None:
     params = Contour3DParams(n_contour=200)
     prepared = prepare_query(query, params)
     target = prepare_mesh(cat1, params)
-    graph = ProductGraph(node_costs(prepared.features, target.features[params.model if params.model != "auto"
-                                                                        else "half"]),
-                         prepared.points, target.vertices, cat1.adjacency)
+    default_features = next(iter(target.features.values()))  # the default shape model's
+    graph = ProductGraph(node_costs(prepared.features, default_features), prepared.points, target.vertices,
+                         cat1.adjacency)
     everything = np.ones(cat1.n_vertices, dtype=bool)
     t_run = _best_time(lambda: graph.shortest(everything, everything), repeat)[0]
     _line(f"one layered Dijkstra, 200 x {cat1.n_vertices}, all starts, unpruned", t_run)

@@ -57,6 +57,22 @@ def face_gradients(vertices: np.ndarray, faces: np.ndarray, values: np.ndarray) 
     return np.einsum("fcd,fck->fdk", values[faces], rotated)
 
 
+def corner_integrals(mesh, face_values: np.ndarray) -> np.ndarray:
+    """``(n, d)``: every face's ``(f, d)`` values times a third of its area, summed at its corners
+    (the integral against the lumped hat functions)."""
+    weighted = face_values * (mesh.face_areas / 3.0)[:, None]
+    out = np.zeros((mesh.n_vertices, face_values.shape[1]))
+    for corner in range(3):
+        np.add.at(out, mesh.faces[:, corner], weighted)
+    return out
+
+
+def outward_sign(mesh) -> float:
+    """-1 for a closed mesh whose normals point inward (negative enclosed volume), else 1."""
+    volume = mesh.enclosed_volume() if mesh.is_closed else None
+    return -1.0 if volume is not None and volume < 0 else 1.0
+
+
 def orientation_features(mesh, functions: np.ndarray, pairs=None) -> np.ndarray:
     """Signed area forms ``n · (∇f_a × ∇f_b)`` of pairs of functions, averaged to the vertices.
 
@@ -82,17 +98,9 @@ def orientation_features(mesh, functions: np.ndarray, pairs=None) -> np.ndarray:
     if pairs.size == 0 or pairs.min() < 0 or pairs.max() >= d:
         raise InputError(f"orientation_features needs pairs of columns of the {d} functions")
     grads = face_gradients(mesh.vertices, mesh.faces, functions)
-    area = mesh.face_areas
-    normal = mesh.face_normals
-    form = np.einsum("fk,fpk->fp", normal, np.cross(grads[:, pairs[:, 0]], grads[:, pairs[:, 1]]))
-    weighted = form * (area / 3.0)[:, None]  # a third of every face to each of its corners, as the lumped mass
-    out = np.zeros((mesh.n_vertices, pairs.shape[0]))
-    for corner in range(3):
-        np.add.at(out, mesh.faces[:, corner], weighted)
-    out /= mass_matrix(mesh.vertices, mesh.faces, "lumped").diagonal()[:, None]
-    volume = mesh.enclosed_volume() if mesh.is_closed else None
-    sign = -1.0 if volume is not None and volume < 0 else 1.0  # inward-facing normals: flip
-    return sign * mesh.area * out
+    form = np.einsum("fk,fpk->fp", mesh.face_normals, np.cross(grads[:, pairs[:, 0]], grads[:, pairs[:, 1]]))
+    out = corner_integrals(mesh, form) / mass_matrix(mesh.vertices, mesh.faces, "lumped").diagonal()[:, None]
+    return outward_sign(mesh) * mesh.area * out
 
 
 def orientation_descriptors(mesh, spectrum, n_channels: int = 8) -> np.ndarray:
@@ -141,17 +149,7 @@ def orientation_operators(mesh, evecs: np.ndarray, functions: np.ndarray) -> np.
     """
     grad_basis = face_gradients(mesh.vertices, mesh.faces, evecs)  # (f, k, 3)
     grad_f = face_gradients(mesh.vertices, mesh.faces, functions)  # (f, d, 3)
-    normals = mesh.face_normals
-    volume = mesh.enclosed_volume() if mesh.is_closed else None
-    if volume is not None and volume < 0:  # inward-facing normals: flip
-        normals = -normals
+    normals = outward_sign(mesh) * mesh.face_normals
     # n · (∇f × ∇φ) = (n × ∇f) · ∇φ
     values = np.einsum("fdc,fkc->fdk", np.cross(normals[:, None, :], grad_f), grad_basis)
-    corner_weight = (mesh.face_areas / 3.0)[:, None]
-    out = np.empty((functions.shape[1], evecs.shape[1], evecs.shape[1]))
-    for d in range(functions.shape[1]):
-        at_vertices = np.zeros((mesh.n_vertices, evecs.shape[1]))
-        for corner in range(3):
-            np.add.at(at_vertices, mesh.faces[:, corner], values[:, d, :] * corner_weight)
-        out[d] = evecs.T @ at_vertices
-    return out
+    return np.stack([evecs.T @ corner_integrals(mesh, values[:, d, :]) for d in range(functions.shape[1])])

@@ -14,8 +14,9 @@ under ``S`` is known:
   orientation-reversing isometry (:mod:`corrlib.descriptors.orientation`):
   ``O ∘ S = -O``.
 
-So ``C`` minimises ``‖C [F, O] − [F, −O]‖² + w ‖CΛ − ΛC‖²`` (coefficients
-of the descriptors; no search over sign sequences), and ZoomOut (Melzi et
+So ``C`` minimises ``‖C [F, O] − [F, −O]‖²`` plus the resolvent Laplacian
+commutativity (coefficients of the descriptors; no search over sign
+sequences; :func:`~corrlib.geometry.fmaps.functional_map`), and ZoomOut (Melzi et
 al. 2019) turns it into the pointwise map :func:`reflection_map`.
 
 **The half shape.** Functions with ``f ∘ S = f`` are the functions on the
@@ -39,7 +40,7 @@ from corrlib import cache
 from corrlib.descriptors.orientation import orientation_descriptors
 from corrlib.descriptors.spectral import hks, wks
 from corrlib.errors import InputError, ParameterError
-from corrlib.geometry.fmaps import fmap_least_squares, zoomout
+from corrlib.geometry.fmaps import functional_map, resolvent_mask, zoomout
 
 #: scales of the even probes (HKS and WKS each) and of the HKS whose pairs give the odd probes
 EVEN_SCALES = 16
@@ -48,8 +49,8 @@ ODD_SCALES = 8
 K_INIT = 20
 K_FINAL = 60
 ZOOMOUT_STEP = 5
-#: Laplacian commutativity weight (eigenvalues scaled to [0, 1]), as in the functional-maps baseline
-COMMUTATIVITY = 0.1
+#: weights of descriptor preservation and resolvent Laplacian commutativity, as in the functional-maps baseline
+COMMUTATIVITY = 1.0
 
 
 def _normalised(functions: np.ndarray, mass: np.ndarray) -> np.ndarray:
@@ -87,8 +88,9 @@ def reflection_map(mesh, spectrum, *, k_init: int = K_INIT, k_final: int = K_FIN
     probes = _normalised(np.hstack([even, odd]), mass)
     mirrored = probes * np.r_[np.ones(even.shape[1]), -np.ones(odd.shape[1])][None, :]
     phi = spectrum.evecs[:, :k_init]
-    c = fmap_least_squares(phi.T @ (mass[:, None] * probes), phi.T @ (mass[:, None] * mirrored),
-                           spectrum.evals[:k_init], spectrum.evals[:k_init], COMMUTATIVITY)
+    evals = spectrum.evals[:k_init]
+    c = functional_map(phi.T @ (mass[:, None] * probes), phi.T @ (mass[:, None] * mirrored),
+                       resolvent_mask(evals, evals), weights=(1.0, COMMUTATIVITY))
     steps = zoomout(spectrum.evecs, spectrum.evecs, spectrum.mass, c, k_final, ZOOMOUT_STEP)
     while True:
         try:
@@ -137,7 +139,7 @@ def even_spectrum(spectrum, mirror: np.ndarray, k: int) -> tuple[np.ndarray, np.
 
 def mesh_reflection(mesh, spectrum) -> np.ndarray:
     """:func:`reflection_map` with the default sizes, cached on disk by mesh content like the spectra."""
-    key = cache.make_key("reflection-v1", mesh.content_hash, K_INIT, K_FINAL, EVEN_SCALES, ODD_SCALES, ZOOMOUT_STEP,
+    key = cache.make_key("reflection-v2", mesh.content_hash, K_INIT, K_FINAL, EVEN_SCALES, ODD_SCALES, ZOOMOUT_STEP,
                          COMMUTATIVITY)
     entry = cache.load("reflections", key)
     if entry is not None and entry.get("mirror", np.empty(0)).shape == (mesh.n_vertices,):

@@ -2,10 +2,7 @@
 
 :func:`functional_map` minimises the quadratic energy of descriptor
 preservation and commutativity with operators (Laplacian, descriptors,
-orientation) exactly; :func:`fmap_least_squares` is its row-separable
-special case (descriptors and the plain Laplacian, used where speed
-matters more, e.g. the intrinsic reflection); :func:`zoomout` refines a map
-by spectral upsampling.
+orientation) exactly; :func:`zoomout` refines a map by spectral upsampling.
 
 Convention (pyFM's): ``C_yx`` of shape (k_Y, k_X) carries the spectral
 coefficients of a function on X to those of its pull-back on Y,
@@ -19,38 +16,6 @@ from __future__ import annotations
 import numpy as np
 
 from corrlib.neighbours import nearest_rows
-
-
-def fmap_least_squares(coef_x: np.ndarray, coef_y: np.ndarray, evals_x: np.ndarray, evals_y: np.ndarray,
-                       weight: float) -> np.ndarray:
-    """Functional map from descriptor coefficients and Laplacian commutativity.
-
-    Minimises ``||C A - B||² + weight ||C Λ_X - Λ_Y C||²`` row by row.
-
-    Parameters
-    ----------
-    coef_x : (k_X, d) float
-        Spectral coefficients of the descriptors on X (``A``).
-    coef_y : (k_Y, d) float
-        On Y (``B``).
-    evals_x : (k_X,) float
-    evals_y : (k_Y,) float
-    weight : float
-
-    Returns
-    -------
-    (k_Y, k_X) float
-        ``C_yx``.
-    """
-    scale = max(evals_x.max(), evals_y.max(), 1e-300)
-    lx, ly = evals_x / scale, evals_y / scale
-    gram = coef_x @ coef_x.T
-    rhs = coef_y @ coef_x.T  # (k_Y, k_X)
-    c = np.empty((coef_y.shape[0], coef_x.shape[0]))
-    for i in range(coef_y.shape[0]):
-        reg = weight * (lx - ly[i]) ** 2
-        c[i] = np.linalg.solve(gram + np.diag(reg) + 1e-12 * np.eye(gram.shape[0]), rhs[i])
-    return c
 
 
 def zoomout(evecs_x: np.ndarray, evecs_y: np.ndarray, mass_y, c_yx: np.ndarray, k_final: int, step: int,

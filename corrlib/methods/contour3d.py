@@ -92,7 +92,7 @@ import numpy as np
 
 from corrlib.descriptors.spectral import hks, wks
 from corrlib.descriptors.symmetry import K_FINAL, even_spectrum, mesh_reflection
-from corrlib.errors import ContourError, InputError
+from corrlib.errors import ContourError, InputError, ParameterError
 from corrlib.geometry.cyclic_paths import ProductGraph, branch_and_bound_union
 from corrlib.geometry.elastic_paths import ElasticProductGraph
 from corrlib.geometry.intrinsic_axis import IntrinsicAxis, axis_mismatch, intrinsic_axis
@@ -328,7 +328,10 @@ def prepare_mesh(mesh: TriMesh, params: Contour3DParams) -> PreparedMesh:
         features["whole"] = spectral_features(spectrum.evals[:params.k] * mesh.area, spectrum.evecs[:, :params.k],
                                               mass, params)
     if "half" in models:
-        evals, evecs = even_spectrum(spectrum, mesh_reflection(mesh, spectrum), params.k)
+        try:
+            evals, evecs = even_spectrum(spectrum, mesh_reflection(mesh, spectrum), params.k)
+        except ParameterError as err:  # a shape far from any left-right symmetry
+            raise InputError(f"{mesh.name}: {err}; use model='whole' or 'auto', or lower k") from None
         features["half"] = spectral_features(evals * mesh.area, evecs, mass, params)
     verts = (mesh.vertices - mesh.vertices.mean(axis=0)) / np.sqrt(mesh.area)
     axis = intrinsic_axis(spectrum.evals[:params.k], spectrum.evecs[:, :params.k], mass)

@@ -43,7 +43,11 @@ its class. Per match: mean geodesic error / √area and the fractions within
 0.05 and 0.1; **coverage**, the length of the matched closed curve on the
 mesh divided by the length of the ground-truth curve (a collapsed optimum has
 a small coverage); the number of distinct vertices the curve visits; energy,
-optimality gap and runtime.
+optimality gap and runtime. Where the target has a mirrored ground truth
+(``<target>.sym.vts`` next to its ``.vts``), the **mirror-accepted** mean
+error is the smaller of the mean errors against the ground truth and against
+its left–right mirror image: a view across the plane of symmetry (a person
+from the front) cannot tell left from right, so both readings are correct.
 """
 
 from __future__ import annotations
@@ -275,7 +279,7 @@ def score_curve(map_xy: np.ndarray, path_vertices: np.ndarray, gt: np.ndarray, t
 
 
 def match_cut_query(source_path, target_path, plane: str, params: dict, *, gt_rows=None, gt_map=None,
-                    picture: str | None = None) -> dict:
+                    mirror_rows=None, picture: str | None = None) -> dict:
     """Cut a query from the source mesh, match it to the target and score it (one benchmark job).
 
     Parameters
@@ -290,6 +294,9 @@ def match_cut_query(source_path, target_path, plane: str, params: dict, *, gt_ro
     gt_map : (n_source,) int, optional
         Target vertex of every source vertex. Without ``gt_rows`` and
         ``gt_map``, source and target must share their connectivity.
+    mirror_rows : (rows_target, rows_target_mirrored), optional
+        The target's ``.vts`` and ``.sym.vts`` rows (0-based): the
+        mirror-accepted error is reported too.
     picture : path, optional
         PNG of the query and the matched curve.
 
@@ -334,6 +341,10 @@ def match_cut_query(source_path, target_path, plane: str, params: dict, *, gt_ro
             gt = transfer(gt)
         path = np.asarray(matched.vertices)
         row.update(score_curve(result.map_xy, path, gt, target, query.length_3d * np.sqrt(target.area / source.area)))
+        row["mean_error_sym"] = row["mean_error"]
+        if mirror_rows is not None:
+            mirrored = score_curve(result.map_xy, path, _vts_transfer(target.vertices, *mirror_rows)(gt), target, 1.0)
+            row["mean_error_sym"] = min(row["mean_error"], mirrored["mean_error"])
         row.update(energy=float(result.energy), gap=float(search.upper_bound - search.lower_bound),
                    optimal=search.optimal, iterations=search.iterations, seconds=seconds)
         if picture is not None:
@@ -356,6 +367,7 @@ class ContourJob:
     plane: str
     gt_rows: tuple | None = None
     gt_map: np.ndarray | None = None
+    mirror_rows: tuple | None = None
 
 
 def _shape_maps(folder: Path, shapes: dict) -> list[tuple[str, str, Path]]:
@@ -405,14 +417,16 @@ def contour_jobs(datasets, planes=DEFAULT_PLANES) -> list[ContourJob]:
     for folder in datasets:
         data = load_dataset(folder, require_pairs=False)
         rows = {name: load_vts(path) for name, path in data.gt.items()}
+        mirror = {name: (rows[name], load_vts(path)) for name, path in data.gt_sym.items() if name in rows}
         maps = _shape_maps(data.folder, data.shapes)
         for name, path in data.shapes.items():
             for plane in planes:
-                jobs.append(ContourJob(path, path, plane))
+                jobs.append(ContourJob(path, path, plane, mirror_rows=mirror.get(name)))
                 for other, other_path in data.shapes.items():
                     if other == name or class_of(other) != class_of(name):
                         continue
-                    jobs.append(ContourJob(path, other_path, plane, gt_rows=(rows[name], rows[other]) if rows else None))
+                    jobs.append(ContourJob(path, other_path, plane, gt_rows=(rows[name], rows[other]) if rows else None,
+                                           mirror_rows=mirror.get(other)))
         for name, other, map_path in maps:
             source, target = load_mesh(data.shapes[name]), load_mesh(data.shapes[other])
             gt_map = load_map(map_path, n_target=target.n_vertices, n_source=source.n_vertices)
@@ -431,6 +445,7 @@ def _summary(rows: list[dict]) -> dict:
         col = lambda key: np.array([r[key] for r in ok], dtype=np.float64)  # noqa: E731
         return {"queries": len(selected), "failed": len(selected) - len(ok),
                 "mean_error": float(col("mean_error").mean()), "worst_mean_error": float(col("mean_error").max()),
+                "mean_error_sym": float(col("mean_error_sym").mean()),
                 "within_005": float(col("within_005").mean()), "within_01": float(col("within_01").mean()),
                 "mean_coverage": float(col("coverage").mean()), "min_coverage": float(col("coverage").min()),
                 "collapsed": int(np.sum(col("coverage") < COLLAPSE_COVERAGE)),
@@ -452,30 +467,33 @@ def _markdown(summary: dict, rows: list[dict]) -> str:
     def fmt(value, spec=".3f"):
         return "–" if value is None else format(value, spec)
 
-    lines = ["| queries | n | failed | mean error | worst mean | ≤0.05 | ≤0.1 | coverage | min coverage | "
-             f"collapsed (<{COLLAPSE_COVERAGE}) | optimal | median s | max s |",
-             "|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
+    lines = ["| queries | n | failed | mean error | mirror accepted | worst mean | ≤0.05 | ≤0.1 | coverage | "
+             f"min coverage | collapsed (<{COLLAPSE_COVERAGE}) | optimal | median s | max s |",
+             "|---|---|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for label, s in summary.items():
         g = s.get
         lines.append(f"| {label} | {s['queries']} | {s['failed']} | {fmt(g('mean_error'))} | "
+                     f"{fmt(g('mean_error_sym'))} | "
                      f"{fmt(g('worst_mean_error'))} | {fmt(g('within_005'))} | {fmt(g('within_01'))} | "
                      f"{fmt(g('mean_coverage'), '.2f')} | {fmt(g('min_coverage'), '.2f')} | {g('collapsed', '–')} | "
                      f"{g('optimal', '–')} | {fmt(g('median_seconds'), '.2f')} | {fmt(g('max_seconds'), '.2f')} |")
-    lines += ["", "| query | target | mean error | ≤0.05 | ≤0.1 | coverage | distinct vertices (gt) | energy | gap | "
-                  "s | error |", "|---|---|---|---|---|---|---|---|---|---|---|"]
+    lines += ["", "| query | target | mean error | mirror accepted | ≤0.05 | ≤0.1 | coverage | distinct vertices (gt) | "
+                  "energy | gap | s | error |", "|---|---|---|---|---|---|---|---|---|---|---|---|"]
     for r in rows:
         if r["status"] == "skipped":
             continue
         if r["status"] != "ok":
-            lines.append(f"| {r['query']} | {r['target']} | | | | | | | | | {r['error']} |")
+            lines.append(f"| {r['query']} | {r['target']} | | | | | | | | | | {r['error']} |")
             continue
-        lines.append(f"| {r['query']} | {r['target']} | {r['mean_error']:.3f} | {r['within_005']:.2f} | "
+        lines.append(f"| {r['query']} | {r['target']} | {r['mean_error']:.3f} | {r['mean_error_sym']:.3f} | "
+                     f"{r['within_005']:.2f} | "
                      f"{r['within_01']:.2f} | {r['coverage']:.2f} | {r['distinct_vertices']} "
                      f"({r['gt_distinct_vertices']}) | {r['energy']:.4g} | {r['gap']:.2g} | {r['seconds']:.2f} | |")
     return "\n".join(lines) + "\n"
 
 
-COLUMNS = ("query", "target", "plane", "self", "other_class", "status", "n_points", "mean_error", "median_error", "within_005",
+COLUMNS = ("query", "target", "plane", "self", "other_class", "status", "n_points", "mean_error", "mean_error_sym",
+           "median_error", "within_005",
            "within_01", "coverage", "distinct_vertices", "gt_distinct_vertices", "energy", "gap", "optimal",
            "iterations", "seconds", "error")
 
@@ -523,7 +541,8 @@ def contour_benchmark(datasets, out, *, planes=DEFAULT_PLANES, params: dict | No
             if pictures:
                 picture = str(out / "pictures" / f"{job.source.stem}-{job.plane}__{job.target.stem}.png")
             futures.append(pool.submit(match_cut_query, str(job.source), str(job.target), job.plane, params,
-                                       gt_rows=job.gt_rows, gt_map=job.gt_map, picture=picture))
+                                       gt_rows=job.gt_rows, gt_map=job.gt_map, mirror_rows=job.mirror_rows,
+                                       picture=picture))
         for number, future in enumerate(futures, 1):
             rows.append(future.result())
             if callback is not None:

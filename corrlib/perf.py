@@ -121,16 +121,18 @@ def suite_contour3d(repeat: int, quick: bool = False) -> None:
     params = Contour3DParams(n_contour=200)
     prepared = prepare_query(query, params)
     target = prepare_mesh(cat1, params)
-    default_features = next(iter(target.features.values()))  # the default shape model's
-    graph = ProductGraph(node_costs(prepared.features, default_features), prepared.points, target.vertices,
+    model, default_features = next(iter(target.features.items()))  # the default shape model's (first)
+    graph = ProductGraph(node_costs(prepared.model_features(model), default_features), prepared.points, target.vertices,
                          cat1.adjacency)
     everything = np.ones(cat1.n_vertices, dtype=bool)
     t_run = _best_time(lambda: graph.shortest(everything, everything), repeat)[0]
     _line(f"one layered Dijkstra, 200 x {cat1.n_vertices}, all starts, unpruned", t_run)
-    paper_cost = {"features": "paper", "axis_weight": 0.0, "model": "whole"}
+    paper_cost = {"features": "paper", "axis_weight": 0.0, "model": "flat"}
     cases = [("default cost", 0.05, {})] if quick else [
         ("default cost", 0.0, {}), ("default cost", 0.05, {}), ("whole-surface model", 0.0, {"model": "whole"}),
-        ("both shape models", 0.0, {"model": "auto"}), ("CVPR 2016 cost", 0.0, paper_cost),
+        ("half-shape model", 0.0, {"model": "half"}), ("half-shape model, one axis", 0.0,
+                                                        {"model": "half", "axis_modes": 1}),
+        ("CVPR 2016 cost", 0.0, paper_cost),
         ("default cost, elastic energy", 0.0, {"energy": "elastic"})]
     for label, eps, extra in cases:
         t, result = _best_time(lambda e=eps, kw=extra: solve("contour3d", query, cat1, n_contour=200, eps=e, **kw),

@@ -175,7 +175,8 @@ def test_result_is_invariant_to_a_mirrored_and_reordered_mesh(wolf_pair):
     inverse = np.argsort(perm)
     mirrored = TriMesh(wolf1.vertices[perm] * [-1.0, 1.0, 1.0], inverse[wolf1.faces][:, ::-1], name="mirrored")
     other = solve("contour3d", contour, mirrored, n_contour=60)
-    assert other.energy == pytest.approx(base.energy, rel=1e-6)
+    # the even eigenpairs come from a reflection estimated by least squares on each mesh: equal to ~1e-6
+    assert other.energy == pytest.approx(base.energy, rel=1e-5)
     assert np.mean(perm[other.map_xy] == base.map_xy) > 0.95
 
 
@@ -309,7 +310,11 @@ def test_too_few_eigenpairs_is_a_named_error():
     # the half-shape model needs about three times as many eigenpairs of the mesh as k
     small = trimesh.creation.icosphere(2)  # 162 vertices
     with pytest.raises(InputError, match=r"ico162: 162 vertices are too few for the 165 eigenpairs .*model='whole'"):
-        solve("contour3d", circle, TriMesh(small.vertices, small.faces, name="ico162"), n_contour=40, k=55)
+        solve("contour3d", circle, TriMesh(small.vertices, small.faces, name="ico162"), n_contour=40, k=55,
+              model="half")
+    # model=auto (the default) falls back to the whole model there
+    fallback = solve("contour3d", circle, TriMesh(small.vertices, small.faces), n_contour=40, k=55)
+    assert fallback.extras["model"] == "whole" and np.isfinite(fallback.energy)
     whole = solve("contour3d", circle, TriMesh(small.vertices, small.faces), n_contour=40, k=20, model="whole")
     assert whole.extras["model"] == "whole" and np.isfinite(whole.energy)
 
@@ -327,7 +332,7 @@ def test_elastic_energy_does_not_collapse_where_the_paper_energy_does():
     for energy in ("paper", "elastic"):
         # the paper's node cost, so that only the path energy differs
         result = solve("contour3d", query.contour, lion, n_contour=60, energy=energy, features="paper", axis_weight=0,
-                       model="whole")
+                       model="flat")
         assert result.search.optimal
         gt = query.ground_truth(result.path.contour_points, lion.vertices)
         scores[energy] = score_curve(result.map_xy, result.path.vertices, gt, lion, query.length_3d)

@@ -373,3 +373,65 @@ def test_cholesky_shift_invert_equals_superlu_shift_invert(cat_pair, monkeypatch
     overlap = np.abs(np.einsum("ij,ij->j", v_lu, mass @ v_ch))
     simple = np.minimum(np.diff(w_lu, prepend=-1), np.diff(w_lu, append=1e9)) > 1e-6 * w_lu[-1]
     assert np.all(overlap[simple] > 1 - 1e-6)
+
+
+def _glued_pillow(disk: TriMesh, boundary: np.ndarray) -> tuple[TriMesh, np.ndarray]:
+    """Two copies of a planar disk glued along their boundary; returns the pillow and, per pillow vertex,
+    the disk vertex it copies (the second copy's interior vertices are appended)."""
+    n = disk.n_vertices
+    interior = np.setdiff1d(np.arange(n), boundary)
+    second = np.arange(n)
+    second[interior] = n + np.arange(interior.size)
+    vertices = np.vstack([disk.vertices, disk.vertices[interior]])
+    faces = np.vstack([disk.faces, second[disk.faces][:, ::-1]])
+    # validate=False: an edge between two boundary vertices is shared by both copies (four faces)
+    return TriMesh(vertices, faces, name="pillow", validate=False), np.concatenate([np.arange(n), interior])
+
+
+def test_doubled_spectrum_is_the_glued_pillow_spectrum():
+    """The spectrum of two copies of a disk glued along the boundary is the union of the disk's Neumann and
+    Dirichlet spectra, exactly also in the discrete setting (the swap of the copies is a symmetry of the
+    cotangent Laplacian): compared with the Laplacian of the explicitly glued pillow, and with the analytic
+    rectangle spectrum π²(i²/a² + j²/b²), i, j ≥ 0 (Neumann) and ≥ 1 (Dirichlet)."""
+    from corrlib.geometry.spectrum import doubled_spectrum
+
+    nx, ny, a, b = 32, 16, 2.0, 1.0
+    x, y = np.meshgrid(np.linspace(0, a, nx + 1), np.linspace(0, b, ny + 1), indexing="ij")
+    vertices = np.column_stack([x.ravel(), y.ravel(), np.zeros(x.size)])
+    idx = np.arange(x.size).reshape(nx + 1, ny + 1)
+    p, q, r, s = idx[:-1, :-1].ravel(), idx[1:, :-1].ravel(), idx[1:, 1:].ravel(), idx[:-1, 1:].ravel()
+    disk = TriMesh(vertices, np.vstack([np.column_stack([p, q, r]), np.column_stack([p, r, s])]), name="rect")
+    on_boundary = (np.isclose(vertices[:, 0], 0) | np.isclose(vertices[:, 0], a)
+                   | np.isclose(vertices[:, 1], 0) | np.isclose(vertices[:, 1], b))
+    boundary = np.flatnonzero(on_boundary)
+    stiffness, mass = mesh_laplacian(disk)
+    k = 12
+    evals, evecs = doubled_spectrum(stiffness, mass, boundary, k, name="rect")
+    pillow, copy_of = _glued_pillow(disk, boundary)
+    p_stiff, p_mass = mesh_laplacian(pillow)
+    p_evals, p_evecs = eigenpairs(p_stiff, p_mass, k)
+    assert np.allclose(evals, p_evals, rtol=1e-8, atol=1e-8)
+    # eigenfunctions of simple eigenvalues agree on the first copy, up to sign; normalised on the pillow
+    simple = np.flatnonzero(np.min(np.abs(np.subtract.outer(evals, evals)) + np.eye(k) * 1e9, axis=1) > 1e-3)
+    first = np.arange(disk.n_vertices)
+    for j in simple:
+        assert min(np.abs(evecs[:, j] - p_evecs[first, j]).max(), np.abs(evecs[:, j] + p_evecs[first, j]).max()) < 1e-6
+    # Dirichlet functions vanish on the boundary; normalised on the pillow, i.e. orthonormal with respect to
+    # twice the disk's mass within each parity (an odd and an even function are orthogonal on the pillow only)
+    odd = np.abs(evecs[boundary]).max(axis=0) < 1e-12
+    assert odd.any() and (~odd).any()
+    for parity in (odd, ~odd):
+        gram = evecs[:, parity].T @ (2 * mass) @ evecs[:, parity]
+        assert np.allclose(gram, np.eye(int(parity.sum())), atol=1e-8)
+    neumann = [np.pi ** 2 * (i * i / a ** 2 + j * j / b ** 2) for i in range(8) for j in range(8)]
+    dirichlet = [np.pi ** 2 * (i * i / a ** 2 + j * j / b ** 2) for i in range(1, 8) for j in range(1, 8)]
+    exact = np.sort(neumann + dirichlet)[:k]
+    assert np.allclose(evals[1:], exact[1:], rtol=0.03)
+    # with fewer interior vertices than k, all Dirichlet eigenpairs take part (the union is still complete)
+    few = np.setdiff1d(np.arange(disk.n_vertices), [200, 201, 202])
+    few_evals, few_evecs = doubled_spectrum(stiffness, mass, few, k, name="rect")
+    expected = np.sort(np.concatenate([eigenpairs(stiffness, mass, k)[0],
+                                       eigenpairs(stiffness[[200, 201, 202]][:, [200, 201, 202]],
+                                                  mass[[200, 201, 202]][:, [200, 201, 202]], 3,
+                                                  check_connected=False)[0]]))[:k]
+    assert few_evecs.shape == (disk.n_vertices, k) and np.allclose(few_evals, expected)

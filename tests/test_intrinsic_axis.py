@@ -6,11 +6,11 @@ import trimesh
 
 from corrlib.errors import ParameterError
 from corrlib.geometry.cyclic_paths import branch_and_bound, branch_and_bound_union
-from corrlib.geometry.intrinsic_axis import axis_mismatch, intrinsic_axis
+from corrlib.geometry.intrinsic_axis import axis_mismatch, intrinsic_axis, spectral_axes
 from corrlib.geometry.laplacian import mesh_laplacian
 from corrlib.geometry.spectrum import eigenpairs
 from corrlib.methods import solve
-from corrlib.methods.contour3d import (Contour3DParams, axis_scale, feature_distances, prepare_mesh,
+from corrlib.methods.contour3d import (Contour3DParams, axis_cost, axis_scales, feature_distances, prepare_mesh,
                                        prepare_query, product_graph)
 from corrlib.progress import run
 from corrlib.shapes import Contour2D, TriMesh
@@ -102,6 +102,45 @@ def test_axis_mismatch_and_errors():
         intrinsic_axis(np.array([0.0, 1.0, 2.0]), np.ones((5, 3)), np.ones(4))
 
 
+def test_higher_modes_of_a_strip_and_their_confidence():
+    """Neumann strip [0, 5] x [0, 1]: φ_2 = cos(2πx/5), not monotone, so its quantile is symmetric about the
+    middle (x and L − x get the same value); λ_j ∝ j² gives the confidence 1 − max(1/4, 4/9) = 5/9 for mode 2.
+    The axes of modes 1 .. 3 are the individual axes."""
+    strip = rectangle(5.0)
+    stiffness, mass = mesh_laplacian(strip)
+    evals, evecs = eigenpairs(stiffness, mass, 6)
+    second = intrinsic_axis(evals, evecs, mass.diagonal(), mode=2)
+    assert second.confidence == pytest.approx(5 / 9, abs=0.01)
+    x = strip.vertices[:, 0]
+    mirror = np.lexsort((strip.vertices[:, 1], 5.0 - x))  # vertex at (5 − x, y), grid order
+    original = np.lexsort((strip.vertices[:, 1], x))
+    # equal up to the order within the tie: the two mirrored grid columns hold 2/61 of the area
+    assert np.max(np.abs(second.coordinate[original] - second.coordinate[mirror])) <= 2 / 61 + 1e-9
+    axes = spectral_axes(evals, evecs, mass.diagonal(), 3)
+    assert [a.confidence for a in axes] == [intrinsic_axis(evals, evecs, mass.diagonal(), j).confidence
+                                           for j in (1, 2, 3)]
+    with pytest.raises(ParameterError, match="mode 4 needs at least 6"):
+        intrinsic_axis(evals[:5], evecs[:, :5], mass.diagonal(), mode=4)
+    with pytest.raises(ParameterError, match="mode must be"):
+        intrinsic_axis(evals, evecs, mass.diagonal(), mode=0)
+
+
+def test_two_axes_search_every_sign_reading():
+    """axis_modes=2: the optimum is the lowest of the four sign readings of the two axes, each searched on
+    its own, and the reported signs are the winner's."""
+    contour, mesh = capsule_and_ellipse()
+    params = Contour3DParams(n_contour=24, k=12, axis_modes=2, model="half")
+    result = solve("contour3d", contour, mesh, n_contour=24, k=12, axis_modes=2, model="half")
+    query, target = prepare_query(contour, params), prepare_mesh(mesh, params)
+    scales = axis_scales(query, target, "half", 1.0, params)
+    assert scales.shape == (2,)
+    readings = [(a, b) for a in (False, True) for b in ((False, True) if scales[1] > 0 else (False,))]
+    energies = {signs: solve_direction(query, target, mesh, params, signs).energy for signs in readings}
+    best = min(energies, key=energies.get)
+    assert result.energy == pytest.approx(energies[best], rel=1e-12)
+    assert tuple(result.extras["axis_signs"][:len(best)]) == best
+
+
 def capsule_and_ellipse():
     capsule = trimesh.creation.capsule(height=3.0, radius=0.6, count=[16, 16])
     mesh = TriMesh(capsule.vertices, capsule.faces, name="capsule")
@@ -110,10 +149,11 @@ def capsule_and_ellipse():
     return contour, mesh
 
 
-def solve_direction(query, target, mesh, params, flipped, model="half", unit_model="half"):
-    distances = feature_distances(query.features, target.features[model])
-    scale = axis_scale(query, target, feature_distances(query.features, target.features[unit_model]).mean(), params)
-    cost = distances + scale * axis_mismatch(query.axis.coordinate, target.axis.coordinate, flipped=flipped)
+def solve_direction(query, target, mesh, params, signs, model="half", unit_model="half"):
+    distances = feature_distances(query.model_features(model), target.features[model])
+    unit = feature_distances(query.model_features(unit_model), target.features[unit_model]).mean()
+    scales = axis_scales(query, target, model, unit, params)
+    cost = distances + axis_cost(query, target, model, scales, signs)
     graph = product_graph(cost, query.points, target.vertices, mesh.adjacency, params, float(distances.mean()))
     return run(branch_and_bound(graph))
 
@@ -123,17 +163,18 @@ def test_both_axis_directions_are_solved_and_the_lower_energy_is_kept(energy):
     """One branch-and-bound over the graphs of both readings of the axis returns the optimum of the better
     one: compared with both directions solved independently."""
     contour, mesh = capsule_and_ellipse()
-    params = Contour3DParams(n_contour=24, k=12, energy=energy)
-    result = solve("contour3d", contour, mesh, n_contour=24, k=12, energy=energy)
+    one_axis = {"model": "half", "axis_modes": 1}
+    params = Contour3DParams(n_contour=24, k=12, energy=energy, **one_axis)
+    result = solve("contour3d", contour, mesh, n_contour=24, k=12, energy=energy, **one_axis)
     query, target = prepare_query(contour, params), prepare_mesh(mesh, params)
-    as_is, reversed_ = (solve_direction(query, target, mesh, params, f) for f in (False, True))
-    assert min(query.axis.confidence, target.axis.confidence) > 0.3  # the axis term is active
+    as_is, reversed_ = (solve_direction(query, target, mesh, params, (f,)) for f in (False, True))
+    assert axis_scales(query, target, "half", 1.0, params)[0] > 0.3  # the axis term is active
     assert result.energy == pytest.approx(min(as_is.energy, reversed_.energy), rel=1e-12)
     assert result.extras["axis_reversed"] == (reversed_.energy < as_is.energy)
     assert result.search.optimal
     assert result.search.lower_bound == pytest.approx(result.energy, rel=1e-12)
     # the axis term is what made the two differ; without it there is one search
-    plain = solve("contour3d", contour, mesh, n_contour=24, k=12, energy=energy, axis_weight=0)
+    plain = solve("contour3d", contour, mesh, n_contour=24, k=12, energy=energy, axis_weight=0, **one_axis)
     assert plain.extras["axis_reversed"] is False
     assert plain.energy < result.energy
 
@@ -142,11 +183,11 @@ def test_auto_model_keeps_the_lower_energy_of_both_shape_models():
     """model=auto searches the half-shape and the whole-surface readings (both axis directions each) at once:
     its optimum is the lowest of the four searched independently, in one unit (the whole model's)."""
     contour, mesh = capsule_and_ellipse()
-    params = Contour3DParams(n_contour=24, k=12, model="auto")
-    result = solve("contour3d", contour, mesh, n_contour=24, k=12, model="auto")
+    params = Contour3DParams(n_contour=24, k=12, model="auto", axis_modes=1)
+    result = solve("contour3d", contour, mesh, n_contour=24, k=12, model="auto", axis_modes=1)
     query, target = prepare_query(contour, params), prepare_mesh(mesh, params)
     assert set(target.features) == {"whole", "half"}
-    energies = {(model, flipped): solve_direction(query, target, mesh, params, flipped, model, "whole").energy
+    energies = {(model, flipped): solve_direction(query, target, mesh, params, (flipped,), model, "whole").energy
                 for model in ("whole", "half") for flipped in (False, True)}
     best = min(energies, key=energies.get)
     assert result.energy == pytest.approx(energies[best], rel=1e-12)

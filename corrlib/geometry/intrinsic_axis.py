@@ -52,18 +52,27 @@ class IntrinsicAxis:
     confidence: float
 
 
-def intrinsic_axis(evals: np.ndarray, evecs: np.ndarray, mass: np.ndarray) -> IntrinsicAxis:
-    """The longest intrinsic axis of a connected shape.
+def intrinsic_axis(evals: np.ndarray, evecs: np.ndarray, mass: np.ndarray, mode: int = 1) -> IntrinsicAxis:
+    """The intrinsic axis of a connected shape along its ``mode``-th eigenfunction.
+
+    ``mode = 1`` is the longest axis (the Fiedler function); higher modes are
+    the next axes of the shape's spectral embedding (for a person with arms
+    out: head to feet, then left to right). Their confidence is the smaller
+    relative gap to the neighbouring eigenvalues,
+    ``1 - max(λ_{mode-1}/λ_mode, λ_mode/λ_{mode+1})`` (for mode 1 this is
+    ``1 - λ_1/λ_2``, as ``λ_0 = 0``).
 
     Parameters
     ----------
     evals : (k,) float
-        Laplace–Beltrami eigenvalues in ascending order, ``k >= 3``,
+        Laplace–Beltrami eigenvalues in ascending order, ``k >= mode + 2``,
         ``evals[0] ≈ 0`` (a connected shape).
     evecs : (n, k) float
         Eigenfunctions (any normalisation).
     mass : (n,) float
         Vertex areas (lumped mass).
+    mode : int
+        Which eigenfunction, ``>= 1``.
 
     Returns
     -------
@@ -71,20 +80,30 @@ def intrinsic_axis(evals: np.ndarray, evecs: np.ndarray, mass: np.ndarray) -> In
     """
     evals = np.asarray(evals, dtype=np.float64)
     mass = np.asarray(mass, dtype=np.float64)
-    if evals.ndim != 1 or evals.shape[0] < 3:
-        raise ParameterError(f"the intrinsic axis needs at least 3 eigenvalues, got shape {evals.shape}")
+    if not (isinstance(mode, (int, np.integer)) and mode >= 1):
+        raise ParameterError(f"mode must be an integer >= 1, got {mode!r}")
+    if evals.ndim != 1 or evals.shape[0] < mode + 2:
+        raise ParameterError(f"the intrinsic axis of mode {mode} needs at least {mode + 2} eigenvalues, got shape "
+                             f"{evals.shape}")
     if evecs.shape != (mass.shape[0], evals.shape[0]):
         raise ParameterError(f"evecs must be (n, k) = ({mass.shape[0]}, {evals.shape[0]}), got {evecs.shape}")
     if not (evals[1] > 0 and np.all(mass > 0)):
         raise ParameterError("the intrinsic axis needs a connected shape (evals[1] > 0) and positive vertex areas")
-    fiedler = np.asarray(evecs[:, 1], dtype=np.float64)
-    order = np.argsort(fiedler, kind="stable")
+    function = np.asarray(evecs[:, mode], dtype=np.float64)
+    order = np.argsort(function, kind="stable")
     sorted_mass = mass[order]
-    coordinate = np.empty_like(fiedler)
+    coordinate = np.empty_like(function)
     # quantile at the vertex's own position: the area strictly before it plus half its own
     coordinate[order] = (np.cumsum(sorted_mass) - 0.5 * sorted_mass) / sorted_mass.sum()
-    confidence = float(np.clip(1.0 - evals[1] / evals[2], 0.0, 1.0)) if evals[2] > 0 else 0.0
+    gap_below = evals[mode - 1] / evals[mode]
+    gap_above = evals[mode] / evals[mode + 1] if evals[mode + 1] > 0 else 1.0
+    confidence = float(np.clip(1.0 - max(gap_below, gap_above), 0.0, 1.0))
     return IntrinsicAxis(coordinate, confidence)
+
+
+def spectral_axes(evals: np.ndarray, evecs: np.ndarray, mass: np.ndarray, n_axes: int) -> list[IntrinsicAxis]:
+    """The intrinsic axes of modes ``1 .. n_axes`` (see :func:`intrinsic_axis`)."""
+    return [intrinsic_axis(evals, evecs, mass, mode) for mode in range(1, n_axes + 1)]
 
 
 def axis_mismatch(contour_axis: np.ndarray, mesh_axis: np.ndarray, *, flipped: bool = False) -> np.ndarray:

@@ -320,3 +320,54 @@ def mesh_spectrum(mesh, k: int, *, mass: str = "lumped", method: str = "auto", u
     if use_cache:
         cache.store("spectra", key, {"evals": evals, "evecs": evecs})
     return Spectrum(evals, evecs, stiffness, mass_mat)
+
+
+def doubled_spectrum(stiffness: sp.spmatrix, mass: sp.spmatrix, boundary: np.ndarray, k: int, *,
+                     neumann: tuple[np.ndarray, np.ndarray] | None = None,
+                     name: str = "shape") -> tuple[np.ndarray, np.ndarray]:
+    """Lowest ``k`` eigenpairs of the doubled domain, read on one of its two copies.
+
+    Two copies of a planar domain glued along their common boundary form a
+    closed surface without boundary (a flat "pillow"). The reflection that
+    swaps the copies splits every eigenfunction of the pillow into an even
+    part, a Neumann eigenfunction of the domain, and an odd part, a Dirichlet
+    eigenfunction, which vanishes on the boundary. Its spectrum is therefore
+    the union of the Neumann and the Dirichlet spectra of the domain, and an
+    eigenfunction normalised on the pillow is the domain's eigenfunction
+    divided by √2.
+
+    Parameters
+    ----------
+    stiffness, mass : (n, n) sparse
+        Laplacian of the domain (Neumann: every vertex free).
+    boundary : (b,) int
+        Boundary vertices (fixed to zero in the Dirichlet problem).
+    k : int
+    neumann : ((k,) float, (n, k) float), optional
+        The domain's own lowest ``k`` eigenpairs, if already computed.
+
+    Returns
+    -------
+    evals : (k,) float
+        Ascending.
+    evecs : (n, k) float
+        The pillow's eigenfunctions on the domain's copy; Dirichlet ones are
+        zero on the boundary. Within each parity orthonormal with respect to
+        ``2 mass`` (across parities only on the whole pillow, where the odd
+        ones change sign).
+    """
+    n = stiffness.shape[0]
+    interior = np.setdiff1d(np.arange(n), np.asarray(boundary, dtype=np.int64))
+    stiffness = sp.csr_matrix(stiffness)
+    mass = sp.csr_matrix(mass)
+    n_evals, n_evecs = neumann if neumann is not None else eigenpairs(stiffness, mass, k, name=name)
+    k_dirichlet = min(k, interior.size)  # all of them on a domain with few interior vertices
+    d_evals, d_evecs = np.zeros(0), np.zeros((n, 0))
+    if k_dirichlet > 0:
+        d_evals, d_interior = eigenpairs(stiffness[interior][:, interior], mass[interior][:, interior], k_dirichlet,
+                                         name=f"{name} (Dirichlet)", check_connected=False)
+        d_evecs = np.zeros((n, k_dirichlet))
+        d_evecs[interior] = d_interior
+    evals = np.concatenate([n_evals, d_evals])
+    order = np.argsort(evals, kind="stable")[:k]
+    return evals[order], np.hstack([n_evecs, d_evecs])[:, order] / np.sqrt(2.0)

@@ -41,7 +41,10 @@ feature distance ``d̄`` (so ``w`` is in units of the node cost). The axis
 has no preferred direction, so one branch-and-bound runs over the product
 graphs of both ``a_2D`` and ``1 − a_2D`` and keeps the lower energy. A
 closed curve on the mesh may run either way, so the contour's orientation
-and its mirror image need no extra search.
+and its mirror image need no extra search. ``axis_modes > 1`` adds the axes
+of the next eigenfunctions (:func:`~corrlib.geometry.intrinsic_axis.intrinsic_axis`,
+each with the confidence of its own spectral gaps) and searches every
+combination of their signs.
 
 Shape model (ours; ``model``): what the filled silhouette is matched as.
 A silhouette of a bilaterally symmetric shape seen across its plane of
@@ -53,11 +56,19 @@ on that half are the functions the reflection leaves unchanged, so its
 spectrum is the even part of the surface's spectrum
 (:mod:`corrlib.descriptors.symmetry`: the reflection from descriptors that
 are even and odd under it, then Rayleigh–Ritz on the even subspace).
-``model="half"`` (default) computes the mesh features from those even
-eigenpairs, so that both sides of every feature distance describe a disk
-with a boundary; ``"whole"`` uses the closed surface's eigenpairs (the
-paper); ``"auto"`` searches both and keeps the lower energy (both measured
-in the unit of the whole model). Half features are the same at a point and
+``model="half"`` computes the mesh features from those even eigenpairs,
+so that both sides of every feature distance describe a disk with a
+boundary; ``"whole"`` matches the whole closed surface against the
+*doubled* silhouette, two copies of the filled outline glued along it (the
+near and the far side of the shape; a person seen from the front). Its
+spectrum is the union of the Neumann and the Dirichlet spectra of the filled
+outline (:func:`~corrlib.geometry.spectrum.doubled_spectrum`), so that both
+sides of every feature distance are closed surfaces of the same area and
+their eigenvalues cover the same range. ``"auto"`` (default) searches both
+and keeps the lower energy (both measured in the unit of the whole model);
+it uses the whole model alone on a mesh too coarse for the half model's
+eigenpairs or without an even subspace. ``"flat"`` compares the filled
+outline itself with the whole surface, as the paper does. Half features are the same at a point and
 at its mirror image, so the matched curve may pass on either side of the
 body, as a silhouette cannot tell them apart either.
 
@@ -85,6 +96,7 @@ Map convention: ``map_xy[i]`` is the mesh vertex matched to contour point i
 
 from __future__ import annotations
 
+import itertools
 from dataclasses import dataclass
 
 import numba
@@ -95,9 +107,9 @@ from corrlib.descriptors.symmetry import K_FINAL, even_spectrum, mesh_reflection
 from corrlib.errors import ContourError, InputError, ParameterError
 from corrlib.geometry.cyclic_paths import ProductGraph, branch_and_bound_union
 from corrlib.geometry.elastic_paths import ElasticProductGraph
-from corrlib.geometry.intrinsic_axis import IntrinsicAxis, axis_mismatch, intrinsic_axis
+from corrlib.geometry.intrinsic_axis import IntrinsicAxis, axis_mismatch, spectral_axes
 from corrlib.geometry.laplacian import mesh_laplacian
-from corrlib.geometry.spectrum import eigenpairs, mesh_spectrum
+from corrlib.geometry.spectrum import doubled_spectrum, eigenpairs, mesh_spectrum
 from corrlib.geometry.triangulate import fill_contour
 from corrlib.methods.base import ContourPath, MatchResult, SearchCertificate, param
 from corrlib.methods.registry import MethodSpec, register
@@ -106,7 +118,7 @@ from corrlib.shapes import Contour2D, TriMesh
 
 
 #: the shape models that each value of ``model`` matches against
-MODELS = {"auto": ("whole", "half"), "half": ("half",), "whole": ("whole",)}
+MODELS = {"auto": ("whole", "half"), "half": ("half",), "whole": ("whole",), "flat": ("flat",)}
 #: eigenpairs of the mesh per even eigenpair asked for (about half of the eigenfunctions are even)
 HALF_EIGENPAIRS_PER_K = 3
 
@@ -138,11 +150,15 @@ class Contour3DParams:
     axis_weight: float = param(1.0, label="Axis weight", low=0.0, high=1e3,
                                help="Weight of the intrinsic-axis node cost, in units of the mean feature distance "
                                     "(0: the paper's node cost).")
-    model: str = param("half", label="Shape model", choices=("auto", "half", "whole"),
+    axis_modes: int = param(2, label="Axes", low=1, high=4,
+                            help="Intrinsic axes (low eigenfunctions) in the axis term; every sign of every axis "
+                                 "is searched (2^axes readings per shape model).")
+    model: str = param("auto", label="Shape model", choices=("auto", "half", "whole", "flat"),
                        help="What the filled silhouette is matched as: half: one half of the mesh cut along its "
                             "curve of intrinsic symmetry (a view across the plane of symmetry, e.g. an animal "
-                            "from the side); whole: the whole surface flattened (the paper); auto: both, the "
-                            "lower energy wins.")
+                            "from the side); whole: the whole surface as the doubled silhouette (near and far "
+                            "side, e.g. a person from the front); auto: both, the lower energy wins; flat: the "
+                            "filled silhouette against the whole surface (the paper).")
     energy: str = param("paper", label="Energy", choices=("paper", "elastic"),
                         help="paper: feature cost times product length (CVPR 2016); elastic: plus stretching, "
                              "bending and no immediate reversal on the curve (second order, Roetzer et al. 2023).")
@@ -242,19 +258,35 @@ class PreparedQuery:
     points : (m, 2) float
         Contour points scaled to enclose area 1/2 and centred.
     features : (m, d) float
+        Features of the filled silhouette (a disk with a free boundary), the
+        half model's.
     labels : (m,) int or None
     contour : Contour2D
         The resampled input contour (original units).
-    axis : IntrinsicAxis
-        The filled silhouette's intrinsic axis at the contour points ((m,)
-        coordinate).
+    axes : dict of str -> list of IntrinsicAxis
+        Per shape model, the intrinsic axes (modes ``1 .. axis_modes``) of the
+        filled silhouette (half) or of the doubled silhouette (whole) at the
+        contour points ((m,) coordinates).
+    doubled_features : (m, d) float or None
+        Features of the doubled silhouette, the whole model's (None if the
+        query was prepared for the half model only).
     """
 
     points: np.ndarray
     features: np.ndarray
     labels: np.ndarray | None
     contour: Contour2D
-    axis: IntrinsicAxis
+    axes: dict[str, list[IntrinsicAxis]]
+    doubled_features: np.ndarray | None = None
+
+    def model_features(self, model: str) -> np.ndarray:
+        """(m, d) float: the contour's features under a shape model (see the module docstring)."""
+        if model in ("half", "flat"):
+            return self.features
+        if self.doubled_features is None:
+            raise ParameterError("the query was prepared without the whole-surface model's features; prepare it "
+                                 "with model='whole' or 'auto'")
+        return self.doubled_features
 
 
 @dataclass
@@ -267,12 +299,14 @@ class PreparedMesh:
         Centred and scaled to unit surface area.
     features : dict of str -> (n, d) float
         The features of every shape model asked for (``"whole"``, ``"half"``).
-    axis : IntrinsicAxis
+    axes : dict of str -> list of IntrinsicAxis
+        Per shape model, the intrinsic axes of the surface (whole) or of its
+        even eigenfunctions (half).
     """
 
     vertices: np.ndarray
     features: dict[str, np.ndarray]
-    axis: IntrinsicAxis
+    axes: dict[str, list[IntrinsicAxis]]
 
 
 def prepare_query(contour: Contour2D, params: Contour3DParams) -> PreparedQuery:
@@ -303,9 +337,20 @@ def prepare_query(contour: Contour2D, params: Contour3DParams) -> PreparedQuery:
     evals, evecs = eigenpairs(stiffness, mass, params.k, name=contour.name)
     feats = spectral_features(evals, evecs, mass.diagonal(), params)
     m = canonical.n_points
-    axis = intrinsic_axis(evals, evecs, mass.diagonal())
-    return PreparedQuery(canonical.points, feats[:m], resampled.labels, resampled,
-                         IntrinsicAxis(axis.coordinate[:m], axis.confidence))
+    doubled = None
+    axes = {"half": _axes_at(spectral_axes(evals, evecs, mass.diagonal(), params.axis_modes), m)}
+    axes["flat"] = axes["half"]
+    if "whole" in MODELS[params.model]:
+        d_evals, d_evecs = doubled_spectrum(stiffness, mass, np.arange(m), params.k, neumann=(evals, evecs),
+                                            name=contour.name)
+        doubled = spectral_features(d_evals, d_evecs, mass.diagonal(), params)[:m]
+        axes["whole"] = _axes_at(spectral_axes(d_evals, d_evecs, mass.diagonal(), params.axis_modes), m)
+    return PreparedQuery(canonical.points, feats[:m], resampled.labels, resampled, axes, doubled)
+
+
+def _axes_at(axes: list[IntrinsicAxis], m: int) -> list[IntrinsicAxis]:
+    """The axes restricted to the first ``m`` vertices (the contour points of a filled silhouette)."""
+    return [IntrinsicAxis(axis.coordinate[:m], axis.confidence) for axis in axes]
 
 
 def prepare_mesh(mesh: TriMesh, params: Contour3DParams) -> PreparedMesh:
@@ -316,32 +361,51 @@ def prepare_mesh(mesh: TriMesh, params: Contour3DParams) -> PreparedMesh:
         raise InputError(f"{mesh.name}: {mesh.n_vertices} vertices are too few for k={params.k} Laplace–Beltrami "
                          f"eigenpairs (at most {mesh.n_vertices - 1}); lower k or use a finer mesh")
     models = MODELS[params.model]
-    k_mesh = params.k if models == ("whole",) else max(HALF_EIGENPAIRS_PER_K * params.k, K_FINAL)
+    k_mesh = params.k if "half" not in models else max(HALF_EIGENPAIRS_PER_K * params.k, K_FINAL)
     if mesh.n_vertices <= k_mesh:
-        raise InputError(f"{mesh.name}: {mesh.n_vertices} vertices are too few for the {k_mesh} eigenpairs that "
-                         f"model={params.model!r} needs; use model='whole', lower k or a finer mesh")
+        if params.model == "half":
+            raise InputError(f"{mesh.name}: {mesh.n_vertices} vertices are too few for the {k_mesh} eigenpairs "
+                             f"that model='half' needs; use model='whole', lower k or a finer mesh")
+        models, k_mesh = ("whole",), params.k  # auto: only the whole model fits so coarse a mesh
     spectrum = mesh_spectrum(mesh, k_mesh)
     mass = spectrum.mass.diagonal()
     features = {}
+    axes = {}
     # eigenvalues of the mesh scaled to unit area (see the module docstring)
-    if "whole" in models:
-        features["whole"] = spectral_features(spectrum.evals[:params.k] * mesh.area, spectrum.evecs[:, :params.k],
-                                              mass, params)
+    for model in {"whole", "flat"}.intersection(models):  # the closed surface's own eigenpairs
+        features[model] = spectral_features(spectrum.evals[:params.k] * mesh.area, spectrum.evecs[:, :params.k],
+                                            mass, params)
+        axes[model] = spectral_axes(spectrum.evals[:params.k], spectrum.evecs[:, :params.k], mass,
+                                    params.axis_modes)
     if "half" in models:
         try:
             evals, evecs = even_spectrum(spectrum, mesh_reflection(mesh, spectrum), params.k)
         except ParameterError as err:  # a shape far from any left-right symmetry
-            raise InputError(f"{mesh.name}: {err}; use model='whole' or 'auto', or lower k") from None
-        features["half"] = spectral_features(evals * mesh.area, evecs, mass, params)
+            if params.model == "half":
+                raise InputError(f"{mesh.name}: {err}; use model='whole' or 'auto', or lower k") from None
+            evals = None  # auto: the whole model alone
+        if evals is not None:
+            features["half"] = spectral_features(evals * mesh.area, evecs, mass, params)
+            axes["half"] = spectral_axes(evals, evecs, mass, params.axis_modes)
     verts = (mesh.vertices - mesh.vertices.mean(axis=0)) / np.sqrt(mesh.area)
-    axis = intrinsic_axis(spectrum.evals[:params.k], spectrum.evecs[:, :params.k], mass)
-    return PreparedMesh(verts, features, axis)
+    return PreparedMesh(verts, features, axes)
 
 
-def axis_scale(query: PreparedQuery, mesh: PreparedMesh, mean_distance: float, params: Contour3DParams) -> float:
-    """Factor ``w c d̄`` of the axis term (see the module docstring); 0 turns the term off."""
-    confidence = min(query.axis.confidence, mesh.axis.confidence)
-    return float(params.axis_weight * confidence * mean_distance)
+def axis_scales(query: PreparedQuery, mesh: PreparedMesh, model: str, mean_distance: float,
+                params: Contour3DParams) -> np.ndarray:
+    """Factors ``w c_d d̄`` of the axis terms of one shape model ((axis_modes,) float; 0 turns a term off)."""
+    confidence = np.array([min(a.confidence, b.confidence) for a, b in zip(query.axes[model], mesh.axes[model])])
+    return params.axis_weight * confidence * mean_distance
+
+
+def axis_cost(query: PreparedQuery, mesh: PreparedMesh, model: str, scales: np.ndarray,
+              signs: tuple[bool, ...]) -> np.ndarray | float:
+    """``Σ_d w c_d d̄ |a_d(i) − b_d(j)|`` ((m, n) float) for one reading of the axes' signs (True: reversed)."""
+    cost = 0.0
+    for scale, flipped, a, b in zip(scales, signs, query.axes[model], mesh.axes[model]):
+        if scale > 0:
+            cost = cost + scale * axis_mismatch(a.coordinate, b.coordinate, flipped=flipped)
+    return cost
 
 
 def product_graph(cost: np.ndarray, contour_points: np.ndarray, mesh_vertices: np.ndarray, adjacency,
@@ -367,21 +431,21 @@ def match_prepared(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams,
     yield Progress("mesh features", 0.05)
     with watch("features"):
         target = prepare_mesh(mesh, params)
-        distances = {model: feature_distances(query.features, feats) for model, feats in target.features.items()}
+        distances = {model: feature_distances(query.model_features(model), feats)
+                     for model, feats in target.features.items()}
         labels = label_penalty(query.labels, mesh.labels, params.tau)
         # one unit for every model, so that their energies compare: the mean distance of the first model
         unit_distance = float(next(iter(distances.values())).mean())
-        scale = axis_scale(query, target, unit_distance, params)
+        scales = {model: axis_scales(query, target, model, unit_distance, params) for model in distances}
     token.raise_if_cancelled()
-    # the axis has no direction, the model is chosen by energy: one branch-and-bound over every combination
-    directions = (False, True) if scale > 0 else (False,)
-    readings = [(model, flipped) for model in distances for flipped in directions]
+    # an axis has no direction, the model is chosen by energy: one branch-and-bound over every combination
+    readings = [(model, signs) for model in distances
+                for signs in itertools.product(*[(False, True) if scale > 0 else (False,)
+                                                 for scale in scales[model]])]
     unit_cost = float(np.mean(next(iter(distances.values())) + labels))
-    graphs = [product_graph(distances[model] + labels
-                            + (scale * axis_mismatch(query.axis.coordinate, target.axis.coordinate, flipped=flipped)
-                               if scale > 0 else 0.0),
+    graphs = [product_graph(distances[model] + labels + axis_cost(query, target, model, scales[model], signs),
                             query.points, target.vertices, mesh.adjacency, params, unit_cost)
-              for model, flipped in readings]
+              for model, signs in readings]
     yield Progress("branch and bound", 0.1, f"{graphs[0].m} x {graphs[0].n} product graph, {len(graphs)} readings "
                                             "(shape model, direction of the axis)")
     with watch("search"):
@@ -389,8 +453,9 @@ def match_prepared(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams,
                                                max_iterations=params.max_iterations)
     path = bb.path
     matched = path.matched_vertices(graphs[bb.graph_index].m)
-    model, flipped = readings[bb.graph_index]
-    extras = {"axis_reversed": bool(flipped), "model": model}
+    model, signs = readings[bb.graph_index]
+    extras = {"axis_reversed": bool(signs[0]) if signs else False, "axis_signs": [bool(s) for s in signs],
+              "model": model}
     yield Progress("done", 1.0, f"energy {bb.energy:.6g} after {bb.iterations} iterations")
     return MatchResult("contour3d", map_xy=matched, map_yx=None, energy=bb.energy, timings=watch.times,
                        path=ContourPath(query.contour.points, path.vertices, path.curve_index, path.layers),

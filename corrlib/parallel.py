@@ -1,7 +1,8 @@
 """Running independent jobs (meshes of a collection, pairs of a benchmark) in parallel.
 
-Local process pools by default. Workers limit BLAS to one thread each (the
-pool already uses the cores; two multi-threaded BLAS per core collapse).
+Local process pools by default. Workers limit BLAS to one thread each and
+numba to their share of the cores (the pool already uses the cores; two
+multi-threaded BLAS per core collapse).
 """
 
 from __future__ import annotations
@@ -13,10 +14,12 @@ from concurrent.futures import ProcessPoolExecutor
 from corrlib.errors import CorrError, ParameterError
 
 
-def _limit_threads():
+def _limit_threads(numba_threads: int):
+    import numba
     from threadpoolctl import threadpool_limits
 
     threadpool_limits(1)
+    numba.set_num_threads(max(1, min(numba_threads, numba.config.NUMBA_NUM_THREADS)))
 
 
 def process_pool(jobs: int | None = None) -> ProcessPoolExecutor:
@@ -29,6 +32,7 @@ def process_pool(jobs: int | None = None) -> ProcessPoolExecutor:
     """
     jobs = jobs or os.cpu_count() or 1
     return ProcessPoolExecutor(max_workers=jobs, initializer=_limit_threads,
+                               initargs=((os.cpu_count() or 1) // jobs,),
                                mp_context=multiprocessing.get_context("forkserver"))
 
 

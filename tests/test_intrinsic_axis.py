@@ -221,3 +221,26 @@ def test_paper_features_stay_selectable():
     assert np.array_equal(paper.features[:, :100], wks_only.features)
     with pytest.raises(ParameterError, match="features"):
         solve("contour3d", contour, mesh, n_contour=24, k=12, features="hks")
+
+
+def test_heuristics_computed_in_threads_equal_the_sequential_ones():
+    """The backward searches of a union run on threads; each graph's heuristic is the one it computes alone."""
+    import numba
+
+    from corrlib.geometry.cyclic_paths import compute_heuristics
+    from test_contour3d import tiny_graph
+
+    alone = []
+    for seed in range(4):
+        graph = tiny_graph(seed)
+        graph.compute_heuristic()
+        alone.append(graph.heuristic.copy())
+    graphs = [tiny_graph(seed) for seed in range(4)]
+    threads = numba.get_num_threads()
+    try:
+        numba.set_num_threads(min(2, numba.config.NUMBA_NUM_THREADS))
+        compute_heuristics(graphs)
+    finally:
+        numba.set_num_threads(threads)
+    for graph, expected in zip(graphs, alone):
+        assert np.array_equal(graph.heuristic, expected)

@@ -381,13 +381,35 @@ def branch_and_bound(graph: ProductGraph, *, eps: float = 0.0, token: CancelToke
     return (yield from branch_and_bound_union([graph], eps=eps, token=token, max_iterations=max_iterations))
 
 
+def compute_heuristics(graphs, cancel: np.ndarray | None = None) -> None:
+    """The backward searches of several product graphs, on up to ``numba.get_num_threads()`` threads.
+
+    The searches are independent and the kernel releases the GIL, so threads
+    run them in parallel (inside a worker of a process pool, which limits
+    numba to one thread, they run one after the other).
+    """
+    workers = min(len(graphs), numba.get_num_threads())
+    if workers <= 1:
+        for graph in graphs:
+            graph.compute_heuristic(cancel)
+        return
+    from concurrent.futures import ThreadPoolExecutor
+
+    with ThreadPoolExecutor(max_workers=workers) as pool:
+        for future in [pool.submit(graph.compute_heuristic, cancel) for graph in graphs]:
+            future.result()  # re-raises Cancelled
+
+
 def branch_and_bound_union(graphs, *, eps: float = 0.0, token: CancelToken | None = None,
                            max_iterations: int = 100_000):
     """The best closed path over several product graphs, by one best-first branch-and-bound (generator).
 
     A region is a set of start vertices of one graph; the open regions of all
     graphs share one priority queue, so a graph whose lower bound exceeds the
-    best closed path found in another is never explored further. This is the
+    best closed path found in another is never explored further. A graph
+    enters the queue with the lower bound its backward search gives for free
+    (the cheapest open path from any start), so a graph that cannot win is
+    not even searched forward once. This is the
     global optimum of ``min_g E_g`` (e.g. both readings of an ambiguous
     feature), at a cost close to that of the winning graph alone.
 
@@ -411,8 +433,7 @@ def branch_and_bound_union(graphs, *, eps: float = 0.0, token: CancelToken | Non
     counter = itertools.count()
     upper, best, best_index = np.inf, None, -1
     heap = []
-    for graph in graphs:
-        graph.compute_heuristic(cancel)
+    compute_heuristics(graphs, cancel)
 
     def consider_closed(index, cost, path):
         nonlocal upper, best, best_index
@@ -431,9 +452,13 @@ def branch_and_bound_union(graphs, *, eps: float = 0.0, token: CancelToken | Non
             heapq.heappush(heap, (cost, next(counter), index, region, s, t))
         return s
 
+    # every graph's whole region is queued unexplored, keyed by its lower bound from the backward search (the
+    # cheapest open path from any start): a graph whose bound is beaten by a closed path is never searched
     for index, graph in enumerate(graphs):
-        if explore(index, np.ones(graph.n_starts, dtype=np.bool_)) < 0 and not np.isfinite(upper):
+        root_bound = float(np.min(graph.heuristic[0, :graph.n_starts]))
+        if not np.isfinite(root_bound):
             raise InputError("no path through the product graph (is the graph connected?)")
+        heapq.heappush(heap, (root_bound, next(counter), index, np.ones(graph.n_starts, dtype=np.bool_), -1, -1))
     lower_bound = np.inf  # stays inf if every region is resolved: then the optimum is `upper`
     iterations = 0
     while heap:
@@ -442,6 +467,9 @@ def branch_and_bound_union(graphs, *, eps: float = 0.0, token: CancelToken | Non
         if lower * (1.0 + eps) >= upper or iterations >= max_iterations:
             lower_bound = lower  # every open region is at least this
             break
+        if s < 0:  # an unexplored whole graph: find its open path (queued again) or its closed optimum
+            explore(index, region)
+            continue
         iterations += 1
         graph = graphs[index]
         # upper bound: close the region's best open path at its start

@@ -56,6 +56,27 @@ def tiny_graph(seed, m=7, subdivisions=1):
     return ProductGraph(*tiny_instance(seed, m, subdivisions))
 
 
+@pytest.mark.parametrize("seed", range(4))
+def test_closing_detour_is_a_closed_path_whose_energy_is_recomputed_edge_by_edge(seed):
+    """The upper bound from an open path: walk back to its start in the closing layer. The path is closed,
+    its stated energy equals the edge-by-edge energy, it is at least the open path's energy and at least
+    the optimum; a stretching weight is paid on the walk too."""
+    for stretch in (0.0, 0.7):
+        node_cost, curve, points, adjacency = tiny_instance(seed, 7, 1)
+        graph = ProductGraph(node_cost, curve, points, adjacency, stretch=stretch)
+        everything = np.ones(graph.n, dtype=bool)
+        cost, s, t = graph.shortest(everything, everything)
+        open_path = graph.backtrack(t)
+        energy, closed = graph.close_by_detour(open_path)
+        assert closed.vertices[0] == closed.vertices[-1] == s
+        assert energy == pytest.approx(graph.path_energy(closed), rel=1e-12)
+        assert energy >= cost - 1e-12
+        if stretch == 0:  # the explicit product graph has the paper's edge costs
+            assert energy >= explicit_product_optimum(graph) - 1e-12
+        if s == t:
+            assert energy == pytest.approx(cost, rel=1e-12)
+
+
 @pytest.mark.parametrize("seed", range(6))
 def test_branch_and_bound_equals_brute_force(seed):
     graph = tiny_graph(seed)

@@ -329,6 +329,34 @@ class ProductGraph:
             near_start = dist[0] <= dist[1]
         return region & near_start, region & ~near_start
 
+    def close_by_detour(self, open_path: CyclicPath) -> tuple[float, CyclicPath | None]:
+        """A closed path from an open one: walk back to its start within the last layer (an upper bound).
+
+        The open path ends at ``(m, t)``; the cheapest walk from ``(m, t)``
+        to ``(m, s)`` along graph edges (cost ``(c̄ + stretch) ·`` edge length,
+        the costs of the closing layer) closes it. Only for undirected graphs
+        closed at their start (``closing_shift = 0``); ``(inf, None)``
+        otherwise.
+        """
+        if self.closing_shift != 0 or type(self) is not ProductGraph:
+            return np.inf, None
+        s, t = int(open_path.vertices[0]), int(open_path.vertices[-1])
+        layer_cost = self.cost[self.m]
+        weights = csr_matrix(((0.5 * (layer_cost[np.repeat(np.arange(self.n), np.diff(self.indptr))]
+                                      + layer_cost[self.indices]) + self.stretch) * self.edge_len,
+                              self.indices, self.indptr), shape=(self.n, self.n))
+        dist, pred = dijkstra(weights, directed=True, indices=t, return_predecessors=True)
+        if not np.isfinite(dist[s]):
+            return np.inf, None
+        walk = [s]
+        while walk[-1] != t:
+            walk.append(int(pred[walk[-1]]))
+        detour = np.array(walk[::-1][1:], dtype=np.int64)  # t (exclusive) ... s
+        path = CyclicPath(np.concatenate([open_path.vertices, detour]),
+                          np.concatenate([open_path.layers, np.full(detour.size, self.m)]),
+                          float(open_path.energy + dist[s]))
+        return path.energy, path
+
     def closed_from(self, start: int, upper: float = np.inf, cancel=None) -> tuple[float, CyclicPath | None]:
         """The cheapest closed path through ``(0, start)`` (if cheaper than ``upper``)."""
         region = np.zeros(self.n_starts, dtype=np.bool_)
@@ -449,6 +477,7 @@ def branch_and_bound_union(graphs, *, eps: float = 0.0, token: CancelToken | Non
         if graph.is_closed(s, t):
             consider_closed(index, cost, graph.backtrack(t))
         elif cost * (1.0 + eps) < upper:
+            consider_closed(index, *graph.close_by_detour(graph.backtrack(t)))  # an upper bound for free
             heapq.heappush(heap, (cost, next(counter), index, region, s, t))
         return s
 

@@ -75,6 +75,12 @@ def test_closing_detour_is_a_closed_path_whose_energy_is_recomputed_edge_by_edge
             assert energy >= explicit_product_optimum(graph) - 1e-12
         if s == t:
             assert energy == pytest.approx(cost, rel=1e-12)
+        # the same open path read off the backward search of the heuristic (walked forwards)
+        graph.compute_heuristic()
+        root = graph.root_path
+        assert root.layers[0] == 0 and root.layers[-1] == graph.m and np.all(np.diff(root.layers) >= 0)
+        assert root.energy == pytest.approx(cost, rel=1e-12)
+        assert graph.path_energy(root) == pytest.approx(root.energy, rel=1e-12)
 
 
 @pytest.mark.parametrize("seed", range(6))

@@ -222,6 +222,8 @@ class ProductGraph:
         self.adjacency = csr_matrix((self.edge_len, self.indices, self.indptr), shape=(n, n))
         # admissible heuristic (remaining cost to the last layer); zero until compute_heuristic()
         self.heuristic = np.zeros((m + 1, n))
+        #: the cheapest open path, once compute_heuristic() has run
+        self.root_path: CyclicPath | None = None
         self.dist = np.empty((m + 1, n))
         self.pred = np.empty((m + 1, n), dtype=np.int32)
         self.origin = np.empty((m + 1, n), dtype=np.int32)
@@ -250,6 +252,28 @@ class ProductGraph:
         if t == -2:
             raise Cancelled("the computation was cancelled")
         self.heuristic = np.ascontiguousarray(self.dist[::-1])
+        self.root_path = self._backward_path(int(np.argmin(self.heuristic[0, :self.n_starts])))
+
+    def _backward_path(self, start: int) -> CyclicPath:
+        """The cheapest open path from ``(0, start)``, read off the backward search (before any other run).
+
+        The backward search ran on the reversed layers, so following its
+        predecessors from ``(0, start)`` walks the path forwards.
+        """
+        n, layer, vertex = self.n, self.m, int(start)  # reversed layer m is layer 0
+        layers, vertices = [0], [vertex]
+        while True:
+            p = int(self.pred[layer, vertex])
+            if p < 0:
+                break
+            if p >= n:
+                layer, vertex = layer - 1, p - n
+            else:
+                vertex = p
+            layers.append(self.m - layer)
+            vertices.append(vertex)
+        return CyclicPath(np.array(vertices, dtype=np.int64), np.array(layers, dtype=np.int64),
+                          float(self.heuristic[0, start]))
 
     def shortest(self, sources: np.ndarray, targets: np.ndarray, upper: float = np.inf,
                  cancel: np.ndarray | None = None) -> tuple[float, int, int]:
@@ -487,6 +511,7 @@ def branch_and_bound_union(graphs, *, eps: float = 0.0, token: CancelToken | Non
         root_bound = float(np.min(graph.heuristic[0, :graph.n_starts]))
         if not np.isfinite(root_bound):
             raise InputError("no path through the product graph (is the graph connected?)")
+        consider_closed(index, *graph.close_by_detour(graph.root_path))  # an upper bound before any search
         heapq.heappush(heap, (root_bound, next(counter), index, np.ones(graph.n_starts, dtype=np.bool_), -1, -1))
     lower_bound = np.inf  # stays inf if every region is resolved: then the optimum is `upper`
     iterations = 0

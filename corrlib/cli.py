@@ -561,7 +561,8 @@ def _add_retrieve_parser(sub) -> None:
     p.add_argument("folder")
     p.add_argument("--top", type=int, default=10, help="how many ranks to print")
     _add_scale_out(p)
-    p.add_argument("--eps", type=float, default=0.05, help="approximation factor (default 0.05)")
+    p.add_argument("--eps", type=float, default=0.0,
+                   help="approximation factor (default 0: rank by the exact optima)")
     p.add_argument("--k", type=int)
     p.add_argument("--n-contour", dest="n_contour", type=int, default=100,
                    help="contour resampling (default 100 for retrieval)")
@@ -594,7 +595,8 @@ def _add_bench_parsers(sub) -> None:
     p.add_argument("queries", help="folder of silhouette images / contour files (class = name without number)")
     p.add_argument("collection", help="folder of meshes (class = name without number)")
     _add_scale_out(p)
-    p.add_argument("--eps", type=float, default=0.05, help="approximation factor (default 0.05)")
+    p.add_argument("--eps", type=float, default=0.0,
+                   help="approximation factor (default 0: rank by the exact optima)")
     p.add_argument("--n-contour", dest="n_contour", type=int, default=100, help="contour resampling (default 100)")
     p.add_argument("--param", action="append", metavar="KEY=VALUE", help="another contour3d parameter (repeatable)")
     _add_output(p, "retrieval_output", "output folder")

@@ -17,7 +17,7 @@ import os
 import re
 from collections.abc import Iterable
 from concurrent.futures import FIRST_COMPLETED, wait
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -97,8 +97,9 @@ def retrieve(query_contour, meshes: Iterable, params: Contour3DParams | None = N
     query_contour : Contour2D
     meshes : iterable of paths
     params : Contour3DParams, optional
-        Default: the method's defaults with ``eps = 0.05`` (a (1+ε)-approximate
-        energy is enough to rank, and much faster than the exact optimum).
+        Default: the method's defaults (the exact optimum: an approximate
+        energy may lie up to a factor ``1 + eps`` above it, which reorders
+        meshes whose energies are that close, and saves little time).
     jobs : int, optional
         Worker processes (default: all cores; 1 runs in this process).
     token : CancelToken, optional
@@ -116,7 +117,7 @@ def retrieve(query_contour, meshes: Iterable, params: Contour3DParams | None = N
     list of RetrievalHit
         Sorted by increasing energy (failed meshes last, with their error).
     """
-    params = params or replace(Contour3DParams(), eps=0.05)
+    params = params or Contour3DParams()
     token = token or CancelToken()
     paths = [str(p) for p in meshes]
     if not paths:

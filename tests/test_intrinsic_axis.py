@@ -244,3 +244,10 @@ def test_heuristics_computed_in_threads_equal_the_sequential_ones():
         numba.set_num_threads(threads)
     for graph, expected in zip(graphs, alone):
         assert np.array_equal(graph.heuristic, expected)
+
+
+def test_too_few_eigenpairs_for_the_axes_is_a_named_error():
+    contour, mesh = capsule_and_ellipse()
+    with pytest.raises(ParameterError, match="axis_modes=4 needs at least k=6 eigenpairs.*got k=5"):
+        solve("contour3d", contour, mesh, n_contour=24, k=5, axis_modes=4)
+    assert np.isfinite(solve("contour3d", contour, mesh, n_contour=24, k=6, axis_modes=4, model="whole").energy)

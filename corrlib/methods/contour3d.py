@@ -170,6 +170,11 @@ class Contour3DParams:
     max_iterations: int = param(10000, label="Max iterations", low=1, high=10_000_000,
                                 help="Cap on branch-and-bound iterations (the bounds are reported).")
 
+    def __post_init__(self):
+        if isinstance(self.k, int) and isinstance(self.axis_modes, int) and self.k < self.axis_modes + 2:
+            raise ParameterError(f"axis_modes={self.axis_modes} needs at least k={self.axis_modes + 2} eigenpairs "
+                                 f"(the eigenvalues around each axis give its confidence), got k={self.k}")
+
 
 def row_normalised_wks(evals: np.ndarray, evecs: np.ndarray, n_scales: int = 100,
                        wks_variance: float = 6.0) -> np.ndarray:

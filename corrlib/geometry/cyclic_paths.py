@@ -437,11 +437,15 @@ def compute_heuristics(graphs, cancel: np.ndarray | None = None) -> None:
     """The backward searches of several product graphs, on up to ``numba.get_num_threads()`` threads.
 
     The searches are independent and the kernel releases the GIL, so threads
-    run them in parallel (inside a worker of a process pool, which limits
-    numba to one thread, they run one after the other).
+    run them in parallel. They do so only when called from the main thread
+    (the command line, a worker process of a pool, which limits numba to its
+    share of the cores); called from another thread (a job of the studio,
+    which may run beside others) they run one after the other.
     """
+    import threading
+
     workers = min(len(graphs), numba.get_num_threads())
-    if workers <= 1:
+    if workers <= 1 or threading.current_thread() is not threading.main_thread():
         for graph in graphs:
             graph.compute_heuristic(cancel)
         return

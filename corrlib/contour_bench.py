@@ -243,7 +243,7 @@ def _vts_transfer(source_vertices: np.ndarray, rows_source: np.ndarray, rows_tar
 
 
 def score_curve(map_xy: np.ndarray, path_vertices: np.ndarray, gt: np.ndarray, target: TriMesh,
-                gt_length: float) -> dict:
+                gt_length: float, solver=None) -> dict:
     """Accuracy and coverage of a matched closed curve.
 
     Parameters
@@ -258,6 +258,8 @@ def score_curve(map_xy: np.ndarray, path_vertices: np.ndarray, gt: np.ndarray, t
     target : TriMesh
     gt_length : float
         Length of the ground-truth curve on the target.
+    solver : GeodesicSolver, optional
+        The target's, if already built (scoring against another ground truth).
 
     Returns
     -------
@@ -268,7 +270,7 @@ def score_curve(map_xy: np.ndarray, path_vertices: np.ndarray, gt: np.ndarray, t
     """
     from corrlib.geometry.geodesics import GeodesicSolver
 
-    solver = GeodesicSolver(target)
+    solver = solver or GeodesicSolver(target)
     candidates = np.asarray(gt).reshape(len(map_xy), -1)
     errors = np.min([solver.pair_distances(map_xy, column) for column in candidates.T], axis=0) / np.sqrt(target.area)
     length = np.linalg.norm(np.diff(target.vertices[path_vertices], axis=0), axis=1).sum()
@@ -340,10 +342,15 @@ def match_cut_query(source_path, target_path, plane: str, params: dict, *, gt_ro
         if transfer is not None:
             gt = transfer(gt)
         path = np.asarray(matched.vertices)
-        row.update(score_curve(result.map_xy, path, gt, target, query.length_3d * np.sqrt(target.area / source.area)))
+        from corrlib.geometry.geodesics import GeodesicSolver
+
+        solver = GeodesicSolver(target)
+        row.update(score_curve(result.map_xy, path, gt, target, query.length_3d * np.sqrt(target.area / source.area),
+                               solver))
         row["mean_error_sym"] = row["mean_error"]
         if mirror_rows is not None:
-            mirrored = score_curve(result.map_xy, path, _vts_transfer(target.vertices, *mirror_rows)(gt), target, 1.0)
+            mirrored = score_curve(result.map_xy, path, _vts_transfer(target.vertices, *mirror_rows)(gt), target, 1.0,
+                                   solver)
             row["mean_error_sym"] = min(row["mean_error"], mirrored["mean_error"])
         row.update(energy=float(result.energy), gap=float(search.upper_bound - search.lower_bound),
                    optimal=search.optimal, iterations=search.iterations, seconds=seconds)

@@ -9,6 +9,7 @@ from scipy.sparse.csgraph import dijkstra
 from _data import SUMNER, TOSCA
 from corrlib.errors import Cancelled, ContourError, InputError, ParameterError
 from corrlib.geometry.cyclic_paths import ProductGraph, branch_and_bound
+from corrlib.geometry.elastic_paths import ElasticProductGraph
 from corrlib.geometry.geodesics import GeodesicSolver
 from corrlib.geometry.sections import plane_section, project_for_silhouette, render_silhouette, rim_vertices
 from corrlib.io import load_mesh
@@ -75,6 +76,9 @@ def test_closing_detour_is_a_closed_path_whose_energy_is_recomputed_edge_by_edge
             assert energy >= explicit_product_optimum(graph) - 1e-12
         if s == t:
             assert energy == pytest.approx(cost, rel=1e-12)
+        # the second-order graph has no such walk (its turns would need its own energy)
+        elastic = ElasticProductGraph(node_cost, curve, points, adjacency, stretch=stretch, bending=1.0)
+        assert elastic.close_by_detour(open_path) == (np.inf, None)
         # the same open path read off the backward search of the heuristic (walked forwards)
         graph.compute_heuristic()
         root = graph.root_path

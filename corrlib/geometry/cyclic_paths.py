@@ -224,6 +224,7 @@ class ProductGraph:
         self.heuristic = np.zeros((m + 1, n))
         #: the cheapest open path, once compute_heuristic() has run
         self.root_path: CyclicPath | None = None
+        self._closing_weights: csr_matrix | None = None
         self.dist = np.empty((m + 1, n))
         self.pred = np.empty((m + 1, n), dtype=np.int32)
         self.origin = np.empty((m + 1, n), dtype=np.int32)
@@ -257,11 +258,17 @@ class ProductGraph:
     def _backward_path(self, start: int) -> CyclicPath:
         """The cheapest open path from ``(0, start)``, read off the backward search (before any other run).
 
-        The backward search ran on the reversed layers, so following its
-        predecessors from ``(0, start)`` walks the path forwards.
+        The backward search ran on the reversed layers (its layer ``m`` is
+        layer 0), so following its predecessors from ``(0, start)`` walks the
+        path forwards.
         """
-        n, layer, vertex = self.n, self.m, int(start)  # reversed layer m is layer 0
-        layers, vertices = [0], [vertex]
+        layers, vertices = self._predecessor_walk(self.m, int(start))
+        return CyclicPath(vertices, self.m - layers, float(self.heuristic[0, start]))
+
+    def _predecessor_walk(self, layer: int, vertex: int) -> tuple[np.ndarray, np.ndarray]:
+        """(layers, vertices) ((p,) int each) from node ``(layer, vertex)`` back along the last run's predecessors."""
+        n = self.n
+        layers, vertices = [layer], [vertex]
         while True:
             p = int(self.pred[layer, vertex])
             if p < 0:
@@ -270,10 +277,9 @@ class ProductGraph:
                 layer, vertex = layer - 1, p - n
             else:
                 vertex = p
-            layers.append(self.m - layer)
+            layers.append(layer)
             vertices.append(vertex)
-        return CyclicPath(np.array(vertices, dtype=np.int64), np.array(layers, dtype=np.int64),
-                          float(self.heuristic[0, start]))
+        return np.array(layers, dtype=np.int64), np.array(vertices, dtype=np.int64)
 
     def shortest(self, sources: np.ndarray, targets: np.ndarray, upper: float = np.inf,
                  cancel: np.ndarray | None = None) -> tuple[float, int, int]:
@@ -309,21 +315,8 @@ class ProductGraph:
 
     def backtrack(self, end: int) -> CyclicPath:
         """The path found by the last :meth:`shortest` run that ends at ``(m, end)``."""
-        n = self.n
-        layer, vertex = self.m, int(end)
-        layers, vertices = [layer], [vertex]
-        while True:
-            p = int(self.pred[layer, vertex])
-            if p < 0:
-                break
-            if p >= n:
-                layer, vertex = layer - 1, p - n
-            else:
-                vertex = p
-            layers.append(layer)
-            vertices.append(vertex)
-        return CyclicPath(np.array(vertices[::-1], dtype=np.int64), np.array(layers[::-1], dtype=np.int64),
-                          float(self.dist[self.m, end]))
+        layers, vertices = self._predecessor_walk(self.m, int(end))
+        return CyclicPath(vertices[::-1].copy(), layers[::-1].copy(), float(self.dist[self.m, end]))
 
     def endpoints(self, region: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """(sources, targets) masks over the graph vertices for a region of start vertices."""
@@ -358,18 +351,19 @@ class ProductGraph:
 
         The open path ends at ``(m, t)``; the cheapest walk from ``(m, t)``
         to ``(m, s)`` along graph edges (cost ``(c̄ + stretch) ·`` edge length,
-        the costs of the closing layer) closes it. Only for undirected graphs
-        closed at their start (``closing_shift = 0``); ``(inf, None)``
-        otherwise.
+        the costs of the closing layer) closes it. Only for graphs closed at
+        their start (``closing_shift = 0``); ``(inf, None)`` otherwise.
         """
-        if self.closing_shift != 0 or type(self) is not ProductGraph:
+        if self.closing_shift != 0:
             return np.inf, None
         s, t = int(open_path.vertices[0]), int(open_path.vertices[-1])
-        layer_cost = self.cost[self.m]
-        weights = csr_matrix(((0.5 * (layer_cost[np.repeat(np.arange(self.n), np.diff(self.indptr))]
-                                      + layer_cost[self.indices]) + self.stretch) * self.edge_len,
-                              self.indices, self.indptr), shape=(self.n, self.n))
-        dist, pred = dijkstra(weights, directed=True, indices=t, return_predecessors=True)
+        if self._closing_weights is None:  # the closing layer's edge costs, built once
+            layer_cost = self.cost[self.m]
+            tails = np.repeat(np.arange(self.n), np.diff(self.indptr))
+            self._closing_weights = csr_matrix(
+                ((0.5 * (layer_cost[tails] + layer_cost[self.indices]) + self.stretch) * self.edge_len,
+                 self.indices, self.indptr), shape=(self.n, self.n))
+        dist, pred = dijkstra(self._closing_weights, directed=True, indices=t, return_predecessors=True)
         if not np.isfinite(dist[s]):
             return np.inf, None
         walk = [s]

@@ -221,6 +221,10 @@ class ElasticProductGraph(ProductGraph):
         n_edges = self.indices.shape[0]
         return int(self.indices[state]) if state < n_edges else int(state - n_edges)
 
+    def close_by_detour(self, open_path: CyclicPath) -> tuple[float, CyclicPath | None]:
+        """No closing walk: its turns and reversals would need the second-order energy ((inf, None))."""
+        return np.inf, None
+
     def backtrack(self, end: int) -> CyclicPath:
         """The path found by the last :meth:`shortest` run (which ended at vertex ``end``)."""
         state = self._end_state

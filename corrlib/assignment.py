@@ -310,6 +310,22 @@ def linear_assignment(score, *, slack: float | None = None, method: str = "aucti
     return row_to_col
 
 
+def area_capacities(n_rows: int, masses: np.ndarray) -> np.ndarray:
+    """(n_cols,) int ≥ 1: rows a column of mass ``m_j`` may take, ``ceil(n_rows · m_j / Σ m)``.
+
+    The columns' share of the rows follows their share of the measure, so an
+    assignment with these capacities couples two differently sampled shapes
+    by area instead of by sample count (a bijection between independently
+    remeshed surfaces has to slide samples to absorb the density difference).
+    """
+    m = np.asarray(masses, dtype=np.float64)
+    if m.ndim != 1 or m.size == 0 or not np.all(np.isfinite(m)) or m.min() < 0 or m.sum() <= 0:
+        raise InputError(f"masses must be a non-empty 1-D array of finite non-negative values with a "
+                         f"positive sum, got shape {m.shape}")
+    share = int(n_rows) * m / m.sum()
+    return np.maximum(1, np.ceil(share - 1e-9)).astype(np.int64)
+
+
 def assignment_score(score: np.ndarray, row_to_col: np.ndarray) -> float:
     """Sum of ``score[i, row_to_col[i]]`` over matched rows."""
     rows = np.flatnonzero(row_to_col >= 0)

@@ -274,3 +274,31 @@ def test_contours_of_very_different_sizes_and_samplings(warped_silhouette):
     assert uneven.map_xy.shape == (30,) and uneven.map_xy.min() >= 0
     steps = np.diff(np.concatenate([uneven.map_xy, uneven.map_xy[:1] + 300])) % 300
     assert steps.sum() == 300  # winds once around B
+
+
+def test_refinement_of_a_corrupted_dense_map_on_independently_remeshed_cats(cat_pair):
+    """A dense ground-truth map with 30 % of its rows replaced by random vertices, refined between the
+    independently remeshed TOSCA cats. The map is extracted with area capacities; a bijection between
+    meshes of different vertex density has to slide vertices (measured: the ground truth projected onto the
+    nearest bijection has 68 % within 0.05). Measured: 0.150 -> 0.013 mean."""
+    from scipy.spatial import cKDTree
+
+    from corrlib.evaluation import geodesic_errors
+    from corrlib.methods import solve
+    from corrlib.methods.base import InitialMatch
+
+    cat0, cat1, gt = cat_pair
+    gx, gy = gt["cat1"], gt["cat0"]
+    truth = np.full(cat1.n_vertices, -1)
+    truth[gx] = gy
+    missing = np.flatnonzero(truth < 0)
+    if missing.size:
+        truth[missing] = gy[cKDTree(cat1.vertices[gx]).query(cat1.vertices[missing])[1]]
+    rng = np.random.default_rng(0)
+    corrupted = truth.copy()
+    bad = rng.random(truth.size) < 0.3
+    corrupted[bad] = rng.integers(0, cat0.n_vertices, bad.sum())
+    before = geodesic_errors(corrupted, cat0, gx, gy).summary()["mean"]
+    result = solve("product-manifold", cat1, cat0, initial=InitialMatch(map_xy=corrupted))
+    after = geodesic_errors(result.map_xy, cat0, gx, gy).summary()
+    assert before > 0.1 and after["mean"] < 0.025 and after["within_0.05"] > 0.9, (before, after)

@@ -80,7 +80,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
-from corrlib.assignment import linear_assignment
+from corrlib.assignment import area_capacities, linear_assignment
 from corrlib.descriptors import DESCRIPTOR_KINDS, mesh_descriptors
 from corrlib.descriptors.orientation import orientation_descriptors
 from corrlib.errors import ParameterError
@@ -314,12 +314,6 @@ def _sample_masses(mesh, mass_diag: np.ndarray, sample: np.ndarray) -> np.ndarra
         return mass_diag[sample]
     owner = cKDTree(mesh.vertices[sample]).query(mesh.vertices)[1]
     return np.bincount(owner, weights=mass_diag, minlength=sample.size)
-
-
-def _capacities(n_source: int, masses_y: np.ndarray) -> np.ndarray:
-    """(s,) int ≥ 1: source samples a target sample may take, ``ceil(n_source · m_y / Σ m_y)``."""
-    share = n_source * masses_y / masses_y.sum()
-    return np.maximum(1, np.ceil(share - 1e-9)).astype(np.int64)
 
 
 def _best_row_per_column(rows: np.ndarray, cols: np.ndarray, values: np.ndarray, n_cols: int) -> np.ndarray:
@@ -883,7 +877,7 @@ def multiscale_refinement(state: KernelState):
         capacity_y = None
         if params.capacity == "area":
             capacity_y = np.ones(n_y, dtype=np.int64)
-            capacity_y[y_idx] = _capacities(x_idx.size, _sample_masses(target, mass_y, y_idx))
+            capacity_y[y_idx] = area_capacities(x_idx.size, _sample_masses(target, mass_y, y_idx))
         for p in range(params.passes):
             state.token.raise_if_cancelled()
             with watch("kernels"):

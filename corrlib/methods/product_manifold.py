@@ -9,7 +9,11 @@ baseline's map is refined). Output: a dense map.
    the ``k_X × k_Y`` coefficients, :func:`corrlib.geometry.product.diffuse`);
    the dense map is extracted by a linear assignment on the density (the
    "sparse assignment" of §9.4.2, here dense up to 8000 × 8000, auction
-   solver) or as the maximum-likelihood map (argmax of every row).
+   solver) or as the maximum-likelihood map (argmax of every row). The
+   assignment couples the two area measures, not the vertex counts: a
+   target vertex may take as many source vertices as its share of the area
+   holds (:func:`corrlib.assignment.area_capacities`), so independently
+   remeshed shapes are not forced into a bijection that slides vertices.
 2. Local stages: for every band fraction of ``bands`` (decreasing), the band
    P is the set of product vertices ``(i, j)`` with ``j`` among the
    ``fraction · n_Y`` target vertices nearest to the current partner of
@@ -82,20 +86,24 @@ def _match_density_coeffs(ix, iy, fx: pm.Factor, fy: pm.Factor) -> np.ndarray:
 ASSIGNMENT_LIMIT = 8000 * 8000
 
 
+def _vertex_masses(factor: pm.Factor) -> np.ndarray:
+    """(n,) float: the measure of every vertex (row sums of the mass matrix: area, or length on a curve)."""
+    return np.asarray(factor.mass.sum(axis=1)).ravel()
+
+
 def _extract(coeffs, fx: pm.Factor, fy: pm.Factor, how: str, token=None) -> tuple[np.ndarray, np.ndarray]:
     """Dense maps from a density given by its product coefficients (assignment or maximum likelihood)."""
     if how == "assignment" and fx.n * fy.n <= ASSIGNMENT_LIMIT:
-        from corrlib.assignment import linear_assignment
+        from corrlib.assignment import area_capacities, linear_assignment
 
         density = pm.density_values(coeffs, fx, fy).astype(np.float32)
         density /= max(float(np.abs(density).max()), 1e-300)
         cancel = token.flag if token is not None else None
-        map_xy = linear_assignment(density, cancel=cancel)
-        if fx.n == fy.n:
-            map_yx = np.empty(fy.n, dtype=np.int64)
-            map_yx[map_xy] = np.arange(fx.n)
-        else:
-            map_yx = linear_assignment(np.ascontiguousarray(density.T), cancel=cancel)
+        # each side's vertices take the other side's in proportion to their area (or length)
+        masses_x, masses_y = _vertex_masses(fx), _vertex_masses(fy)
+        map_xy = linear_assignment(density, cancel=cancel, capacity=area_capacities(fx.n, masses_y))
+        map_yx = linear_assignment(np.ascontiguousarray(density.T), cancel=cancel,
+                                   capacity=area_capacities(fy.n, masses_x))
         # rectangular problems leave rows unmatched: those take their most likely partner
         for mp, dens_rows in ((map_xy, density), (map_yx, density.T)):
             free = np.flatnonzero(mp < 0)

@@ -93,8 +93,12 @@ class MapErrors:
     n_rows: int
 
 
-def map_errors(map_xy, target: TriMesh, gt_source, gt_target) -> MapErrors:
-    """Errors of ``map_xy`` on the ground-truth rows it matches; unmatched rows are counted, not scored."""
+def map_errors(map_xy, target: TriMesh, gt_source, gt_target, gt_target_sym=None) -> MapErrors:
+    """Errors of ``map_xy`` on the ground-truth rows it matches; unmatched rows are counted, not scored.
+
+    With ``gt_target_sym`` (the mirrored partners of the rows) the report also holds the mirror-accepted
+    errors; ``per_vertex`` is always the direct error, so a left/right flip shows in a heat map.
+    """
     from corrlib.evaluation import geodesic_errors
 
     map_xy = np.asarray(map_xy)
@@ -105,8 +109,9 @@ def map_errors(map_xy, target: TriMesh, gt_source, gt_target) -> MapErrors:
     report = None
     if matched.any():
         # the matched rows as a map of their own: row i of the sub-map is ground-truth row i
+        sym = None if gt_target_sym is None else np.asarray(gt_target_sym)[matched]
         report = geodesic_errors(predicted[matched], target, np.arange(int(matched.sum())), gt_target[matched],
-                                 method=ERROR_GEODESICS)
+                                 gt_target_sym=sym, method=ERROR_GEODESICS)
         per_vertex[gt_source[matched]] = report.errors
     return MapErrors(report, per_vertex, int(np.count_nonzero(~matched)), int(gt_source.size))
 
@@ -166,7 +171,8 @@ class MethodOutcome:
 
 
 def method_job(name: str, source, target, params, gt=None, *, view_data: bool = True):
-    """Job factory: run method ``name``, then its error report (with ``gt``) and, with
+    """Job factory: run method ``name``, then its error report (with ``gt``: source rows, target rows and
+    optionally the target's mirrored rows or None) and, with
     ``view_data``, the pair view's source function; returns a :class:`MethodOutcome`."""
     from corrlib.methods import solve_iter
 
@@ -179,7 +185,7 @@ def method_job(name: str, source, target, params, gt=None, *, view_data: bool = 
         if gt is not None and map_xy is not None and isinstance(target, TriMesh):
             yield Progress("geodesic errors", -1.0, f"{np.asarray(gt[0]).size} ground-truth rows")
             try:
-                outcome.errors = map_errors(map_xy, target, gt[0], gt[1])
+                outcome.errors = map_errors(map_xy, target, gt[0], gt[1], gt[2] if len(gt) > 2 else None)
             except CorrError as exc:  # a bad ground truth must not lose the result
                 outcome.note = f"no error figures: {exc}"
         if view_data and isinstance(source, TriMesh) and isinstance(target, TriMesh):

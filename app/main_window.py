@@ -147,7 +147,7 @@ class MainWindow(QMainWindow):
         self.settings = settings or QSettings("corrlib", "corr-studio")
         self.interactive = interactive  # False in tests/screenshots: errors go to the log, not modal dialogs
         self.source = self.target = None
-        self.gt: tuple[np.ndarray, np.ndarray] | None = None
+        self.gt: tuple | None = None  # (source rows, target rows, target mirrored rows or None)
         self.last_result = None
         self.runner = JobRunner(self)
         self.runner.progress.connect(self._on_progress)
@@ -354,11 +354,18 @@ class MainWindow(QMainWindow):
         try:
             if not (isinstance(self.source, TriMesh) and isinstance(self.target, TriMesh)):
                 raise CorrError("load a source and a target mesh before their ground truth")
-            self.gt = (load_vts(source_vts, self.source.n_vertices), load_vts(target_vts, self.target.n_vertices))
+            gt = (load_vts(source_vts, self.source.n_vertices), load_vts(target_vts, self.target.n_vertices))
+            # the target's mirrored rows, where they lie next to its rows (<name>.sym.vts, as in corr bench)
+            sym_path = Path(target_vts).with_name(Path(target_vts).stem + ".sym.vts")
+            sym = load_vts(sym_path, self.target.n_vertices) if sym_path.is_file() else None
+            if sym is not None and sym.shape != gt[1].shape:
+                raise CorrError(f"{sym_path} has {sym.size} rows, {target_vts} {gt[1].size}")
         except CorrError as exc:
             self.show_error(str(exc))
             return
-        self.job_panel.write(f"ground truth: {self.gt[0].size} rows")
+        self.gt = gt + (sym,)
+        self.job_panel.write(f"ground truth: {gt[0].size} rows" +
+                             (f", mirrored rows from {sym_path.name}" if sym is not None else ""))
 
     def load_file(self, path: str, which: str = "source", then: Callable[[], None] | None = None) -> None:
         """Load a mesh or contour as source/target in the worker (queued: files load one after another).
@@ -574,7 +581,8 @@ class MainWindow(QMainWindow):
             return
         self._log_outcome(outcome)
         if key == COMPARE_KEY:
-            self.compare_view.add_result(self.source, self.target, result, outcome.report, outcome.n_unmatched)
+            self.compare_view.add_result(self.source, self.target, result, outcome.report, outcome.n_unmatched,
+                                         None if outcome.errors is None else outcome.errors.per_vertex)
             self._next_compare()
             if not self.runner.is_running(COMPARE_KEY):
                 self.result_ready.emit(result)

@@ -138,6 +138,28 @@ def test_map_errors_counts_unmatched_rows(wolf_pair):
     assert none.report is None and none.n_unmatched == gt.size
 
 
+def test_map_errors_with_mirrored_rows_and_the_heat_map_fill(wolf_pair):
+    """A map onto the 'mirrored' partners has a large direct and zero mirror-accepted error; per-vertex
+    errors stay direct (a flip glows in the heat map), and the display fill keeps unmatched vertices grey."""
+    from app.jobs import map_errors
+    from app.views.compare import spread_to_matched
+
+    _source, target = wolf_pair
+    n = target.n_vertices
+    gt = np.arange(0, n, 2)
+    mirrored = np.random.default_rng(0).permutation(n)[gt]  # any other partners serve as the mirrored rows
+    map_xy = np.arange(n)
+    map_xy[gt] = mirrored
+    map_xy[1] = -1
+    out = map_errors(map_xy, target, gt, gt, mirrored)
+    summary = out.report.summary()
+    assert summary["mean"] > 0.1 and summary["mean_sym"] == pytest.approx(0.0, abs=1e-9)
+    assert np.nanmean(out.per_vertex) == pytest.approx(summary["mean"])
+    shown = spread_to_matched(target.vertices, out.per_vertex, map_xy)
+    assert np.isnan(shown[1]) and np.isfinite(np.delete(shown, 1)).all()
+    assert np.array_equal(shown[gt], out.per_vertex[gt])
+
+
 def test_bad_file_shows_a_message_and_the_window_keeps_running(qtbot, tmp_path, monkeypatch):
     import corrlib.io
     from PySide6.QtWidgets import QMessageBox

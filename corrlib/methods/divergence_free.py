@@ -36,6 +36,15 @@ correspondence and the coefficients are estimated jointly by EM:
   a seventh of a shape's size) averages the targets over a wide
   neighbourhood and the fit stalls at a blurred surface. The Gauss–Newton
   data weight keeps σ². ``anneal = 1`` reproduces the fixed-σ² EM.
+* A given map (another method's result, ``init``, or ``--init`` of
+  ``corr refine``; our addition, documented): it enters Eq. 10.17 as one
+  more feature, the position of every source vertex's partner on the target
+  against every target vertex's own position, ``|y_map(x) - y|²`` (each
+  feature block scaled to unit mean pair distance before ``w`` is set), so a
+  sample is drawn towards the neighbourhood of its given partner while the
+  flow stays divergence-free and wrong matches are outvoted by coordinates
+  and SHOT. The rigid (Kabsch) alignment of the source onto its partners
+  joins the candidate pre-alignments.
 * Dense result: every source vertex is flowed (linear in the vertex count)
   and matched to its nearest target vertex in the Eq. 10.17 metric (with
   the feature factor at the final annealed variance); the
@@ -98,6 +107,9 @@ class DivergenceFreeParams:
     max_iter: int = param(40, label="EM iterations", low=1, high=10000, help="Iteration cap.")
     tol: float = param(1e-4, label="Tolerance", low=0.0, high=1.0,
                        help="Stop when the coefficient update is below tol × |a| (and 1e-8).")
+    init: str = param("none", label="Initial map", choices=("none", "fmap-zoomout", "kernel-matching"),
+                      help="Another method's map as a feature of the E-step distance (the partner's position), "
+                           "and its rigid alignment as a pre-alignment candidate; none: SHOT and coordinates only.")
     prealign: str = param("pca", label="Pre-alignment", choices=("pca", "none"),
                           help="Rigid PCA alignment (best proper axis orientation or none), or none.")
     margin: float = param(0.15, label="Margin", low=0.0, high=0.45,
@@ -122,6 +134,30 @@ def _principal_axes(p: np.ndarray) -> np.ndarray:
     c = p - p.mean(axis=0)
     evals, evecs = np.linalg.eigh(c.T @ c)
     return evecs[:, ::-1]
+
+
+def kabsch_rotation(points_x: np.ndarray, partners: np.ndarray) -> np.ndarray:
+    """(3, 3) proper rotation best taking the centred ``points_x`` onto their centred ``partners`` (n, 3)."""
+    u, _, vt = np.linalg.svd((partners - partners.mean(0)).T @ (points_x - points_x.mean(0)))
+    d = np.sign(np.linalg.det(u @ vt)) or 1.0
+    return u @ np.diag([1.0, 1.0, d]) @ vt
+
+
+def map_features(points_y: np.ndarray, map_xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The map (n_x,) int, every vertex matched, as a feature pair: the partner's position on the target
+    ((n_x, 3)) and every target vertex's own position ((n_y, 3))."""
+    map_xy = np.asarray(map_xy, dtype=np.int64)
+    return np.asarray(points_y)[map_xy], np.asarray(points_y, dtype=np.float64)
+
+
+def _unit_blocks(blocks_x: list, blocks_y: list) -> tuple[np.ndarray, np.ndarray]:
+    """Feature blocks of both shapes scaled to unit mean pair distance each, side by side."""
+    out_x, out_y = [], []
+    for fx, fy in zip(blocks_x, blocks_y):
+        scale = math.sqrt(max(_mean_sq_distance(fx, fy), 1e-300))
+        out_x.append(fx / scale)
+        out_y.append(fy / scale)
+    return np.hstack(out_x), np.hstack(out_y)
 
 
 def candidate_rotations(points_x: np.ndarray, points_y: np.ndarray) -> list[np.ndarray]:
@@ -309,7 +345,7 @@ class FitResult:
     converged: bool
 
 
-def prepare_fit(points_x, points_y, feats_x, feats_y, params, watch):
+def prepare_fit(points_x, points_y, feats_x, feats_y, params, watch, extra_rotations=()):
     """Frames (pre-alignment), samples and the fixed feature distances."""
     rng_start = params.seed % len(points_x)
     with watch("sampling"):
@@ -320,6 +356,7 @@ def prepare_fit(points_x, points_y, feats_x, feats_y, params, watch):
     if feats_x is not None:
         feat_dist = _sq_distances(feats_x[sx], feats_y[sy])
     rotations = candidate_rotations(points_x, points_y) if params.prealign == "pca" else [np.eye(3)]
+    rotations = rotations + list(extra_rotations)
     best = None
     w = 0.0
     with watch("alignment"):
@@ -338,7 +375,7 @@ def prepare_fit(points_x, points_y, feats_x, feats_y, params, watch):
 
 
 def fit(points_x, points_y, params: DivergenceFreeParams | None = None, token=None, *,
-        feats_x=None, feats_y=None, watch: Stopwatch | None = None):
+        feats_x=None, feats_y=None, watch: Stopwatch | None = None, extra_rotations=()):
     """EM fit of the divergence-free deformation of ``points_x`` onto ``points_y`` (generator).
 
     Parameters
@@ -353,6 +390,8 @@ def fit(points_x, points_y, params: DivergenceFreeParams | None = None, token=No
         Features of the Eq. 10.17 distance (none: coordinates only).
     feats_y : (n_y, f) float, optional
     watch : Stopwatch, optional
+    extra_rotations : sequence of (3, 3) float
+        Pre-alignment candidates besides the PCA ones (e.g. the rigid fit of a given map).
 
     Yields
     ------
@@ -374,7 +413,7 @@ def fit(points_x, points_y, params: DivergenceFreeParams | None = None, token=No
             raise InputError(f"feature arrays {feats_x.shape} and {feats_y.shape} do not fit the point counts "
                              f"{len(px)} and {len(py)}")
     yield Progress("preparing", 0.02, "samples and pre-alignment")
-    sx, sy, feat_dist, frames, w = prepare_fit(px, py, feats_x, feats_y, params, watch)
+    sx, sy, feat_dist, frames, w = prepare_fit(px, py, feats_x, feats_y, params, watch, extra_rotations)
     basis = DivFreeBasis(params.n_fields)
     start = frames.source_to_cube(px[sx])
     targets_y = frames.target_to_cube(py[sy])
@@ -433,19 +472,57 @@ def dense_maps(frames: Frames, morphed, points_y, w: float, feats_x=None, feats_
     return nearest_rows(ux, uy), nearest_rows(uy, ux)
 
 
-def solve_divergence_free(source, target, params: DivergenceFreeParams, token):
+def _initial_map(source, target, params: DivergenceFreeParams, token, initial, watch):
+    """(n_x,) int map to use as a feature, or None: a given map, else the ``init`` method's map."""
+    from corrlib.methods.base import InitialMatch
+
+    if initial is not None:
+        if not isinstance(initial, InitialMatch):
+            initial = InitialMatch(map_xy=np.asarray(initial))
+        ix, iy = initial.pairs(source.n_vertices, target.n_vertices)
+        if ix.size < source.n_vertices:  # landmarks or a partial map: every vertex follows its nearest match
+            return iy[nearest_rows(source.vertices, source.vertices[ix])]
+        return iy[np.argsort(ix)]
+    if params.init == "none":
+        return None
+    from corrlib.methods.registry import solve_iter
+
+    with watch("init"):
+        result = yield from solve_iter(params.init, source, target, token=token)
+    map_xy = np.asarray(result.map_xy)
+    if (map_xy < 0).any():
+        matched = np.flatnonzero(map_xy >= 0)
+        if matched.size == 0:
+            raise InputError(f"the initial map of {params.init} matches no vertex")
+        map_xy = map_xy[matched][nearest_rows(source.vertices, source.vertices[matched])]
+    return map_xy
+
+
+def solve_divergence_free(source, target, params: DivergenceFreeParams, token, *, initial=None):
     """Registered solver: fit, dense maps, deformation record (generator returning a MatchResult)."""
     watch = Stopwatch()
-    feats_x = feats_y = None
+    blocks_x, blocks_y = [], []
     if params.features == "shot":
         yield Progress("features", 0.0, "SHOT on both shapes")
         from corrlib.descriptors import mesh_descriptors
 
         with watch("descriptors"):
-            feats_x = mesh_descriptors(source, "shot")
-            feats_y = mesh_descriptors(target, "shot")
+            blocks_x.append(mesh_descriptors(source, "shot"))
+            blocks_y.append(mesh_descriptors(target, "shot"))
+    if initial is not None or params.init != "none":
+        yield Progress("initial map", 0.0, "given map" if initial is not None else params.init)
+    map_xy = yield from _initial_map(source, target, params, token, initial, watch)
+    extra_rotations = []
+    if map_xy is not None:
+        partner_x, own_y = map_features(target.vertices, map_xy)
+        blocks_x.append(partner_x)
+        blocks_y.append(own_y)
+        extra_rotations.append(kabsch_rotation(source.vertices, partner_x))
+    feats_x = feats_y = None
+    if blocks_x:
+        feats_x, feats_y = _unit_blocks(blocks_x, blocks_y) if len(blocks_x) > 1 else (blocks_x[0], blocks_y[0])
     fitted = yield from fit(source.vertices, target.vertices, params, token, feats_x=feats_x, feats_y=feats_y,
-                            watch=watch)
+                            watch=watch, extra_rotations=extra_rotations)
     deformation = Deformation(fitted.basis, fitted.coeffs, fitted.frames, params.n_steps)
     yield Progress("dense map", 0.95, f"flowing {source.n_vertices} vertices")
     with watch("trajectory"):  # every RK2 step up to SEQUENCE_T_MAX; step T is t = 1 (same step size)
@@ -471,7 +548,7 @@ def solve_divergence_free(source, target, params: DivergenceFreeParams, token):
 
 register(MethodSpec(
     name="divergence-free", label="Divergence-free deformation", inputs=("mesh", "mesh"),
-    params=DivergenceFreeParams, solve=solve_divergence_free, rank=15,
+    params=DivergenceFreeParams, solve=solve_divergence_free, rank=15, refines=True,
     description="Volume-preserving deformation of the source into the target by the flow of a divergence-free "
                 "field (closed-form curl basis on the unit cube), fitted jointly with soft correspondences by EM; "
                 "the flow gives interpolation and extrapolation sequences at any resolution.",

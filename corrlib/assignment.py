@@ -40,6 +40,10 @@ from corrlib.errors import Cancelled, InputError, ParameterError
 
 #: length of every row's list of best columns in the auction
 N_CANDIDATES = 16
+#: bids the auction may spend, per row and per √(columns), before the exact Jonker–Volgenant solver takes
+#: over. The auction is pseudo-polynomial: on near-tied columns (e.g. the copies of a column with a
+#: capacity, on an exactly symmetric shape) rows outbid each other by ε for a very long time.
+BID_BUDGET = 20
 
 
 @numba.njit(cache=True, nogil=True)
@@ -65,7 +69,7 @@ def _best_of_row(row, prices, n_keep, best_v, best_j):
 
 
 @numba.njit(cache=True, nogil=True)
-def _auction(benefit, benefit_t, eps_start, eps_final, factor, cancel, prices, row_to_col, n_cand):
+def _auction(benefit, benefit_t, eps_start, eps_final, factor, cancel, prices, row_to_col, n_cand, max_bids):
     """Forward–reverse auction with ε-scaling (maximisation), ``m <= n``.
 
     Parameters
@@ -79,11 +83,13 @@ def _auction(benefit, benefit_t, eps_start, eps_final, factor, cancel, prices, r
         Output: the column of every row.
     n_cand : int
         Candidate list length (< 2: plain scans).
+    max_bids : int
+        Budget of bids (forward and reverse) over all ε phases.
 
     Returns
     -------
-    bool
-        False if cancelled.
+    int
+        1: solved; 0: cancelled; -1: the bid budget ran out (a price war, see :data:`BID_BUDGET`).
     """
     m, n = benefit.shape
     col_to_row = np.empty(n, dtype=np.int64)
@@ -101,15 +107,19 @@ def _auction(benefit, benefit_t, eps_start, eps_final, factor, cancel, prices, r
     n_keep = min(max(n_list + 1, 2), n)  # values kept by a full scan: the list, its bound, at least the top two
     best_v = np.empty(max(n_keep, 2))
     best_j = np.empty(max(n_keep, 2), dtype=np.int64)
+    bids = 0
     while True:
         if cancel[0] != 0:
-            return False
+            return 0
         row_to_col[:] = -1
         col_to_row[:] = -1
         stack[:m] = np.arange(m - 1, -1, -1)  # row 0 bids first
         top = m
         # forward auction: unassigned rows bid until every row holds a column
         while top > 0:
+            bids += 1
+            if bids > max_bids:
+                return -1
             top -= 1
             i = stack[top]
             row = benefit[i]
@@ -158,6 +168,9 @@ def _auction(benefit, benefit_t, eps_start, eps_final, factor, cancel, prices, r
                     stack[top] = j
                     top += 1
             while top > 0:
+                bids += 1
+                if bids > max_bids:
+                    return -1
                 top -= 1
                 j = stack[top]
                 col = benefit_t[j]
@@ -179,7 +192,7 @@ def _auction(benefit, benefit_t, eps_start, eps_final, factor, cancel, prices, r
                         top += 1
                 drop += old - prices[j]
         if eps <= eps_final:
-            return True
+            return 1
         eps = max(eps / factor, eps_final)
 
 
@@ -226,8 +239,15 @@ def _auction_solve(s: np.ndarray, eps_final: float | None, eps_start: float | No
         raise ParameterError(f"eps_start must lie in (0, 1] (a fraction of the score range), got {eps_start}")
     eps_start *= span
     s_t = np.ascontiguousarray(s.T) if n > m else s
-    if not _auction(s, s_t, eps_start, eps_final, 5.0, flag, prices, row_to_col, N_CANDIDATES):
+    status = _auction(s, s_t, eps_start, eps_final, 5.0, flag, prices, row_to_col, N_CANDIDATES,
+                      int(BID_BUDGET * m * max(m, n) ** 0.5))
+    if status == 0:
         raise Cancelled("the computation was cancelled")
+    if status < 0:  # a price war on near-tied columns: the strongly polynomial exact solver instead
+        from scipy.optimize import linear_sum_assignment
+
+        rows, cols = linear_sum_assignment(s, maximize=True)
+        row_to_col[rows] = cols
     return row_to_col
 
 

@@ -244,6 +244,10 @@ def test_a_given_map_enters_as_a_feature_and_a_prealignment(wolf_pair):
     err_guided = geodesic_errors(guided.map_xy, wolf1, ident, ident).summary()["mean"]
     err_noisy = geodesic_errors(noisy, wolf1, ident, ident).summary()["mean"]
     assert err_guided < 0.5 * err_noisy and err_guided < err_plain, (err_guided, err_noisy, err_plain)
+    with pytest.raises(InputError, match="matches no vertex"):
+        solve("divergence-free", wolf0, wolf1, initial=InitialMatch(map_xy=np.full(n, -1)), **budget)
+    with pytest.raises(InputError, match="entries"):
+        solve("divergence-free", wolf0, wolf1, initial=InitialMatch(map_xy=np.arange(n - 1)), **budget)
 
 
 def test_frames_round_trip():

@@ -30,7 +30,14 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from app.views.scene import PLAIN_COLOR, coordinate_colors, make_plotter, polydata, transfer_colors
+from app.views.scene import (
+    ERROR_COLOR_MAX,
+    PLAIN_COLOR,
+    coordinate_colors,
+    make_plotter,
+    polydata,
+    transfer_colors,
+)
 
 #: table columns: header and tooltip
 COLUMNS = (("method", "registered method"), ("s", "runtime in seconds"), ("energy", "the method's own objective"),
@@ -40,7 +47,6 @@ COLUMNS = (("method", "registered method"), ("s", "runtime in seconds"), ("energ
            ("unmatched", "source vertices left unmatched"))
 #: what the method views show
 COLOR_MODES = ("colour transfer", "error heat map")
-ERROR_COLOR_MAX = 0.15  # top of the shared error colour scale (geodesic error / sqrt(area)), as the pair view
 METHOD_LIST_WIDTH = 220
 TABLE_CURVES_SPLIT = [620, 300]  # initial widths of the table and the error-curve plot
 VIEWS_BOTTOM_SPLIT = [500, 250]  # initial heights of the views and the table/plot row

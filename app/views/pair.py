@@ -8,6 +8,7 @@ from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QVBoxLayout, QWidg
 
 from app.views.scene import (
     LABEL_FONT_SIZE,
+    ERROR_COLOR_MAX,
     PLAIN_COLOR,
     UNMATCHED_GREY,
     coordinate_colors,
@@ -19,7 +20,6 @@ from corrlib.geometry.uv import checkerboard, cylindrical_uv
 
 MODES = ("coordinates", "function", "texture", "lines", "error")
 N_LINES = 12  # correspondence lines drawn before the user picks more
-ERROR_COLOR_MAX = 0.15  # top of the error colour scale (geodesic error / sqrt(area))
 ERROR_WITHIN = 0.05  # the info line gives the share of errors up to this
 LINES_GAP = 0.9  # lines mode: the target sits this many bounding-box diagonals right of the source
 LINE_WIDTH = 2

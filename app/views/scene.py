@@ -12,6 +12,8 @@ UNMATCHED_GREY = 0.7
 #: colour of a shape drawn without any data
 PLAIN_COLOR = "lightgrey"
 LABEL_FONT_SIZE = 9
+#: top of the error colour scale of every heat map (geodesic error / sqrt(area))
+ERROR_COLOR_MAX = 0.15
 
 
 def transfer_colors(colors: np.ndarray, map_yx: np.ndarray) -> np.ndarray:

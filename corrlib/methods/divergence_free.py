@@ -473,29 +473,25 @@ def dense_maps(frames: Frames, morphed, points_y, w: float, feats_x=None, feats_
 
 
 def _initial_map(source, target, params: DivergenceFreeParams, token, initial, watch):
-    """(n_x,) int map to use as a feature, or None: a given map, else the ``init`` method's map."""
+    """(n_x,) int map to use as a feature, or None: a given map or landmarks, else the ``init`` method's map.
+
+    Source vertices without a match (landmarks, a partial map) take the partner of their nearest matched vertex.
+    """
     from corrlib.methods.base import InitialMatch
 
-    if initial is not None:
-        if not isinstance(initial, InitialMatch):
-            initial = InitialMatch(map_xy=np.asarray(initial))
-        ix, iy = initial.pairs(source.n_vertices, target.n_vertices)
-        if ix.size < source.n_vertices:  # landmarks or a partial map: every vertex follows its nearest match
-            return iy[nearest_rows(source.vertices, source.vertices[ix])]
-        return iy[np.argsort(ix)]
-    if params.init == "none":
-        return None
-    from corrlib.methods.registry import solve_iter
+    if initial is None:
+        if params.init == "none":
+            return None
+        from corrlib.methods.registry import solve_iter
 
-    with watch("init"):
-        result = yield from solve_iter(params.init, source, target, token=token)
-    map_xy = np.asarray(result.map_xy)
-    if (map_xy < 0).any():
-        matched = np.flatnonzero(map_xy >= 0)
-        if matched.size == 0:
-            raise InputError(f"the initial map of {params.init} matches no vertex")
-        map_xy = map_xy[matched][nearest_rows(source.vertices, source.vertices[matched])]
-    return map_xy
+        with watch("init"):
+            initial = InitialMatch(map_xy=(yield from solve_iter(params.init, source, target, token=token)).map_xy)
+    elif not isinstance(initial, InitialMatch):
+        initial = InitialMatch(map_xy=np.asarray(initial))
+    ix, iy = initial.pairs(source.n_vertices, target.n_vertices)  # named errors for empty or bad maps
+    if ix.size == source.n_vertices:
+        return iy
+    return iy[nearest_rows(source.vertices, source.vertices[ix])]
 
 
 def solve_divergence_free(source, target, params: DivergenceFreeParams, token, *, initial=None):

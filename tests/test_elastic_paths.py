@@ -3,11 +3,11 @@
 import numpy as np
 import pytest
 import scipy.sparse as sp
-from scipy.sparse.csgraph import dijkstra
+from scipy.sparse.csgraph import dijkstra, johnson
 from test_contour3d import tiny_instance
 
 from corrlib.errors import ParameterError
-from corrlib.geometry.cyclic_paths import ProductGraph, branch_and_bound
+from corrlib.geometry.cyclic_paths import ProductGraph, branch_and_bound, minimum_ratio_union
 from corrlib.geometry.elastic_paths import ElasticProductGraph
 from corrlib.progress import run
 
@@ -16,11 +16,13 @@ def tiny(seed, m=6, stretch=0.7, bending=0.4, subdivisions=1):
     return ElasticProductGraph(*tiny_instance(seed, m, subdivisions), stretch=stretch, bending=bending)
 
 
-def explicit_optimum(g: ElasticProductGraph) -> float:
+def explicit_optimum(g: ElasticProductGraph, gain: float = 0.0) -> float:
     """Every state and move built explicitly; per start vertex a Dijkstra (SciPy).
 
     States: (layer, directed edge u -> j: at j, last graph move from u) and (layer, vertex v: no graph move
-    yet). Moves as in the module docstring; bending only after a first graph move.
+    yet). Moves as in the module docstring; bending only after a first graph move. ``gain`` credits every
+    move advancing along curve and graph with ``-gain * min(a, b)`` (the ratio energy's parametric problem;
+    Johnson's algorithm then, as some edges are negative).
     """
     m, n_edges, n = g.m, len(g.indices), g.n
     pts = g.graph_points
@@ -46,14 +48,16 @@ def explicit_optimum(g: ElasticProductGraph) -> float:
                 w.append(0.5 * (g.cost[i, j] + g.cost[i, k]) * b + g.stretch * b + bend)
                 if i < m:
                     rows.append(node(i, e)), cols.append(node(i + 1, q))
-                    w.append(0.5 * (g.cost[i, j] + g.cost[i + 1, k]) * np.hypot(a, b) + g.stretch * abs(b - a) + bend)
+                    w.append(0.5 * (g.cost[i, j] + g.cost[i + 1, k]) * np.hypot(a, b) + g.stretch * abs(b - a) + bend
+                             - gain * min(a, b))
             if i < m:
                 rows.append(node(i, e)), cols.append(node(i + 1, e))
                 w.append((0.5 * (g.cost[i, j] + g.cost[i + 1, j]) + g.stretch) * a)
     graph = sp.coo_matrix((w, (rows, cols)), shape=((m + 1) * n_states,) * 2).tocsr()
     best = np.inf
+    shortest = dijkstra if gain == 0 else johnson
     for s in range(n):
-        dist = dijkstra(graph, directed=True, indices=node(0, n_edges + s))
+        dist = shortest(graph, directed=True, indices=node(0, n_edges + s))
         ends = [node(m, e) for e in range(n_states) if head[e] == s]
         best = min(best, dist[ends].min())
     return float(best)
@@ -69,6 +73,18 @@ def test_branch_and_bound_equals_brute_force(seed):
     assert g.path_energy(result.path) == pytest.approx(result.energy, rel=1e-9)
     approx = run(branch_and_bound(tiny(seed), eps=0.2))
     assert exact - 1e-12 <= approx.energy <= 1.2 * exact + 1e-12
+
+
+@pytest.mark.parametrize("seed", range(3))
+def test_minimum_ratio_on_the_second_order_graph_is_optimal_on_the_explicit_state_graph(seed):
+    """Dinkelbach over the elastic graph: no closed path of the explicit state graph has E - ratio * D < 0 (so
+    none has a lower ratio), and the returned path attains the ratio, recomputed step by step."""
+    g = tiny(seed, m=5, subdivisions=0)
+    result = run(minimum_ratio_union([g]))
+    assert explicit_optimum(g, gain=result.energy) == pytest.approx(0.0, abs=1e-9)
+    assert explicit_optimum(g, gain=result.energy * 1.001) < 0  # a larger ratio is beaten
+    assert g.path_energy(result.path) / g.credited_length(result.path) == pytest.approx(result.energy, rel=1e-12)
+    assert result.lower_bound == result.upper_bound
 
 
 def test_no_immediate_reversal_and_valid_closed_path():

@@ -44,13 +44,18 @@ from corrlib.progress import CancelToken, Progress
 
 @numba.njit(cache=True, nogil=True)
 def _layered_dijkstra(cost, step2, graph_points, indptr, indices, edge_len, source_mask, target_mask,
-                      upper, heuristic, cancel, dist, pred, origin, stretch):
+                      upper, heuristic, cancel, dist, pred, origin, stretch, gain):
     """Multi-source shortest paths through all layers; returns (best end vertex, its cost).
 
     ``stretch`` adds ``stretch * |b - a|`` to every edge, ``a`` and ``b`` its
     lengths along the curve and in the graph (0: the paper's energy; the
     second-order energy of :mod:`corrlib.geometry.elastic_paths` uses this
-    first-order part as its admissible heuristic).
+    first-order part as its admissible heuristic). ``gain`` subtracts
+    ``gain * min(a, b)`` from every edge that advances along both the curve
+    and the graph (the credited length of :meth:`ProductGraph.credited_length`;
+    the parametric problem of the ratio energy). Edges within a layer never
+    get a credit, so they stay non-negative and every layer's Dijkstra is exact
+    whatever the distances it starts from.
 
     ``dist``/``pred``/``origin`` (L, n) are overwritten: distance, predecessor
     (``j`` within the layer, ``n + j`` from vertex j of the previous layer,
@@ -97,7 +102,7 @@ def _layered_dijkstra(cost, step2, graph_points, indptr, indices, edge_len, sour
                 for e in range(indptr[j], indptr[j + 1]):
                     k = indices[e]
                     nd = (dj + 0.5 * (cj + cost[i, k]) * np.sqrt(s2 + edge_len[e] * edge_len[e])
-                          + stretch * abs(edge_len[e] - step))
+                          + stretch * abs(edge_len[e] - step) - gain * min(edge_len[e], step))
                     if nd < d[k] and nd + h[k] < upper:
                         d[k] = nd
                         p[k] = n + j
@@ -198,6 +203,9 @@ class ProductGraph:
         if not (np.isfinite(stretch) and stretch >= 0):
             raise ParameterError(f"stretch must be finite and non-negative, got {stretch}")
         self.stretch = float(stretch)
+        #: Dinkelbach parameter of the ratio energy: every edge advancing along curve and graph gets
+        #: ``-gain * min(a, b)`` (0: no credit; set by :func:`minimum_ratio_union`)
+        self.gain = 0.0
         # a closed path starts at (0, s) and ends at (m, s + closing_shift), s < n_starts
         self.closing_shift = int(closing_shift)
         self.n_starts = int(n_starts if n_starts is not None else n)
@@ -247,7 +255,7 @@ class ProductGraph:
         t, _ = _layered_dijkstra(np.ascontiguousarray(self.cost[::-1]), np.ascontiguousarray(self.step2[::-1]),
                                  self.graph_points, indptr, indices, edge_len, everything,
                                  everything, np.inf, np.zeros((self.m + 1, self.n)), flag, self.dist, self.pred,
-                                 self.origin, self.stretch)
+                                 self.origin, self.stretch, self.gain)
         self.runs += 1
         self.run_seconds += time.perf_counter() - start
         if t == -2:
@@ -304,7 +312,7 @@ class ProductGraph:
         start = time.perf_counter()
         t, c = _layered_dijkstra(self.cost, self.step2, self.graph_points, self.indptr, self.indices,
                                  self.edge_len, sources, targets, float(upper), self.heuristic, flag,
-                                 self.dist, self.pred, self.origin, self.stretch)
+                                 self.dist, self.pred, self.origin, self.stretch, self.gain)
         self.runs += 1
         self.run_seconds += time.perf_counter() - start
         if t == -2:
@@ -394,7 +402,28 @@ class ProductGraph:
             a2 = self.step2[i0] if i1 == i0 + 1 else 0.0
             total += 0.5 * (self.cost[i0, j0] + self.cost[i1, j1]) * np.sqrt(a2 + b2)
             total += self.stretch * abs(np.sqrt(b2) - np.sqrt(a2))
-        return float(total)
+        return float(total - self.gain * self.credited_length(path))
+
+    def credited_length(self, path: CyclicPath) -> float:
+        """The length of the curve a path matches to moving graph vertices: ``Σ min(a, b)`` over its edges.
+
+        An edge from ``(i, j)`` to ``(i + 1, k)``, ``k ≠ j``, advances ``a`` along
+        the curve and ``b`` in the graph and is credited ``min(a, b)``; an edge
+        on which either stays is credited nothing. So a curve point whose match
+        does not move (a collapsed stretch of the matching) adds nothing, a
+        point whose match keeps pace adds its own step, and a detour within a
+        layer adds nothing either: the credit is at most the curve's length.
+        """
+        layers, vertices = path.layers, path.vertices
+        advancing = (np.diff(layers) == 1) & (vertices[1:] != vertices[:-1])
+        b = np.linalg.norm(self.graph_points[vertices[1:]] - self.graph_points[vertices[:-1]], axis=1)
+        a = np.sqrt(np.append(self.step2, 0.0)[layers[:-1]])  # no edge advances from the closing layer
+        return float(np.sum(np.minimum(a, b)[advancing]))
+
+    @property
+    def curve_length(self) -> float:
+        """Length of the closed curve: the largest possible credited length."""
+        return float(np.sum(np.sqrt(self.step2)))
 
 
 @dataclass
@@ -543,3 +572,74 @@ def branch_and_bound_union(graphs, *, eps: float = 0.0, token: CancelToken | Non
     runs = sum(g.runs for g in graphs)
     return BranchAndBoundResult(best, upper, lower_bound, upper, iterations, runs,
                                 sum(g.run_seconds for g in graphs) / max(runs, 1), best_index)
+
+
+def minimum_ratio_union(graphs, *, eps: float = 0.0, token: CancelToken | None = None,
+                        max_iterations: int = 100_000, max_rounds: int = 100):
+    """The closed path of least energy per credited length over several product graphs (generator).
+
+    Minimises the ratio ``R(P) = E(P) / D(P)`` of the path energy ``E`` to the
+    credited length ``D`` (:meth:`ProductGraph.credited_length`, the part of the
+    curve matched to moving graph vertices) by Dinkelbach's parametric search
+    (Dinkelbach 1967; the minimum-ratio cycles of Roetzer et al., CVPR 2025):
+    for a ratio ``λ`` attained by a path, the global optimum of ``E − λ D``
+    (every edge advancing along curve and graph credited ``−λ min(a, b)``,
+    :func:`branch_and_bound_union`) is negative exactly when some path has a
+    lower ratio, and then that path's ratio is the next ``λ``. The ratios
+    decrease strictly, so the search ends, at the global optimum, after a
+    handful of rounds. A collapsed matching, whose curve points keep their
+    match, has a small ``D`` and a large ratio however small its energy.
+
+    Bounds: for every path ``E − λ D ≥ v`` (the last optimum) and ``D ≤ L``
+    (the curve's length), so ``R ≥ λ + v / L``. With ``eps > 0`` the search stops
+    once that lower bound times ``1 + eps`` reaches ``λ``.
+
+    Returns
+    -------
+    BranchAndBoundResult
+        ``energy``, ``lower_bound`` and ``upper_bound`` are ratios; the
+        inner searches' iterations and runs are summed.
+    """
+    if not (0.0 <= eps < 1.0):
+        raise ParameterError(f"eps must be in [0, 1), got {eps}")
+    token = token or CancelToken()
+    curve_length = max(g.curve_length for g in graphs)
+    for graph in graphs:
+        graph.gain = 0.0
+    iterations = 0
+    bb = yield from branch_and_bound_union(graphs, token=token, max_iterations=max_iterations)
+    iterations += bb.iterations
+    path, index = bb.path, bb.graph_index
+    credit = graphs[index].credited_length(path)
+    energy = graphs[index].path_energy(path)
+    # a matching of the paper's optimum that never moves has no ratio yet: start from the smallest credit
+    ratio = energy / max(credit, 1e-9 * curve_length)
+    lower = -np.inf
+    for _ in range(max_rounds):
+        for graph in graphs:
+            graph.gain = ratio
+        bb = yield from branch_and_bound_union(graphs, token=token, max_iterations=max_iterations)
+        iterations += bb.iterations
+        value = bb.lower_bound  # the optimum of E - ratio * D (exact unless the iteration cap stopped it)
+        tolerance = 1e-9 * max(abs(energy), 1e-300)
+        if value >= -tolerance:  # no path beats the current ratio
+            lower = ratio
+            break
+        lower = ratio + value / curve_length
+        candidate, candidate_index = bb.path, bb.graph_index
+        graph = graphs[candidate_index]
+        candidate_credit = graph.credited_length(candidate)
+        graph.gain = 0.0
+        candidate_energy = graph.path_energy(candidate)
+        if candidate_credit <= 0 or candidate_energy / candidate_credit >= ratio:
+            break  # the inner search stopped early (iteration cap): keep the bounds as they are
+        path, index, credit, energy = candidate, candidate_index, candidate_credit, candidate_energy
+        ratio = energy / credit
+        if lower * (1.0 + eps) >= ratio:
+            break
+    for graph in graphs:
+        graph.gain = 0.0
+    runs = sum(g.runs for g in graphs)
+    result_path = CyclicPath(path.vertices, path.layers, float(ratio))
+    return BranchAndBoundResult(result_path, float(ratio), float(min(lower, ratio)), float(ratio), iterations, runs,
+                                sum(g.run_seconds for g in graphs) / max(runs, 1), index)

@@ -66,7 +66,7 @@ def _turn_cosines(indptr, indices, tail, points):
 
 @numba.njit(cache=True, nogil=True)
 def _elastic_layered_dijkstra(cost, step, indptr, indices, tail, edge_len, cos_turn, source_mask, target_mask,
-                              upper, heuristic, stretch, bend, cancel, dist, pred, origin):
+                              upper, heuristic, stretch, bend, cancel, dist, pred, origin, gain):
     """Multi-source shortest paths over (layer, directed edge) states; returns (best end state, its cost).
 
     The layer-by-layer scheme of :func:`~corrlib.geometry.cyclic_paths._layered_dijkstra`
@@ -79,7 +79,9 @@ def _elastic_layered_dijkstra(cost, step, indptr, indices, tail, edge_len, cos_t
     previous layer, -1 for a start state) and start vertex. ``heuristic`` (L, n) bounds the
     remaining cost from a vertex from below; states whose distance plus it
     reaches ``upper`` are pruned. Returns (-2, inf) when cancelled, (-1, inf)
-    when no path below ``upper`` exists.
+    when no path below ``upper`` exists. ``gain`` credits every step that
+    advances along curve and graph with ``-gain * min(a, b)``, as the
+    first-order kernel does (the ratio energy's parametric problem).
     """
     n_layers = cost.shape[0]
     n_edges = indices.shape[0]
@@ -125,7 +127,8 @@ def _elastic_layered_dijkstra(cost, step, indptr, indices, tail, edge_len, cos_t
                     if k == u:
                         continue
                     b = edge_len[q]
-                    nd = de + 0.5 * (cj + cost[i, k]) * np.sqrt(a * a + b * b) + stretch * abs(b - a)
+                    nd = (de + 0.5 * (cj + cost[i, k]) * np.sqrt(a * a + b * b) + stretch * abs(b - a)
+                          - gain * min(a, b))
                     if memory:
                         nd += bend * (1.0 - cos_turn[e, q - indptr[j]])
                     if nd < d[q] and nd + h[k] < upper:
@@ -207,7 +210,7 @@ class ElasticProductGraph(ProductGraph):
         state, c = _elastic_layered_dijkstra(self.cost, self.step, self.indptr, self.indices, self.tail,
                                              self.edge_len, self.cos_turn, sources, targets, float(upper),
                                              self.heuristic, self.stretch, self.bending, flag, self.state_dist,
-                                             self.state_pred, self.state_origin)
+                                             self.state_pred, self.state_origin, self.gain)
         self.runs += 1
         self.run_seconds += time.perf_counter() - start
         if state == -2:
@@ -265,4 +268,4 @@ class ElasticProductGraph(ProductGraph):
                 into = points[j0] - points[previous]
                 total += self.bending * (1.0 - (points[j1] - points[j0]) @ into / (b * np.linalg.norm(into)))
             previous = j0
-        return float(total)
+        return float(total - self.gain * self.credited_length(path))

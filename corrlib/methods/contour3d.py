@@ -87,8 +87,14 @@ Energies (``energy``): ``paper`` is the CVPR 2016 energy on the first-order
 product graph; ``elastic`` adds stretching, bending and the rule against
 immediate reversals on the second-order graph of
 :mod:`corrlib.geometry.elastic_paths` (Roetzer, Lähner, Bernard, CVPR 2023),
-whose optimum does not collapse onto a few vertices. Both are solved to the
-global optimum (or a (1 + ε) approximation) by the same branch-and-bound.
+whose optimum does not collapse onto a few vertices; ``ratio`` divides the
+paper's energy (``elastic-ratio``: the elastic energy) by the length of the
+contour matched to a moving curve
+(:func:`~corrlib.geometry.cyclic_paths.minimum_ratio_union`; Roetzer et al.,
+CVPR 2025): a collapsed matching, whose contour points keep their mesh
+vertex, earns no length however cheap it is. All are solved to the global
+optimum (or a (1 + ε) approximation) by the same branch-and-bound, the ratio
+by a parametric (Dinkelbach) sequence of them.
 
 Map convention: ``map_xy[i]`` is the mesh vertex matched to contour point i
 (where the path enters that contour point); ``map_yx`` is undefined (None).
@@ -105,7 +111,7 @@ import numpy as np
 from corrlib.descriptors.spectral import hks, wks
 from corrlib.descriptors.symmetry import K_FINAL, even_spectrum, mesh_reflection
 from corrlib.errors import ContourError, InputError, ParameterError
-from corrlib.geometry.cyclic_paths import ProductGraph, branch_and_bound_union
+from corrlib.geometry.cyclic_paths import ProductGraph, branch_and_bound_union, minimum_ratio_union
 from corrlib.geometry.elastic_paths import ElasticProductGraph
 from corrlib.geometry.intrinsic_axis import IntrinsicAxis, axis_mismatch, spectral_axes
 from corrlib.geometry.laplacian import mesh_laplacian
@@ -159,9 +165,12 @@ class Contour3DParams:
                             "from the side); whole: the whole surface as the doubled silhouette (near and far "
                             "side, e.g. a person from the front); auto: both, the lower energy wins; flat: the "
                             "filled silhouette against the whole surface (the paper).")
-    energy: str = param("paper", label="Energy", choices=("paper", "elastic"),
+    energy: str = param("paper", label="Energy", choices=("paper", "elastic", "ratio", "elastic-ratio"),
                         help="paper: feature cost times product length (CVPR 2016); elastic: plus stretching, "
-                             "bending and no immediate reversal on the curve (second order, Roetzer et al. 2023).")
+                             "bending and no immediate reversal on the curve (second order, Roetzer et al. 2023); "
+                             "ratio: the paper's energy per length of the contour matched to a moving curve "
+                             "(minimum-ratio cycle, Roetzer et al. 2025); elastic-ratio: the elastic energy per that "
+                             "length.")
     stretch: float = param(1.0, label="Stretching weight", low=0.0, high=1e3,
                            help="elastic energy: |3D step − 2D step| in units of the mean node cost.")
     bending: float = param(1.0, label="Bending weight", low=0.0, high=1e3,
@@ -423,7 +432,7 @@ def product_graph(cost: np.ndarray, contour_points: np.ndarray, mesh_vertices: n
     distance), the bending weight in units of ``unit_cost`` times the mean
     contour step. Both readings of the axis therefore get the same weights.
     """
-    if params.energy == "paper":
+    if params.energy in ("paper", "ratio"):
         return ProductGraph(cost, contour_points, mesh_vertices, adjacency)
     step = float(np.mean(np.linalg.norm(np.roll(contour_points, -1, axis=0) - contour_points, axis=1)))
     return ElasticProductGraph(cost, contour_points, mesh_vertices, adjacency, stretch=params.stretch * unit_cost,
@@ -454,18 +463,19 @@ def match_prepared(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams,
     yield Progress("branch and bound", 0.1, f"{graphs[0].m} x {graphs[0].n} product graph, {len(graphs)} readings "
                                             "(shape model, direction of the axis)")
     with watch("search"):
-        bb = yield from branch_and_bound_union(graphs, eps=params.eps, token=token,
-                                               max_iterations=params.max_iterations)
+        search = minimum_ratio_union if params.energy.endswith("ratio") else branch_and_bound_union
+        bb = yield from search(graphs, eps=params.eps, token=token, max_iterations=params.max_iterations)
     path = bb.path
     matched = path.matched_vertices(graphs[bb.graph_index].m)
     model, signs = readings[bb.graph_index]
     extras = {"axis_reversed": bool(signs[0]) if signs else False, "axis_signs": [bool(s) for s in signs],
               "model": model}
     yield Progress("done", 1.0, f"energy {bb.energy:.6g} after {bb.iterations} iterations")
+    per_length = " per contour length matched to a moving curve" if params.energy.endswith("ratio") else ""
     return MatchResult("contour3d", map_xy=matched, map_yx=None, energy=bb.energy, timings=watch.times,
                        path=ContourPath(query.contour.points, path.vertices, path.curve_index, path.layers),
                        search=SearchCertificate.of(bb), extras=extras,
-                       energy_meaning=f"{params.energy} product-graph path energy ({model} shape model, unit-area "
+                       energy_meaning=f"{params.energy} product-graph path energy{per_length} ({model} shape model, unit-area "
                                       f"mesh, contour area {params.area_ratio:g}, axis weight {params.axis_weight:g})")
 
 

@@ -693,10 +693,16 @@ class MainWindow(QMainWindow):
     def load_texture(self, path: str) -> None:
         from PIL import Image, UnidentifiedImageError
 
+        from corrlib.io import check_image_size
+
         try:
             with Image.open(path) as im:
+                check_image_size(path, *im.size)
                 self.pair_view.texture_image = np.asarray(im.convert("RGB"))
-        except (OSError, UnidentifiedImageError) as exc:
+        except CorrError as exc:
+            self.show_error(str(exc))
+            return
+        except (OSError, UnidentifiedImageError, Image.DecompressionBombError, ValueError, SyntaxError) as exc:
             self.show_error(f"{path}: cannot read the texture image: {exc}")
             return
         self.pair_view.mode.setCurrentText("texture")

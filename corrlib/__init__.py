@@ -17,6 +17,24 @@ weak form ``S phi = lambda M phi`` with M-orthonormal eigenvectors.
 
 __version__ = "0.1.0"
 
+
+def _writable_numba_cache() -> None:
+    """Point numba's kernel cache at a temporary folder when the installed package cannot hold it.
+
+    numba caches compiled kernels beside the sources, else in the user's
+    cache folder, and raises at import when neither can be written (a
+    read-only install run by a user without a writable home).
+    """
+    import os
+    import tempfile
+
+    if "NUMBA_CACHE_DIR" not in os.environ and not os.access(os.path.dirname(os.path.abspath(__file__)), os.W_OK):
+        uid = os.getuid() if hasattr(os, "getuid") else "user"
+        os.environ["NUMBA_CACHE_DIR"] = os.path.join(tempfile.gettempdir(), f"corrlib-numba-cache-{uid}")
+
+
+_writable_numba_cache()
+
 from corrlib.errors import (  # noqa: F401
     Cancelled,
     ContourError,

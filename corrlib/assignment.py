@@ -214,6 +214,19 @@ def _with_slack_columns(base: np.ndarray, slack: float) -> np.ndarray:
     return out
 
 
+def _effective_slack(base: np.ndarray, slack: float) -> float:
+    """The slack clipped to the range where its value still matters; the optimal assignment is unchanged.
+
+    With ``r`` bidding rows and score span ``d``, a slack below ``min − r d`` already makes every
+    maximum-cardinality matching beat every smaller one, and a slack above ``max`` leaves everything
+    unmatched; values beyond ``min − (r + 1) d`` and ``max + d`` give the same optimum, while keeping the
+    auction's ε (relative to the score range) and its floating-point resolution meaningful.
+    """
+    lo, hi = float(base.min()), float(base.max())
+    span = max(hi - lo, abs(hi), 1e-300)
+    return float(np.clip(slack, lo - (base.shape[0] + 1) * span, hi + span))
+
+
 def _auction_solve(s: np.ndarray, eps_final: float | None, eps_start: float | None, cancel, prices) -> np.ndarray:
     """(m,) int: column of every row of ``s`` (m, n), m <= n, by the forward–reverse auction."""
     m, n = s.shape
@@ -307,7 +320,7 @@ def linear_assignment(score, *, slack: float | None = None, method: str = "aucti
     # the auction's bidders are the rows of the smaller side
     transposed = n_rows > n_cols
     base = np.ascontiguousarray(s.T if transposed else s)
-    problem = base if slack is None else _with_slack_columns(base, float(slack))
+    problem = base if slack is None else _with_slack_columns(base, _effective_slack(base, float(slack)))
     if method == "scipy":
         from scipy.optimize import linear_sum_assignment
 

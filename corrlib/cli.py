@@ -91,11 +91,18 @@ def cmd_info(args) -> int:
 
 def cmd_eval(args) -> int:
     from corrlib.evaluation import cumulative_curve, geodesic_errors
-    from corrlib.io import load_map, load_mesh, load_vts
+    from corrlib.io import check_output_file, load_map, load_mesh, load_vts
 
+    for option, value in (("--errors", args.errors), ("--plot", args.plot)):
+        if value is not None:
+            check_output_file(value, option)
     target = load_mesh(args.target)
     map_xy = load_map(args.map, n_target=target.n_vertices)
-    gt_source = load_vts(args.gt_source, map_xy.shape[0])
+    gt_source = load_vts(args.gt_source)
+    if gt_source.max() >= map_xy.shape[0]:
+        raise FileFormatError(f"{args.map}: the map has {map_xy.shape[0]} entries, but the ground truth "
+                              f"{args.gt_source} refers to source vertex {gt_source.max()} (is the map short, or "
+                              f"for another source?)")
     gt_target = load_vts(args.gt_target, target.n_vertices)
     gt_sym = load_vts(args.gt_target_sym, target.n_vertices) if args.gt_target_sym else None
     start = time.perf_counter()
@@ -110,19 +117,28 @@ def cmd_eval(args) -> int:
     else:
         for key, value in summary.items():
             print(f"{key:>18}: {value:.4f}" if isinstance(value, float) else f"{key:>18}: {value}")
-    if args.errors:
-        from corrlib.io import atomic_write
+    written = []
+    try:  # both files or neither
+        if args.errors:
+            from corrlib.io import atomic_write
 
-        with atomic_write(args.errors) as fh:
-            np.savetxt(fh, report.errors, fmt="%.6g")
-    if args.plot:
-        from corrlib.plotting import save_error_curves
+            with atomic_write(args.errors) as fh:
+                np.savetxt(fh, report.errors, fmt="%.6g")
+            written.append(Path(args.errors))
+        if args.plot:
+            from corrlib.plotting import save_error_curves
 
-        curves = {"direct": cumulative_curve(report.errors, report.thresholds)}
-        if report.errors_sym is not None:
-            curves["symmetry-aware"] = cumulative_curve(report.errors_sym, report.thresholds)
-        save_error_curves(args.plot, curves, report.thresholds)
-        print(f"wrote {args.plot}")
+            curves = {"direct": cumulative_curve(report.errors, report.thresholds)}
+            if report.errors_sym is not None:
+                curves["symmetry-aware"] = cumulative_curve(report.errors_sym, report.thresholds)
+            save_error_curves(args.plot, curves, report.thresholds)
+            written.append(Path(args.plot))
+    except BaseException:
+        for path in written:
+            path.unlink(missing_ok=True)
+        raise
+    for path in written:
+        print(f"wrote {path}")
     return 0
 
 
@@ -146,9 +162,19 @@ def _parse_overrides(pairs: list[str]) -> dict:
 
 
 def _write_match_outputs(result, source, target, out: Path, *, quiet: bool = False) -> None:
+    """The result files of a match beside the stem ``out``, all or none of them."""
+    from corrlib.io import staged_output
+
+    with staged_output(out.parent) as stage:
+        written = [out.parent / p.name for p in _stage_match_outputs(result, source, target, stage / out.name)]
+    if not quiet:
+        for path in written:
+            print(f"wrote {path}")
+
+
+def _stage_match_outputs(result, source, target, out: Path) -> list[Path]:
     from corrlib.io import save_map
 
-    out.parent.mkdir(parents=True, exist_ok=True)
     npz, js = result.save(out)
     written = [npz, js]
     if result.map_xy is not None:
@@ -171,9 +197,14 @@ def _write_match_outputs(result, source, target, out: Path, *, quiet: bool = Fal
         from corrlib.plotting import save_torus_pictures
 
         written.append(save_torus_pictures(out.with_name(out.name + ".png"), result))
-    if not quiet:
-        for path in written:
-            print(f"wrote {path}")
+    return [Path(p) for p in written]
+
+
+def _check_output_stem(args, attribute: str = "output") -> Path:
+    """The ``-o`` stem, checked before any work (its folder created and writable)."""
+    from corrlib.io import check_output_file
+
+    return check_output_file(Path(getattr(args, attribute)), "-o")
 
 
 def _progress_printer(quiet: bool):
@@ -187,25 +218,32 @@ def _progress_printer(quiet: bool):
 
 def _initial_match(value: str, source, target):
     """``--init``: a map file (one target index per source vertex) or a landmarks file (two columns)."""
-    from corrlib.io import load_map
+    from corrlib.io import load_map, load_pairs, read_text
     from corrlib.methods.base import InitialMatch
 
     path = Path(value)
     if not path.exists():
         raise FileFormatError(f"{path}: --init is neither 'descriptors', 'fmap' nor an existing file")
-    rows = [line.split() for line in path.read_text().splitlines() if line.strip() and not line.startswith("#")]
-    if rows and len(rows[0]) == 2:
-        try:
-            pairs = np.array(rows, dtype=np.int64)
-        except ValueError:
-            raise FileFormatError(f"{path}: landmarks must be two integer columns (source, target)") from None
-        return InitialMatch(landmarks_x=pairs[:, 0], landmarks_y=pairs[:, 1])
+    if path.suffix.lower() != ".npz":
+        rows = [line.split("#", 1)[0].split() for line in read_text(path, "--init").splitlines()]
+        rows = [row for row in rows if row]
+        if rows and len(rows[0]) == 2:
+            pairs = load_pairs(path, "--init landmarks")
+            initial = InitialMatch(landmarks_x=pairs[:, 0], landmarks_y=pairs[:, 1])
+            n_x, n_y = getattr(source, "n_vertices", None), getattr(target, "n_vertices", None)
+            if n_x is not None and n_y is not None:
+                try:
+                    initial.pairs(n_x, n_y)
+                except CorrError as exc:
+                    raise FileFormatError(f"{path}: {exc}") from None
+            return initial
     return InitialMatch(map_xy=load_map(path, n_target=target.n_vertices, n_source=source.n_vertices))
 
 
 def cmd_match(args) -> int:
     from corrlib.methods import get_method, solve
 
+    _check_output_stem(args)
     source, target = _load_shape(args.source), _load_shape(args.target)
     overrides = _parse_overrides(args.param)
     spec = get_method(args.method)
@@ -231,6 +269,7 @@ def cmd_match(args) -> int:
 def cmd_refine(args) -> int:
     from corrlib.methods import get_method, solve
 
+    _check_output_stem(args)
     source, target = _load_shape(args.source), _load_shape(args.target)
     spec = get_method(args.method)
     if not spec.refines:
@@ -318,25 +357,34 @@ def cmd_bench_contour(args) -> int:
     return 0 if summary["all"]["failed"] == 0 else 1
 
 
+#: most frames ``corr morph`` writes (the glTF animation's weights grow with the square of the count: 2,000
+#: frames need 16 MB of them, and every frame is a mesh file)
+MAX_FRAMES = 2000
+
+
 def cmd_morph(args) -> int:
     from corrlib.methods import get_method, solve
     from corrlib.morph import export_sequence, frame_positions, has_deformation
     from corrlib.shapes import TriMesh
 
-    if args.frames < 2:
-        raise CorrError(f"--frames must be at least 2, got {args.frames}")
+    if not 2 <= args.frames <= MAX_FRAMES:
+        raise CorrError(f"--frames must be between 2 and {MAX_FRAMES}, got {args.frames}")
     if not (np.isfinite(args.t_max) and args.t_max > 0):
         raise CorrError(f"--t-max must be a positive number, got {args.t_max}")
+    from corrlib.io import ensure_output_folder, staged_output
+
+    out = ensure_output_folder(args.output, "-o")
     source, target = _load_shape(args.source), _load_shape(args.target)
     if not (isinstance(source, TriMesh) and isinstance(target, TriMesh)):
         raise CorrError("corr morph takes two meshes")
     spec = get_method(args.method)
     result = solve(spec, source, target, callback=_progress_printer(args.quiet), **_parse_overrides(args.param))
-    out = Path(args.output)
-    _write_match_outputs(result, source, target, out / "result", quiet=args.quiet)
     times = np.linspace(0.0, args.t_max, args.frames)
     frames = frame_positions(result, source, target, times)
-    written = export_sequence(out, frames, source.faces, times, fmt=args.format, closed=source.is_closed)
+    with staged_output(out) as stage:  # the result and every frame, or nothing
+        _stage_match_outputs(result, source, target, stage / "result")
+        written = export_sequence(stage, frames, source.faces, times, fmt=args.format, closed=source.is_closed)
+    written["animation"] = written["animation"] and out / Path(written["animation"]).name
     kind = "divergence-free flow" if has_deformation(result) else "linear interpolation through the map"
     print(f"{len(frames)} frames t = 0 .. {args.t_max:g} ({kind}) in {out}/, animation {written['animation']}")
     if source.is_closed:
@@ -353,6 +401,9 @@ def cmd_demo(args) -> int:
     from corrlib.methods import methods_for, solve
     from corrlib.resources import DEMO_PAIR, resource
 
+    from corrlib.io import ensure_output_folder
+
+    ensure_output_folder(args.output, "-o")
     source = load_mesh(resource(DEMO_PAIR[0]))
     target = load_mesh(resource(DEMO_PAIR[1]))
     spec = methods_for(source, target)[0]
@@ -382,7 +433,9 @@ def _query_contour(path: str, labels: str | None = None):
         loop = max(loops, key=len)
         contour = Contour2D(sketch.vertices[loop, :2], name=Path(path).name)
     if labels:
-        values = np.loadtxt(labels, dtype=np.int64, ndmin=1)
+        from corrlib.io import load_labels
+
+        values = load_labels(labels, what="--query-labels")
         if isinstance(sketch, TriMesh) and values.shape[0] == sketch.n_vertices:
             values = values[loop]  # per-vertex labels of the sketch mesh
         contour = Contour2D(contour.points, name=contour.name, labels=values)
@@ -405,23 +458,28 @@ def cmd_match_contour(args) -> int:
     from corrlib.methods import solve
     from corrlib.plotting import save_contour_match
 
+    out = _check_output_stem(args)
     contour = _query_contour(args.query, args.query_labels)
     mesh = load_mesh(args.mesh)
     if args.mesh_labels:
-        mesh = mesh.with_labels(np.loadtxt(args.mesh_labels, dtype=np.int64, ndmin=1))
+        from corrlib.io import load_labels
+
+        mesh = mesh.with_labels(load_labels(args.mesh_labels, mesh.n_vertices, what="--mesh-labels"))
     result = solve("contour3d", contour, mesh, _contour3d_params(args), callback=_progress_printer(args.quiet))
     search, path = result.search, result.path
     print(f"energy {result.energy:.6g} (lower bound {search.lower_bound:.6g}, "
           f"{'optimal' if search.optimal else 'within the ε bound'}), {search.iterations} branch-and-bound "
           f"iterations, {search.dijkstra_runs} layered Dijkstra runs of {search.seconds_per_dijkstra:.3f} s, "
           f"{result.timings['total']:.2f} s in total")
-    out = Path(args.output)
-    npz, js = result.save(out)
-    png = save_contour_match(out.with_name(out.name + ".png"), path.contour_points, mesh, path.vertices,
-                             path.contour_index, title=f"energy {result.energy:.4g}")
+    from corrlib.io import staged_output
+
+    with staged_output(out.parent) as stage:
+        staged = [*result.save(stage / out.name),
+                  save_contour_match(stage / (out.name + ".png"), path.contour_points, mesh, path.vertices,
+                                     path.contour_index, title=f"energy {result.energy:.4g}")]
     if not args.quiet:
-        for path in (npz, js, png):
-            print(f"wrote {path}")
+        for written in staged:
+            print(f"wrote {out.parent / Path(written).name}")
     return 0
 
 
@@ -429,6 +487,10 @@ def cmd_retrieve(args) -> int:
     from corrlib.progress import run
     from corrlib.retrieval import class_of, mean_average_precision, mesh_files, retrieve
 
+    if args.output:
+        from corrlib.io import check_output_file
+
+        check_output_file(args.output, "-o")
     contour = _query_contour(args.query)
     params = _contour3d_params(args)
     files = mesh_files(args.folder)
@@ -670,17 +732,54 @@ def build_parser() -> argparse.ArgumentParser:
     return parser
 
 
+class Terminated(BaseException):
+    """SIGTERM, raised like KeyboardInterrupt so that every half-written output is cleaned up."""
+
+
+def _terminate_like_interrupt():
+    """Make SIGTERM raise :class:`Terminated` (main thread only); returns the handler to restore, or None."""
+    import signal
+    import threading
+
+    def handler(signum, frame):
+        raise Terminated()
+
+    if threading.current_thread() is threading.main_thread():
+        return signal.signal(signal.SIGTERM, handler)
+    return None
+
+
 def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
+    previous = _terminate_like_interrupt()
     try:
+        if getattr(args, "scheduler", None) is not None:
+            from corrlib.parallel import check_scheduler_address
+
+            check_scheduler_address(args.scheduler)  # before any output exists
         return int(args.func(args) or 0)
     except CorrError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except OSError as exc:  # the environment: permissions, a full disk, a vanished file
+        where = f"{exc.filename}: " if exc.filename else ""
+        print(f"error: {where}{(exc.strerror or str(exc)).lower()}", file=sys.stderr)
+        return EXIT_BAD_INPUT
+    except MemoryError:
+        print("error: out of memory; try smaller inputs or fewer parallel jobs", file=sys.stderr)
+        return EXIT_BAD_INPUT
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
+    except Terminated:
+        print("terminated", file=sys.stderr)
+        return 143
+    finally:
+        if previous is not None:
+            import signal
+
+            signal.signal(signal.SIGTERM, previous)
 
 
 if __name__ == "__main__":

@@ -151,12 +151,25 @@ CONTOUR_SUFFIXES = frozenset(suffixes("contour", readable=True))
 # ----------------------------------------------------------------------------- atomic writes
 
 
+def _os_reason(exc: OSError) -> str:
+    return (exc.strerror or str(exc)).lower()
+
+
 @contextlib.contextmanager
 def atomic_write(path, mode: str = "w"):
-    """Context manager yielding a file object; the file appears at ``path`` only on success."""
+    """Context manager yielding a file object; the file appears at ``path`` only on success.
+
+    Raises
+    ------
+    InputError
+        Naming ``path`` when it cannot be written (permissions, a full disk, a file where a folder should be).
+    """
     path = Path(path)
-    path.parent.mkdir(parents=True, exist_ok=True)
-    fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    check_output_file(path)
+    try:
+        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
+    except OSError as exc:
+        raise InputError(f"{path}: cannot write the file ({_os_reason(exc)})") from None
     umask = os.umask(0)
     os.umask(umask)
     os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600 files; exports get the usual permissions
@@ -164,13 +177,65 @@ def atomic_write(path, mode: str = "w"):
         with os.fdopen(fd, mode) as fh:
             yield fh
         os.replace(tmp, path)
-    except BaseException:
+    except BaseException as exc:
         with contextlib.suppress(OSError):
             os.unlink(tmp)
+        if isinstance(exc, OSError):
+            raise InputError(f"{path}: cannot write the file ({_os_reason(exc)})") from None
         raise
 
 
-def ensure_output_folder(path) -> Path:
+def check_output_file(path, what: str = "output") -> Path:
+    """Check, before any work, that a file can be written at ``path`` (its folder is created).
+
+    Raises
+    ------
+    InputError
+        Naming ``path``: empty, a folder, under a file, or in a folder that cannot be written.
+    """
+    if str(path).strip() == "" or Path(path).name in ("", ".", ".."):
+        raise InputError(f"the {what} path {str(path)!r} does not name a file")
+    path = Path(path)
+    try:
+        is_folder = path.is_dir()
+    except OSError as exc:  # a folder on the way cannot be entered
+        raise InputError(f"{path}: cannot write {what} there ({_os_reason(exc)})") from None
+    if is_folder:
+        raise InputError(f"{path}: the {what} path is a folder, expected a file name")
+    ensure_output_folder(path.parent, what)
+    return path
+
+
+@contextlib.contextmanager
+def staged_output(folder):
+    """Write a set of files all-or-nothing into ``folder`` (a generator-based context manager).
+
+    Yields a hidden staging folder inside ``folder``; on success its files
+    move into ``folder`` (each move atomic), on any failure or interruption
+    it is removed, so no partial set of outputs is left behind.
+    """
+    folder = ensure_output_folder(folder)
+    try:
+        stage = Path(tempfile.mkdtemp(dir=folder, prefix=".partial-"))
+    except OSError as exc:
+        raise InputError(f"{folder}: cannot write output there ({_os_reason(exc)})") from None
+    import shutil
+
+    try:
+        yield stage
+        for entry in sorted(stage.iterdir()):
+            os.replace(entry, folder / entry.name)
+    except BaseException as exc:
+        shutil.rmtree(stage, ignore_errors=True)
+        if isinstance(exc, OSError):
+            raise InputError(f"{folder}: cannot write the outputs ({_os_reason(exc)})") from None
+        if isinstance(exc, CorrError) and str(stage) in str(exc):  # name the file where it was to go
+            raise type(exc)(str(exc).replace(str(stage), str(folder))) from None
+        raise
+    shutil.rmtree(stage, ignore_errors=True)
+
+
+def ensure_output_folder(path, what: str = "output") -> Path:
     """Create ``path`` (with parents) and check that files can be written in it, before any work.
 
     Raises
@@ -179,7 +244,7 @@ def ensure_output_folder(path) -> Path:
         Naming the folder: it is a file, lies under a file, or is not writable.
     """
     if str(path) == "":
-        raise InputError("the output folder is an empty path")
+        raise InputError(f"the {what} folder is an empty path")
     folder = Path(path)
     try:
         folder.mkdir(parents=True, exist_ok=True)
@@ -187,8 +252,14 @@ def ensure_output_folder(path) -> Path:
         os.close(fd)
         os.unlink(probe)
     except OSError as exc:
-        reason = "it is a file" if folder.is_file() else (exc.strerror or str(exc)).lower()
-        raise InputError(f"{folder}: cannot write output there ({reason})") from None
+        blocking = next((p for p in [folder, *folder.parents] if p.exists() and not p.is_dir()), None)
+        if blocking == folder:
+            reason = "it is a file"
+        elif blocking is not None:
+            reason = f"{blocking} is a file, not a folder"
+        else:
+            reason = _os_reason(exc)
+        raise InputError(f"{folder}: cannot write {what} there ({reason})") from None
     return folder
 
 
@@ -210,8 +281,7 @@ def _read_off(path: Path) -> tuple[np.ndarray, np.ndarray]:
     Each vertex and each face is on its own line; extra values on a line
     (normals, colours) are ignored.
     """
-    with open(path, "rb") as fh:
-        text = fh.read().decode("utf-8", errors="replace")
+    text = read_text(path, "mesh")
     lines = [ln.split("#", 1)[0].split() for ln in text.splitlines()]
     lines = [ln for ln in lines if ln]
     if not lines:
@@ -239,7 +309,7 @@ def _read_off(path: Path) -> tuple[np.ndarray, np.ndarray]:
     if all(len(ln) == 4 and ln[0] == "3" for ln in face_lines):  # the common all-triangle file
         try:
             return coords.reshape(n_v, 3), np.array([ln[1:] for ln in face_lines], dtype=np.int64).reshape(-1, 3)
-        except ValueError:
+        except (ValueError, OverflowError):
             pass  # the loop below names the bad face
     faces = []
     for index, ln in enumerate(face_lines):
@@ -248,8 +318,13 @@ def _read_off(path: Path) -> tuple[np.ndarray, np.ndarray]:
             poly = [int(v) for v in ln[1:1 + k]]
         except ValueError:
             raise FileFormatError(f"{path}: face {index} is not made of integers") from None
-        if k < 3 or len(poly) != k:
-            raise FileFormatError(f"{path}: face {index} has fewer than 3 vertices or is truncated")
+        if k < 3:
+            raise FileFormatError(f"{path}: face {index} has {k} vertices; a face needs at least 3")
+        if len(poly) != k:
+            raise FileFormatError(f"{path}: face {index} announces {k} vertices but lists {len(poly)}")
+        if max(abs(v) for v in poly) >= n_v:
+            raise FileFormatError(f"{path}: face {index} refers to vertex {max(poly, key=abs)}, but the file has "
+                                  f"{n_v} vertices (0 to {n_v - 1})")
         faces.extend((poly[0], poly[j], poly[j + 1]) for j in range(1, k - 1))
     return coords.reshape(n_v, 3), np.array(faces, dtype=np.int64).reshape(-1, 3)
 
@@ -416,7 +491,7 @@ def save_mesh(path, vertices, faces, colors=None) -> Path:
 
 
 def _points_file(path: Path) -> np.ndarray:
-    text = path.read_text(errors="replace")
+    text = read_text(path, "contour")
     rows = []
     for lineno, line in enumerate(text.splitlines(), 1):
         line = line.split("#", 1)[0].strip()
@@ -638,6 +713,18 @@ def silhouette_mask(image: np.ndarray, threshold: float | None = None, *, name: 
     return ~bright if border.mean() > 0.5 else bright
 
 
+#: largest silhouette image read (pixels): 6,000 x 6,000 holds far more outline detail than a match uses
+#: (200 points), and a larger image costs gigabytes to decode
+MAX_IMAGE_PIXELS = 36_000_000
+
+
+def check_image_size(path, width: int, height: int) -> None:
+    """Refuse an image of more than :data:`MAX_IMAGE_PIXELS` (a :class:`FileFormatError` naming it)."""
+    if width * height > MAX_IMAGE_PIXELS:
+        raise FileFormatError(f"{path}: the image has {width} x {height} pixels, more than the {MAX_IMAGE_PIXELS:,} "
+                              f"a silhouette may have; downsample it first")
+
+
 def load_contour(path, n_points: int | None = None, *, assume_closed: bool = False,
                  threshold: float | None = None, min_points: int = 10) -> Contour2D:
     """Load a closed 2D contour from a point file, an SVG or a silhouette image.
@@ -681,9 +768,13 @@ def load_contour(path, n_points: int | None = None, *, assume_closed: bool = Fal
 
         try:
             with Image.open(path) as im:
+                check_image_size(path, *im.size)
                 im.seek(0)
                 arr = np.asarray(im.convert("RGBA") if im.mode in {"P", "LA", "RGBA", "PA"} else im.convert("L"))
-        except (UnidentifiedImageError, OSError, ValueError) as exc:
+        except Image.DecompressionBombError:
+            raise FileFormatError(f"{path}: the image is too large to read (more than {MAX_IMAGE_PIXELS:,} "
+                                  f"pixels); downsample it first") from None
+        except (UnidentifiedImageError, OSError, ValueError, SyntaxError, EOFError) as exc:
             raise FileFormatError(f"{path}: cannot read image: {exc}") from exc
         mask = silhouette_mask(arr, threshold, name=name)
         contour = Contour2D(contour_from_mask(mask, name=name), name=name, min_points=min_points)
@@ -732,18 +823,89 @@ def load_shape(path) -> TriMesh | Contour2D:
 # ----------------------------------------------------------------------------- maps and ground truth
 
 
+def read_text(path, what: str = "input") -> str:
+    """The text of a file (undecodable bytes replaced), every failure a :class:`FileFormatError` naming it."""
+    path = _require_file(path)
+    try:
+        return path.read_bytes().decode("utf-8", errors="replace")
+    except OSError as exc:
+        raise FileFormatError(f"{path}: cannot read the {what} file ({(exc.strerror or str(exc)).lower()})") from None
+
+
+#: integer entries must stay exactly representable (float64) and within int64
+_LARGEST_INDEX = 2 ** 53
+
+
+def _integers(values: np.ndarray, path: Path, what: str, entry: str = "vertex indices") -> np.ndarray:
+    """``values`` as int64 if every one is a finite integer of at most 2^53 in magnitude."""
+    values = np.asarray(values)
+    if np.issubdtype(values.dtype, np.integer):
+        return values.astype(np.int64)
+    if not np.issubdtype(values.dtype, np.floating) and not np.issubdtype(values.dtype, np.bool_):
+        raise FileFormatError(f"{path}: the {what} must hold {entry}, found {values.dtype} values")
+    values = values.astype(np.float64)
+    bad = ~np.isfinite(values) | (values != np.round(values)) | (np.abs(values) > _LARGEST_INDEX)
+    if np.any(bad):
+        first = int(np.argmax(bad))
+        raise FileFormatError(f"{path}: the {what} must hold integer {entry}; entry {first} is "
+                              f"{float(values[first])!r}")
+    return values.astype(np.int64)
+
+
 def _index_file(path: Path, what: str) -> np.ndarray:
-    text = path.read_text(errors="replace").split()
+    text = " ".join(line.split("#", 1)[0] for line in read_text(path, what).splitlines()).split()  # '#' comments
     if not text:
         raise FileFormatError(f"{path}: the {what} file is empty")
     try:
         values = np.array([float(t) for t in text])
     except ValueError:
         bad = next(t for t in text if not _is_number(t))
-        raise FileFormatError(f"{path}: {what} file has a non-numeric entry {bad!r}") from None
-    if not np.all(np.isfinite(values)) or np.any(values != np.round(values)):
-        raise FileFormatError(f"{path}: {what} file must contain integer vertex indices")
-    return values.astype(np.int64)
+        raise FileFormatError(f"{path}: {what} file has a non-numeric entry {bad[:40]!r}") from None
+    return _integers(values, path, f"{what} file")
+
+
+def load_labels(path, n: int | None = None, what: str = "labels") -> np.ndarray:
+    """Part labels: one integer per line (0 = unlabelled).
+
+    Parameters
+    ----------
+    path : str or Path
+    n : int, optional
+        Expected count (contour points or mesh vertices); checked by the caller when several counts fit.
+    what : str
+        Named in the messages (e.g. ``"--mesh-labels"``).
+
+    Returns
+    -------
+    (r,) int
+    """
+    path = _require_file(path)
+    values = _index_file(path, what)
+    if n is not None and values.shape[0] != n:
+        raise FileFormatError(f"{path}: the {what} file has {values.shape[0]} labels, expected {n}")
+    return values
+
+
+def load_pairs(path, what: str = "landmarks") -> np.ndarray:
+    """Landmark pairs: two integer columns (source vertex, target vertex) per line, ``#`` comments allowed.
+
+    Returns
+    -------
+    (r, 2) int
+    """
+    rows = [line.split("#", 1)[0].split() for line in read_text(path, what).splitlines()]
+    rows = [row for row in rows if row]
+    if not rows:
+        raise FileFormatError(f"{path}: the {what} file is empty")
+    if any(len(row) != 2 for row in rows):
+        line = next(i for i, row in enumerate(rows) if len(row) != 2)
+        raise FileFormatError(f"{path}: {what} must be two integer columns (source, target); data line {line + 1} "
+                              f"has {len(rows[line])} values")
+    try:
+        values = np.array([[float(v) for v in row] for row in rows])
+    except ValueError:
+        raise FileFormatError(f"{path}: {what} must be two integer columns (source, target)") from None
+    return _integers(values, Path(path), f"{what} file").reshape(-1, 2)
 
 
 def _is_number(t: str) -> bool:
@@ -783,12 +945,17 @@ def load_map(path, n_target: int | None = None, n_source: int | None = None) -> 
     if path.suffix.lower() == ".npz":
         try:
             with np.load(path, allow_pickle=False) as data:
-                key = "map_xy" if "map_xy" in data.files else None
-                if key is None:
+                if "map_xy" not in data.files:
                     raise FileFormatError(f"{path}: no 'map_xy' array in the .npz file")
-                mp = np.asarray(data[key]).astype(np.int64)
-        except (OSError, ValueError) as exc:
-            raise FileFormatError(f"{path}: cannot read .npz: {exc}") from exc
+                raw = np.asarray(data["map_xy"])
+        except FileFormatError:
+            raise
+        except Exception as exc:  # numpy and zipfile raise many types on damaged archives
+            raise FileFormatError(f"{path}: cannot read the .npz file ({type(exc).__name__}: {exc})") from None
+        if raw.ndim != 1 or raw.size == 0:
+            raise FileFormatError(f"{path}: 'map_xy' must be a non-empty 1-D array of target indices, "
+                                  f"found shape {raw.shape}")
+        mp = _integers(raw, path, "'map_xy' array", "target indices")
     else:
         mp = _index_file(path, "map")
     if mp.min() < 0:

@@ -49,6 +49,8 @@ class job_executor:
         if jobs is not None and (isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 0):
             raise ParameterError(f"jobs must be a whole number of worker processes (0 or none: all cores), "
                                  f"got {jobs!r}")
+        if scheduler is not None:
+            check_scheduler_address(scheduler)
         self.jobs, self.scheduler = jobs, scheduler
         self.client = None
 
@@ -72,3 +74,15 @@ class job_executor:
         if self.client is not None:
             self.client.close()
         return False
+
+
+def check_scheduler_address(address) -> str:
+    """A Dask scheduler address ``[protocol://]host:port``, checked before any work (ParameterError otherwise)."""
+    import re
+
+    text = str(address).strip()
+    match = re.fullmatch(r"(?:(?:tcp|tls|ws|wss|ucx)://)?(\[[0-9A-Fa-f:.]+\]|[A-Za-z0-9._-]+):(\d{1,5})/?", text)
+    if match is None or not 0 < int(match.group(2)) < 65536:
+        raise ParameterError(f"--scheduler {address!r} is not a Dask scheduler address; expected "
+                             f"[tcp://]host:port, e.g. tcp://127.0.0.1:8786")
+    return text

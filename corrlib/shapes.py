@@ -167,6 +167,25 @@ def inspect_mesh(vertices, faces) -> list[Finding]:
     return findings
 
 
+#: coordinates are usable while squared lengths stay finite and non-zero in float64 (about 1e±308)
+COORDINATE_LIMITS = (1e-150, 1e150)
+
+
+def _coordinate_scale_problem(points: np.ndarray) -> str:
+    """A message if the coordinates are too large or their spread too small for squared lengths, else ''."""
+    if points.size == 0:
+        return ""
+    largest = float(np.abs(points).max())
+    spread = float(np.abs(points - points.mean(axis=0)).max()) if largest < COORDINATE_LIMITS[1] else largest
+    if largest > COORDINATE_LIMITS[1]:
+        return (f"coordinates up to {largest:.3g} overflow squared lengths (at most {COORDINATE_LIMITS[1]:.0e}); "
+                f"rescale the input")
+    if 0 < spread < COORDINATE_LIMITS[0]:
+        return (f"the coordinates span only {spread:.3g}, too small for squared lengths (at least "
+                f"{COORDINATE_LIMITS[0]:.0e}); rescale the input")
+    return ""
+
+
 def _value_findings(v: np.ndarray, f: np.ndarray) -> list[Finding]:
     """Non-finite coordinates, then face indices out of range (each stops the inspection)."""
     n = v.shape[0]
@@ -174,6 +193,9 @@ def _value_findings(v: np.ndarray, f: np.ndarray) -> list[Finding]:
     if bad_rows.size:
         return [Finding("error", "non-finite", f"{bad_rows.size} vertices have NaN or infinite coordinates "
                         f"(e.g. vertex {_examples(bad_rows)})")]
+    scale = _coordinate_scale_problem(v)
+    if scale:
+        return [Finding("error", "coordinate-scale", scale)]
     out_of_range = np.flatnonzero(np.any((f < 0) | (f >= n), axis=1))
     if out_of_range.size:
         return [Finding("error", "index-range", f"{out_of_range.size} faces reference vertex indices outside "
@@ -567,6 +589,9 @@ def inspect_contour(points, *, min_points: int = 10) -> list[Finding]:
     if bad.size:
         return [Finding("error", "non-finite", f"{bad.size} contour points are NaN or infinite "
                         f"(e.g. point {_examples(bad)})")]
+    scale = _coordinate_scale_problem(p)
+    if scale:
+        return [Finding("error", "coordinate-scale", scale)]
     q = _clean_polygon(p)
     if q.shape[0] < min_points:
         return [Finding("error", "too-short", f"the contour has {q.shape[0]} distinct points; "
@@ -640,7 +665,7 @@ class Contour2D:
         """
         p = np.asarray(points, dtype=np.float64)
         if not assume_closed and p.ndim == 2 and p.shape[1] == 2 and p.shape[0] >= 3 \
-                and np.all(np.isfinite(p)):
+                and np.all(np.isfinite(p)) and not _coordinate_scale_problem(p):
             steps = np.linalg.norm(np.diff(p, axis=0), axis=1)
             steps = steps[steps > 0]
             gap = float(np.linalg.norm(p[-1] - p[0]))

@@ -57,7 +57,7 @@ def test_stl_loads(tmp_path):
     ("OFF\n3 1 0\n0 0 0\n1 0 0\n", "announces 3 vertices and 1 faces but the file has only 2"),
     ("this is not a mesh\n", "not an OFF file"),
     ("OFF\n4 0 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n", "no faces"),
-    ("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1\n", "face 0 has fewer than 3 vertices or is truncated"),
+    ("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1\n", "face 0 announces 3 vertices but lists 2"),
     ("OFF\n3 1 0\n0 0 0\n1 x 0\n0 1 0\n3 0 1 2\n", "vertex line"),
     ("OFF\n3\n", "vertex and face counts"),
 ])

@@ -53,7 +53,7 @@ CASES = {
     "header-face-count-lies": ("count.off", "OFF\n3 999999999 0\n" + TRIANGLE + "3 0 1 2\n", False,
                                "announces 3 vertices and 999999999 faces"),
     "face-line-lies": ("face.off", "OFF\n3 1 0\n" + TRIANGLE + "999999999 0 1 2\n", False,
-                       "face 0 has fewer than 3 vertices or is truncated"),
+                       "face 0 announces 999999999 vertices but lists 3"),
     "more-vertices-than-lines": ("short.off", "OFF\n5 4 0\n" + TRIANGLE + "0 0 1\n" + TETRA_FACES, False,
                                  "announces 5 vertices and 4 faces"),
     "face-line-read-as-vertex": ("shifted.off", "OFF\n5 3 0\n" + TRIANGLE + "0 0 1\n" + TETRA_FACES, False,

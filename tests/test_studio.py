@@ -200,6 +200,19 @@ def test_bad_file_shows_a_dialog(qtbot, tmp_path, monkeypatch):
     assert not load_file(qtbot, win, bad, "source")
     assert shown and "broken.off" in shown[0]
     assert win.source is None  # nothing half-loaded, the window keeps running
+    # the hostile files of the command line's tests (test_hostile.py) through the studio's loaders
+    (tmp_path / "garbage.off").write_bytes(np.random.default_rng(0).bytes(300))
+    (tmp_path / "huge.off").write_text("OFF\n4 4 0\n0 0 0\n1e308 0 0\n0 1e308 0\n0 0 1e308\n3 0 2 1\n3 0 1 3\n"
+                                       "3 0 3 2\n3 1 2 3\n")
+    (tmp_path / "noise.png").write_bytes(b"\x89PNG\r\n\x1a\n" + bytes(40))
+    circle = np.column_stack([np.cos(np.linspace(0, 6.2, 40)), np.sin(np.linspace(0, 6.2, 40))])
+    np.savetxt(tmp_path / "tiny.txt", circle * 1e-300)
+    (tmp_path / "empty.svg").write_text("<svg>")
+    for name in ("garbage.off", "huge.off", "noise.png", "tiny.txt", "empty.svg"):
+        shown.clear()
+        assert not load_file(qtbot, win, tmp_path / name, "source")
+        assert shown and name in shown[0], (name, shown)
+        assert win.source is None
     assert load_file(qtbot, win, TOSCA / "wolf0.off", "source")
     win.close()
 

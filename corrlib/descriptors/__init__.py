@@ -36,9 +36,9 @@ def mesh_descriptors(mesh, kind: str = "wks", *, spectrum=None, n_scales: int = 
     if kind not in DESCRIPTOR_KINDS:
         raise ParameterError(f"unknown descriptor {kind!r} (use one of {', '.join(DESCRIPTOR_KINDS)})")
     if kind in {"wks", "hks"} and spectrum is None:
-        from corrlib.geometry.spectrum import mesh_spectrum
+        from corrlib.geometry.spectrum import available_eigenpairs, mesh_spectrum
 
-        spectrum = mesh_spectrum(mesh, min(100, mesh.n_vertices - 1))
+        spectrum = mesh_spectrum(mesh, available_eigenpairs(mesh, 100, f"{kind.upper()} descriptors"))
     if kind == "shot":
         key = cache.make_key("descriptor-v1", mesh.content_hash, kind)
     else:

@@ -87,9 +87,9 @@ def curve_factor(points, k: int, mass: str = "consistent") -> Factor:
 
 def mesh_factor(mesh, k: int) -> Factor:
     """Factor of a triangle mesh (cotangent Laplacian, lumped mass; spectrum from the disk cache)."""
-    from corrlib.geometry.spectrum import mesh_spectrum
+    from corrlib.geometry.spectrum import available_eigenpairs, mesh_spectrum
 
-    spec = mesh_spectrum(mesh, min(int(k), mesh.n_vertices - 1))
+    spec = mesh_spectrum(mesh, available_eigenpairs(mesh, k, "the product manifold"))
     return Factor(spec.stiffness, spec.mass, spec.evals, spec.evecs, float(mesh.area))
 
 

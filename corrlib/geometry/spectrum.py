@@ -290,6 +290,27 @@ def eigenpairs(stiffness: sp.spmatrix, mass: sp.spmatrix, k: int, *, method: str
     return evals, evecs
 
 
+#: eigenpairs every spectral descriptor needs: the constant one and three more
+MIN_EIGENPAIRS = 4
+
+
+def available_eigenpairs(mesh, k: int, what: str = "spectral descriptors") -> int:
+    """``min(k, n - 1)``, the eigenpairs a mesh of ``n`` vertices can give, at least :data:`MIN_EIGENPAIRS`.
+
+    Raises
+    ------
+    InputError
+        Naming the mesh when it is too small for ``what``.
+    """
+    from corrlib.errors import InputError
+
+    n = int(mesh.n_vertices)
+    if n - 1 < MIN_EIGENPAIRS:
+        raise InputError(f"{mesh.name}: a mesh of {n} vertices is too small for {what} (at least "
+                         f"{MIN_EIGENPAIRS + 1} vertices are needed)")
+    return min(int(k), n - 1)
+
+
 def mesh_spectrum(mesh, k: int, *, mass: str = "lumped", method: str = "auto", use_cache: bool = True) -> Spectrum:
     """Laplacian eigenpairs of a :class:`~corrlib.shapes.TriMesh`, cached on disk by mesh content.
 

@@ -74,11 +74,15 @@ def validate_params(params) -> None:
             if not isinstance(value, (bool, np.bool_)):
                 raise ParameterError(f"{f.name} must be true or false, got {value!r}")
             continue
+        if isinstance(f.default, str) and not isinstance(value, str):
+            raise ParameterError(f"{f.name} must be text, got {value!r}")
         if isinstance(f.default, (int, float)) and f.default is not None:
             if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
                 raise ParameterError(f"{f.name} must be a number, got {value!r}")
             if not math.isfinite(float(value)):
                 raise ParameterError(f"{f.name} must be finite, got {value!r}")
+            if isinstance(f.default, int) and not isinstance(value, (int, np.integer)):
+                raise ParameterError(f"{f.name} must be an integer, got {value!r}")
             if meta.get("integer") and float(value) != int(value):
                 raise ParameterError(f"{f.name} must be an integer, got {value!r}")
             low, high = meta.get("low"), meta.get("high")
@@ -151,8 +155,11 @@ class InitialMatch:
         ly = np.asarray(self.landmarks_y, dtype=np.int64)
         if lx.size == 0 or lx.shape != ly.shape:
             raise InputError(f"landmarks need equally many source and target indices, got {lx.size} and {ly.size}")
-        if lx.min() < 0 or lx.max() >= n_x or ly.min() < 0 or ly.max() >= n_y:
-            raise InputError("landmark index out of range")
+        for side, indices, n in (("source", lx, n_x), ("target", ly, n_y)):
+            bad = np.flatnonzero((indices < 0) | (indices >= n))
+            if bad.size:
+                raise InputError(f"landmark {bad[0]}: {side} vertex {indices[bad[0]]} is out of range for a "
+                                 f"{n}-vertex {side} (0 to {n - 1})")
         return lx, ly
 
 

@@ -21,7 +21,7 @@ import numpy as np
 from corrlib.descriptors import DESCRIPTOR_KINDS, mesh_descriptors
 from corrlib.descriptors.orientation import orientation_operators
 from corrlib.geometry.fmaps import functional_map, multiplication_operators, resolvent_mask, zoomout
-from corrlib.geometry.spectrum import mesh_spectrum
+from corrlib.geometry.spectrum import available_eigenpairs, mesh_spectrum
 from corrlib.methods.base import MatchResult, param
 from corrlib.methods.registry import MethodSpec, register
 from corrlib.neighbours import nearest_rows
@@ -51,8 +51,8 @@ class DescriptorNNParams:
 def _spectra_and_descriptors(source, target, n_eigs: int, descriptor: str, n_scales: int, watch):
     """Laplacian spectra (``n_eigs`` pairs, capped by the vertex counts) and descriptors of both shapes."""
     with watch("eigen"):
-        spec_x = mesh_spectrum(source, min(n_eigs, source.n_vertices - 1))
-        spec_y = mesh_spectrum(target, min(n_eigs, target.n_vertices - 1))
+        spec_x = mesh_spectrum(source, available_eigenpairs(source, n_eigs))
+        spec_y = mesh_spectrum(target, available_eigenpairs(target, n_eigs))
     with watch("descriptors"):
         desc_x = mesh_descriptors(source, descriptor, spectrum=spec_x, n_scales=n_scales)
         desc_y = mesh_descriptors(target, descriptor, spectrum=spec_y, n_scales=n_scales)
@@ -134,7 +134,8 @@ def descriptor_functional_map(source, target, spec_x, spec_y, desc_x, desc_y, k:
 
 def solve_fmap_zoomout(source, target, params: FmapZoomOutParams, token):
     watch = Stopwatch()
-    k_final = min(params.k_final, source.n_vertices - 1, target.n_vertices - 1)
+    k_final = min(available_eigenpairs(source, params.k_final, "functional maps"),
+                  available_eigenpairs(target, params.k_final, "functional maps"))
     k_init = min(params.k_init, k_final)
     yield Progress("eigenpairs and descriptors", 0.0)
     spec_x, spec_y, desc_x, desc_y = _spectra_and_descriptors(source, target, max(k_final, 100),

@@ -185,7 +185,12 @@ class KernelMatchingParams:
     def __post_init__(self):
         if isinstance(self.times, str) and isinstance(self.tau_min, (int, float)) and \
                 isinstance(self.tau_max, (int, float)):
-            diffusion_times(self)  # raises ParameterError on a bad schedule, before any run
+            try:
+                diffusion_times(self)  # raises ParameterError on a bad schedule, before any run
+            except (TypeError, ValueError, OverflowError) as exc:
+                if isinstance(exc, ParameterError):
+                    raise
+                # a value of the wrong type or range: validate_params names the field
 
 
 def diffusion_times(params: KernelMatchingParams) -> np.ndarray:

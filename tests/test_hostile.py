@@ -1,0 +1,200 @@
+"""Careless and hostile input to `corr`: a named error and exit status 2, never a traceback, a hang, a
+silently wrong answer or a half-written result set (issue 20)."""
+
+import os
+import resource
+import signal
+import struct
+import subprocess
+import sys
+import time
+import zlib
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from _data import TOSCA
+from corrlib.assignment import linear_assignment
+from corrlib.cli import main
+
+WOLF0, WOLF1 = str(TOSCA / "wolf0.off"), str(TOSCA / "wolf1.off")
+FAST = ["--method", "descriptor-nn"]
+
+
+def corr(*args):
+    """The `corr` command in a fresh interpreter: (exit status, stderr)."""
+    done = subprocess.run([sys.executable, "-m", "corrlib.cli", *map(str, args)], capture_output=True, text=True,
+                          timeout=300, env={**os.environ, "MPLBACKEND": "Agg"})
+    return done.returncode, done.stderr
+
+
+def error_of(capsys, argv) -> str:
+    """Run ``corr`` in-process; it must exit with status 2 and one ``error:`` line, which is returned."""
+    assert main(list(map(str, argv))) == 2
+    err = capsys.readouterr().err.strip().splitlines()
+    assert err and err[-1].startswith("error: ") and "Traceback" not in "\n".join(err)
+    return err[-1]
+
+
+def files_in(folder: Path) -> list[str]:
+    return sorted(p.name for p in folder.iterdir()) if folder.exists() else []
+
+
+# ----------------------------------------------------------------------------- output locations
+
+
+def test_output_locations_are_checked_before_any_work(tmp_path, capsys):
+    blocker = tmp_path / "afile"
+    blocker.write_text("x")
+    for argv in (["match", WOLF0, WOLF1, *FAST, "-o", blocker / "res"],
+                 ["refine", WOLF0, WOLF1, "--init", tmp_path / "missing.txt", "-o", blocker / "res"],
+                 ["morph", WOLF0, WOLF1, *FAST, "-o", blocker / "m"],
+                 ["eval", tmp_path / "missing.txt", "--gt-source", TOSCA / "wolf0.vts", "--gt-target",
+                  TOSCA / "wolf1.vts", "--target", WOLF1, "--plot", blocker / "c.png"]):
+        start = time.perf_counter()
+        message = error_of(capsys, argv)
+        assert "afile" in message and "is a file" in message, message
+        assert time.perf_counter() - start < 5  # nothing was computed first
+    assert "does not name a file" in error_of(capsys, ["match", WOLF0, WOLF1, *FAST, "-o", ""])
+    assert "is a folder" in error_of(capsys, ["match", WOLF0, WOLF1, *FAST, "-o", tmp_path])
+    assert "Dask scheduler address" in error_of(capsys, ["bench", tmp_path, "-o", tmp_path / "b", "--scheduler",
+                                                        "not a url"])
+    assert not (tmp_path / "b").exists()
+
+
+@pytest.mark.skipif(os.geteuid() != 0, reason="needs root to become another user (setpriv)")
+def test_read_only_folder_for_another_user():
+    """As root, a folder is never read-only; as the unprivileged user `nobody` it is."""
+    import shutil
+    import tempfile
+
+    base = Path(tempfile.mkdtemp())  # pytest's own folders are private to root
+    base.chmod(0o755)
+    read_only = base / "ro"
+    read_only.mkdir(mode=0o555)
+    read_only.chmod(0o555)
+    home = base / "home"  # numba may not write beside an installed package nor in root's home
+    home.mkdir()
+    home.chmod(0o777)
+    done = subprocess.run(["setpriv", "--reuid=65534", "--regid=65534", "--clear-groups", sys.executable, "-m",
+                           "corrlib.cli", "match", WOLF0, WOLF1, *FAST, "-o", str(read_only / "res")],
+                          capture_output=True, text=True, timeout=300, env={**os.environ, "HOME": str(home)})
+    assert done.returncode == 2, done.stderr
+    assert done.stderr.strip().splitlines()[-1] == f"error: {read_only}: cannot write -o there (permission denied)"
+    assert files_in(read_only) == []
+    shutil.rmtree(base, ignore_errors=True)
+
+
+def _limit_file_size(kilobytes):
+    return lambda: resource.setrlimit(resource.RLIMIT_FSIZE, (kilobytes * 1024, kilobytes * 1024))
+
+
+@pytest.mark.parametrize("kilobytes", [20, 75])
+def test_full_disk_leaves_no_partial_result_set(tmp_path, kilobytes):
+    """``ulimit -f``: the first file (20 kB) or the picture after the maps (75 kB) cannot be written."""
+    out = tmp_path / "out"
+    done = subprocess.run([sys.executable, "-m", "corrlib.cli", "match", WOLF0, WOLF1, *FAST, "-o", out / "res"],
+                          capture_output=True, text=True, timeout=300, preexec_fn=_limit_file_size(kilobytes),
+                          env={**os.environ, "MPLBACKEND": "Agg"})
+    assert done.returncode == 2, done.stderr
+    last = done.stderr.strip().splitlines()[-1]
+    assert last.startswith(f"error: {out}/res") and "file too large" in last and ".partial" not in last, last
+    assert [p.name for p in out.iterdir()] == []  # not even hidden temporary files
+
+
+@pytest.mark.parametrize("sig, status", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+def test_interrupted_morph_leaves_nothing(tmp_path, sig, status):
+    """Interrupted while writing 2,000 frames: the staging folder goes, nothing is half-written."""
+    out = tmp_path / "m"
+    proc = subprocess.Popen([sys.executable, "-m", "corrlib.cli", "morph", WOLF0, WOLF1, *FAST, "--frames", "2000",
+                             "-o", out], stderr=subprocess.PIPE, text=True)
+    deadline = time.time() + 120
+    while not any(p.name.startswith(".partial-") for p in (out.iterdir() if out.exists() else [])):
+        assert proc.poll() is None and time.time() < deadline, "the frames were never being written"
+        time.sleep(0.05)
+    time.sleep(0.5)
+    proc.send_signal(sig)
+    assert proc.wait(timeout=60) == status
+    assert "Traceback" not in proc.stderr.read()
+    assert [p.name for p in out.iterdir()] == []
+
+
+# ----------------------------------------------------------------------------- bad files
+
+
+def _png_header_only(path: Path, width: int, height: int) -> None:
+    """A PNG that announces ``width x height`` pixels (greyscale) and holds one compressed row."""
+    def chunk(kind, data):
+        return struct.pack(">I", len(data)) + kind + data + struct.pack(">I", zlib.crc32(kind + data) & 0xFFFFFFFF)
+
+    header = struct.pack(">IIBBBBB", width, height, 8, 0, 0, 0, 0)
+    path.write_bytes(b"\x89PNG\r\n\x1a\n" + chunk(b"IHDR", header) + chunk(b"IDAT", zlib.compress(b"\0" * 64))
+                     + chunk(b"IEND", b""))
+
+
+@pytest.mark.filterwarnings("error::RuntimeWarning")  # no raw overflow warnings before the message
+def test_bad_files_give_named_errors(tmp_path, capsys):
+    t = tmp_path
+    (t / "labels.txt").write_text("a b c\n")
+    (t / "random.bin").write_bytes(np.random.default_rng(0).bytes(400))
+    (t / "folder").mkdir()
+    np.savez(t / "frac.npz", map_xy=np.arange(4344) + 0.7)
+    np.savez(t / "wide.npz", map_xy=np.zeros((4344, 2), dtype=int))
+    np.savez(t / "nan.npz", map_xy=np.full(4344, np.nan))
+    whole = (t / "frac.npz").read_bytes()
+    (t / "cut.npz").write_bytes(whole[: len(whole) // 2])
+    np.savetxt(t / "short.txt", np.arange(100), fmt="%d")
+    (t / "landmarks.txt").write_text("0 0\n5 5\n99999 3\n")
+    lines = (TOSCA / "wolf0.off").read_text().splitlines()
+    lines[-1] = "3 0 1 99999999999999999999"
+    (t / "bigindex.off").write_text("\n".join(lines) + "\n")
+    (t / "triangle.off").write_text("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 2\n")
+    (t / "huge.off").write_text("OFF\n4 4 0\n0 0 0\n1e308 0 0\n0 1e308 0\n0 0 1e308\n3 0 2 1\n3 0 1 3\n3 0 3 2\n"
+                                "3 1 2 3\n")
+    (t / "liar.off").write_text("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n999999999 0 1 2\n")
+    circle = np.column_stack([np.cos(np.linspace(0, 6.2, 40)), np.sin(np.linspace(0, 6.2, 40))])
+    np.savetxt(t / "big.txt", circle * 1e300)
+    np.savetxt(t / "tiny.txt", circle * 1e-300)
+    np.savetxt(t / "good.txt", circle)
+    _png_header_only(t / "bomb.png", 20000, 20000)
+    gt = ["--gt-source", TOSCA / "wolf0.vts", "--gt-target", TOSCA / "wolf1.vts", "--target", WOLF1]
+    out = ["-o", t / "out" / "r"]
+    cases = {
+        ("match-contour", t / "good.txt", WOLF0, "--mesh-labels", t / "labels.txt", *out):
+            "non-numeric entry 'a'",
+        ("match-contour", t / "good.txt", WOLF0, "--query-labels", t / "nowhere.txt", *out):
+            "nowhere.txt: file not found",
+        ("refine", WOLF0, WOLF1, "--init", t / "random.bin", *out): "random.bin",
+        ("refine", WOLF0, WOLF1, "--init", t / "folder", *out): "folder: not a file",
+        ("refine", WOLF0, WOLF1, "--init", t / "landmarks.txt", *out):
+            "landmarks.txt: landmark 2: source vertex 99999 is out of range for a 4344-vertex source",
+        ("eval", t / "frac.npz", *gt): "must hold integer target indices; entry 0 is 0.7",
+        ("eval", t / "wide.npz", *gt): "found shape (4344, 2)",
+        ("eval", t / "nan.npz", *gt): "entry 0 is nan",
+        ("eval", t / "cut.npz", *gt): "cut.npz: cannot read the .npz file",
+        ("eval", t / "short.txt", *gt): "short.txt: the map has 100 entries, but the ground truth",
+        ("match", t / "bigindex.off", WOLF1, *FAST, *out): "refers to vertex 99999999999999999999",
+        ("match", t / "triangle.off", WOLF1, *FAST, *out): "triangle.off: a mesh of 3 vertices is too small",
+        ("match", t / "huge.off", WOLF1, *FAST, *out): "huge.off: coordinates up to 1e+308 overflow",
+        ("info", t / "liar.off"): "face 0 announces 999999999 vertices but lists 3",
+        ("match-contour", t / "big.txt", WOLF0, *out): "big.txt: coordinates up to",
+        ("match-contour", t / "tiny.txt", WOLF0, *out): "tiny.txt: the coordinates span only",
+        ("match-contour", t / "bomb.png", WOLF0, *out): "downsample it first",
+        ("morph", WOLF0, WOLF1, *FAST, "--frames", 10 ** 8, "-o", t / "m"): "--frames must be between 2 and 2000",
+    }
+    for argv, expected in cases.items():
+        message = error_of(capsys, argv)
+        assert expected in message, (argv, message)
+    assert files_in(t / "out") == []
+
+
+def test_a_hugely_negative_slack_is_no_slack():
+    """A slack far below every score must not blow up the auction's ε: every row matched optimally."""
+    from scipy.optimize import linear_sum_assignment
+
+    score = np.random.default_rng(1).random((120, 120))
+    optimum = score[np.arange(120), linear_sum_assignment(-score)[1]].sum()
+    for slack in (-1.0, -1e10, -1e300):
+        rows = linear_assignment(score, slack=slack)
+        assert np.all(rows >= 0) and score[np.arange(120), rows].sum() == pytest.approx(optimum, rel=1e-12)

@@ -69,7 +69,14 @@ class job_executor:
         self.pool = self.client.get_executor(pure=False)
         return self.pool
 
-    def __exit__(self, *exc):
+    def __exit__(self, exc_type, exc, tb):
+        interrupted = exc_type is not None and not issubclass(exc_type, Exception)  # Ctrl-C, SIGTERM, exit
+        if interrupted and self.client is None:
+            # stop the local workers now instead of waiting for their jobs (else they outlive the command)
+            workers = list((getattr(self.pool, "_processes", None) or {}).values())
+            self.pool.shutdown(wait=False, cancel_futures=True)
+            for worker in workers:
+                worker.terminate()
         self.pool.shutdown(wait=True)
         if self.client is not None:
             self.client.close()

@@ -198,3 +198,22 @@ def test_a_hugely_negative_slack_is_no_slack():
     for slack in (-1.0, -1e10, -1e300):
         rows = linear_assignment(score, slack=slack)
         assert np.all(rows >= 0) and score[np.arange(120), rows].sum() == pytest.approx(optimum, rel=1e-12)
+
+
+def test_interrupting_a_parallel_run_stops_its_workers():
+    """Ctrl-C or SIGTERM (raised as an exception in the command) must not leave pool workers running their
+    jobs after the command has ended."""
+    from corrlib.parallel import job_executor
+
+    with pytest.raises(KeyboardInterrupt):
+        with job_executor(2, None) as pool:
+            futures = [pool.submit(time.sleep, 120) for _ in range(2)]
+            deadline = time.time() + 60
+            while not all(f.running() for f in futures):
+                assert time.time() < deadline
+                time.sleep(0.05)
+            workers = list(pool._processes.values())
+            raise KeyboardInterrupt
+    for worker in workers:
+        worker.join(timeout=10)
+        assert not worker.is_alive()

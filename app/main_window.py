@@ -10,7 +10,7 @@ from pathlib import Path
 
 import numpy as np
 from PySide6.QtCore import QSettings, Qt, QTimer, Signal
-from PySide6.QtGui import QAction, QKeySequence
+from PySide6.QtGui import QAction, QGuiApplication, QKeySequence
 from PySide6.QtWidgets import (
     QComboBox,
     QDockWidget,
@@ -21,6 +21,8 @@ from PySide6.QtWidgets import (
     QPlainTextEdit,
     QProgressBar,
     QPushButton,
+    QScrollArea,
+    QSizePolicy,
     QStackedWidget,
     QTabWidget,
     QVBoxLayout,
@@ -46,6 +48,18 @@ MESH_FILTER = dialog_filter("mesh", all_files=False)  # file-dialog filters: fro
 CONTOUR_FILTER = dialog_filter("contour", all_files=False)
 
 DEFAULT_WINDOW_SIZE = (1500, 950)
+
+
+def _scrollable(widget: QWidget) -> QScrollArea:
+    """``widget`` in a frameless scroll area: a dock may then be smaller than its content (small screens)."""
+    area = QScrollArea()
+    area.setWidget(widget)
+    area.setWidgetResizable(True)
+    area.setFrameShape(QScrollArea.NoFrame)
+    # vertical scrolling only: the dock keeps the width its content needs
+    area.setHorizontalScrollBarPolicy(Qt.ScrollBarAlwaysOff)
+    area.setMinimumWidth(widget.minimumSizeHint().width() + area.verticalScrollBar().sizeHint().width())
+    return area
 PROGRESS_STEPS = 1000  # resolution of the job panel's progress bar
 WARM_UP_DELAY_MS = 300  # start loading the compiled kernels this long after the window opened
 STALL_PROBE_MS = 20  # the job panel's timer period: a longer gap between ticks is a GUI stall
@@ -185,9 +199,23 @@ class MainWindow(QMainWindow):
             self.restoreGeometry(geometry)
         if state is not None:
             self.restoreState(state)
+        self._fit_to_screen()
         self.refresh_methods()
         # load the compiled kernels while the window is idle, not during the first solve
         QTimer.singleShot(WARM_UP_DELAY_MS, self._warm_up)
+
+    def _fit_to_screen(self) -> None:
+        """Shrink the window (default or restored size) to the screen's available area, and keep it on it."""
+        screen = self.screen() or QGuiApplication.primaryScreen()
+        if screen is None:
+            return
+        area = screen.availableGeometry()
+        width, height = min(self.width(), area.width()), min(self.height(), area.height())
+        if (width, height) != (self.width(), self.height()):
+            self.resize(width, height)
+        x = min(max(self.x(), area.x()), area.x() + area.width() - width)
+        y = min(max(self.y(), area.y()), area.y() + area.height() - height)
+        self.move(x, y)
 
     def _warm_up(self) -> None:
         import threading
@@ -243,6 +271,7 @@ class MainWindow(QMainWindow):
         self.run_button.clicked.connect(self.run_method)
         for w in (self.method_box, self.method_desc, self.forms, self.run_button):
             mlay.addWidget(w)
+        mlay.addStretch(1)
         self.job_panel = JobPanel()
         self.job_panel.cancel_requested.connect(self.cancel_jobs)
         for title, widget, area in (("Shapes", shapes, Qt.LeftDockWidgetArea),
@@ -251,7 +280,7 @@ class MainWindow(QMainWindow):
                                     ("Job", self.job_panel, Qt.RightDockWidgetArea)):
             dock = QDockWidget(title, self)
             dock.setObjectName(f"dock-{title}")
-            dock.setWidget(widget)
+            dock.setWidget(_scrollable(widget))
             self.addDockWidget(area, dock)
 
     def _build_menus(self) -> None:
@@ -499,7 +528,12 @@ class MainWindow(QMainWindow):
 
         spec = get_method(name)
         self.method_desc.setText(spec.description)
+        # the stack takes the height of the shown form only, so that Run follows it (not the longest form)
+        for form in self._forms.values():
+            policy = QSizePolicy.Preferred if form is self._forms[name] else QSizePolicy.Ignored
+            form.setSizePolicy(policy, policy)
         self.forms.setCurrentWidget(self._forms[name])
+        self.forms.adjustSize()
 
     def form_of(self, method: str) -> ParamForm | None:
         """The parameter form of the registered method ``method`` (None for an unknown name)."""

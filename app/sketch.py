@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from PySide6.QtCore import QPointF, Qt, Signal
 from PySide6.QtGui import QColor, QPainter, QPainterPath, QPen
-from PySide6.QtWidgets import QHBoxLayout, QLabel, QPushButton, QSpinBox, QVBoxLayout, QWidget
+from PySide6.QtWidgets import QGridLayout, QHBoxLayout, QLabel, QPushButton, QSpinBox, QVBoxLayout, QWidget
 
 from corrlib.errors import CorrError
 from corrlib.shapes import Contour2D
@@ -106,12 +106,12 @@ class SketchPanel(QWidget):
         self.n_points.setRange(*SKETCH_POINTS_RANGE)
         self.n_points.setValue(DEFAULT_SKETCH_POINTS)
         self.n_points.setToolTip("The sketch is resampled by arc length to this many points.")
-        buttons = QHBoxLayout()
-        for text, slot in (("Undo", self.area.undo), ("Clear", self.area.clear), ("Smooth", self.smooth),
-                           ("Use", self.emit_contour)):
+        buttons = QGridLayout()  # two by two: the dock stays narrow on small screens
+        for index, (text, slot) in enumerate((("Undo", self.area.undo), ("Clear", self.area.clear),
+                                              ("Smooth", self.smooth), ("Use", self.emit_contour))):
             b = QPushButton(text)
             b.clicked.connect(slot)
-            buttons.addWidget(b)
+            buttons.addWidget(b, index // 2, index % 2)
         layout = QVBoxLayout(self)
         layout.addWidget(self.area, 1)
         row = QHBoxLayout()

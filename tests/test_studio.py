@@ -189,6 +189,23 @@ def test_close_during_a_run(qtbot, tmp_path):
     assert settings.value("window/state") is not None
 
 
+def test_the_window_fits_a_laptop_screen(qtbot, tmp_path):
+    """Every dock scrolls instead of imposing its content's height, so the window's minimum size is below
+    1280 x 720; at that size every dock stays on screen and the central views keep most of the width."""
+    from PySide6.QtWidgets import QDockWidget
+
+    win = make_window(qtbot, tmp_path / "s.ini")
+    hint = win.minimumSizeHint()
+    assert hint.width() <= 1280 and hint.height() <= 720, hint
+    win.resize(1280, 720)
+    qtbot.waitUntil(lambda: win.width() <= 1282 and win.height() <= 720)
+    for dock in win.findChildren(QDockWidget):
+        box = dock.geometry()
+        assert box.right() <= win.width() and box.bottom() <= win.height(), (dock.windowTitle(), box)
+    assert win.centralWidget().width() >= 0.35 * win.width()
+    win.close()
+
+
 def test_bad_file_shows_a_dialog(qtbot, tmp_path, monkeypatch):
     from PySide6.QtWidgets import QMessageBox
 

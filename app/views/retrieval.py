@@ -89,6 +89,8 @@ class RetrievalView(QWidget):
         self.gallery.setResizeMode(QListWidget.Adjust)
         self.gallery.setSpacing(GALLERY_SPACING_PX)
         self.gallery.itemDoubleClicked.connect(self._open)
+        for label in (self.query_label, self.folder_label):
+            label.setWordWrap(True)  # long paths and hints wrap instead of widening the window
         top = QHBoxLayout()
         top.addWidget(self.query_label, 1)
         top.addWidget(self.folder_label, 1)

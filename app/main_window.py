@@ -290,7 +290,8 @@ class MainWindow(QMainWindow):
                                      ("Open contour / silhouette…", self.open_contour_dialog, None),
                                      ("Load ground truth (.vts pair)…", self.open_gt_dialog, None),
                                      ("Texture image…", self.open_texture_dialog, None),
-                                     ("Demo pair", self.load_demo, None)):
+                                     ("Demo pair", self.load_demo, None),
+                                     ("Try retrieval (bundled collection)", self.try_retrieval, None)):
             action = QAction(text, self)
             action.triggered.connect(slot)
             if shortcut is not None:
@@ -449,6 +450,23 @@ class MainWindow(QMainWindow):
         if isinstance(self.source, TriMesh) and isinstance(self.target, TriMesh):
             self.pair_view.set_shapes(self.source, self.target)
         self.refresh_methods()
+
+    def try_retrieval(self) -> None:
+        """The Retrieval tab with the bundled collection (10 meshes, 4 classes) and a drawn person as the query."""
+        from corrlib.io import load_contour
+        from corrlib.resources import RETRIEVAL_QUERY, resource, retrieval_collection
+
+        try:
+            folder = retrieval_collection()
+            query = load_contour(resource(RETRIEVAL_QUERY))
+        except (CorrError, OSError) as exc:
+            self.show_error(f"the bundled retrieval collection: {exc}")
+            return
+        self.retrieval_view.set_folder(str(folder))
+        self.retrieval_view.set_query(query)
+        self.tabs.setCurrentWidget(self.retrieval_view)
+        self.statusBar().showMessage("Retrieval: a drawn person against cats, wolves, a lion and people; press Rank "
+                                     "(or draw your own query in the Sketch panel and press Use).")
 
     def load_demo(self) -> None:
         """Load the bundled pair (the target after the source loaded) with its identity ground truth."""

@@ -42,3 +42,43 @@ def bundled_shapes() -> list[tuple[str, str]]:
             rel = path.relative_to(root).as_posix()
             out.append((rel.removeprefix("data/"), rel))
     return out
+
+
+#: the retrieval collection of the studio's "Try retrieval": collection name -> bundled mesh (4 classes)
+RETRIEVAL_COLLECTION = {
+    "cat0.off": "data/tosca/cat0.off", "cat1.off": "data/tosca/cat1.off", "cat2.off": "data/sumner/cat-00.off",
+    "wolf0.off": "data/tosca/wolf0.off", "wolf1.off": "data/tosca/wolf1.off", "lion0.off": "data/sumner/lion-00.off",
+    **{f"human{i}.off": f"people/human{i}.off" for i in range(4)}}
+#: the query it starts with: the hand-drawn person of the CVPR 2016 paper (the people should rank first)
+RETRIEVAL_QUERY = "data/sketch2d/human_sketch_a_contour.txt"
+
+
+def retrieval_collection(folder=None) -> Path:
+    """A folder holding the bundled retrieval collection, named so that a file's class is its name's stem.
+
+    The files are links to the bundled meshes (copies where links are not possible), made once in
+    ``folder`` (default: a folder in the system's temporary directory).
+    """
+    import shutil
+    import tempfile
+
+    if folder is None:  # one folder per resources folder, so that every link points into this installation
+        import hashlib
+
+        tag = hashlib.sha1(str(resource_dir()).encode()).hexdigest()[:10]
+        folder = Path(tempfile.gettempdir()) / f"corrlib-retrieval-collection-{tag}"
+    target = Path(folder)
+    target.mkdir(parents=True, exist_ok=True)
+    for name, relative in RETRIEVAL_COLLECTION.items():
+        link = target / name
+        if link.exists():
+            continue
+        if link.is_symlink():  # a link whose file has gone
+            link.unlink()
+        source = resource(relative)
+        try:
+            link.symlink_to(source)
+        except OSError:
+            shutil.copyfile(source, link)
+    return target
+

@@ -206,6 +206,29 @@ def test_the_window_fits_a_laptop_screen(qtbot, tmp_path):
     win.close()
 
 
+def test_try_retrieval_opens_the_bundled_collection(qtbot, window, tmp_path):
+    """File > Try retrieval: the Retrieval tab with 10 bundled meshes of 4 classes and a drawn person as the query; the
+    collection is made of links into the bundled resources (made again when a link has gone)."""
+    from corrlib.io import load_mesh
+    from corrlib.resources import retrieval_collection
+    from corrlib.retrieval import class_of, mesh_files
+
+    window.try_retrieval()
+    view = window.retrieval_view
+    assert window.tabs.currentWidget() is view
+    assert view.query is not None and view.query.name == "human_sketch_a_contour.txt"
+    files = mesh_files(view.folder)
+    assert len(files) == 10 and sorted({class_of(f) for f in files}) == ["cat", "human", "lion", "wolf"]
+    people = [load_mesh(f) for f in files if class_of(f) == "human"]
+    assert len({p.n_vertices for p in people}) == 1 and not np.allclose(people[0].vertices, people[3].vertices)
+    # a collection elsewhere, one of whose links broke: it is repaired, not copied onto the broken link
+    folder = retrieval_collection(tmp_path / "collection")
+    (folder / "lion0.off").unlink()
+    (folder / "lion0.off").symlink_to(tmp_path / "gone.off")
+    retrieval_collection(folder)
+    assert load_mesh(folder / "lion0.off").n_vertices == 5000 and not (tmp_path / "gone.off").exists()
+
+
 def test_bad_file_shows_a_dialog(qtbot, tmp_path, monkeypatch):
     from PySide6.QtWidgets import QMessageBox
 

@@ -200,11 +200,11 @@ def _stage_match_outputs(result, source, target, out: Path) -> list[Path]:
     return [Path(p) for p in written]
 
 
-def _check_output_stem(args, attribute: str = "output") -> Path:
+def _check_output_stem(args) -> Path:
     """The ``-o`` stem, checked before any work (its folder created and writable)."""
     from corrlib.io import check_output_file
 
-    return check_output_file(Path(getattr(args, attribute)), "-o")
+    return check_output_file(Path(args.output), "-o")
 
 
 def _progress_printer(quiet: bool):

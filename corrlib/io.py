@@ -165,7 +165,7 @@ def atomic_write(path, mode: str = "w"):
         Naming ``path`` when it cannot be written (permissions, a full disk, a file where a folder should be).
     """
     path = Path(path)
-    check_output_file(path)
+    _make_folder(path.parent, "output")
     try:
         fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
     except OSError as exc:
@@ -245,12 +245,20 @@ def ensure_output_folder(path, what: str = "output") -> Path:
     """
     if str(path) == "":
         raise InputError(f"the {what} folder is an empty path")
-    folder = Path(path)
-    try:
-        folder.mkdir(parents=True, exist_ok=True)
+    folder = _make_folder(Path(path), what)
+    try:  # a probe file: permissions, read-only file systems
         fd, probe = tempfile.mkstemp(dir=folder, prefix=".write-check.")
         os.close(fd)
         os.unlink(probe)
+    except OSError as exc:
+        raise InputError(f"{folder}: cannot write {what} there ({_os_reason(exc)})") from None
+    return folder
+
+
+def _make_folder(folder: Path, what: str) -> Path:
+    """``mkdir -p`` with an :class:`InputError` naming the folder and, if so, the file in its way."""
+    try:
+        folder.mkdir(parents=True, exist_ok=True)
     except OSError as exc:
         blocking = next((p for p in [folder, *folder.parents] if p.exists() and not p.is_dir()), None)
         if blocking == folder:
@@ -322,7 +330,7 @@ def _read_off(path: Path) -> tuple[np.ndarray, np.ndarray]:
             raise FileFormatError(f"{path}: face {index} has {k} vertices; a face needs at least 3")
         if len(poly) != k:
             raise FileFormatError(f"{path}: face {index} announces {k} vertices but lists {len(poly)}")
-        if max(abs(v) for v in poly) >= n_v:
+        if max(abs(v) for v in poly) >= 2 ** 63:  # an ordinary index out of range is the mesh check's to name
             raise FileFormatError(f"{path}: face {index} refers to vertex {max(poly, key=abs)}, but the file has "
                                   f"{n_v} vertices (0 to {n_v - 1})")
         faces.extend((poly[0], poly[j], poly[j + 1]) for j in range(1, k - 1))
@@ -829,7 +837,7 @@ def read_text(path, what: str = "input") -> str:
     try:
         return path.read_bytes().decode("utf-8", errors="replace")
     except OSError as exc:
-        raise FileFormatError(f"{path}: cannot read the {what} file ({(exc.strerror or str(exc)).lower()})") from None
+        raise FileFormatError(f"{path}: cannot read the {what} file ({_os_reason(exc)})") from None
 
 
 #: integer entries must stay exactly representable (float64) and within int64
@@ -879,8 +887,7 @@ def load_labels(path, n: int | None = None, what: str = "labels") -> np.ndarray:
     -------
     (r,) int
     """
-    path = _require_file(path)
-    values = _index_file(path, what)
+    values = _index_file(Path(path), what)
     if n is not None and values.shape[0] != n:
         raise FileFormatError(f"{path}: the {what} file has {values.shape[0]} labels, expected {n}")
     return values

@@ -176,10 +176,10 @@ def _coordinate_scale_problem(points: np.ndarray) -> str:
     if points.size == 0:
         return ""
     largest = float(np.abs(points).max())
-    spread = float(np.abs(points - points.mean(axis=0)).max()) if largest < COORDINATE_LIMITS[1] else largest
     if largest > COORDINATE_LIMITS[1]:
         return (f"coordinates up to {largest:.3g} overflow squared lengths (at most {COORDINATE_LIMITS[1]:.0e}); "
                 f"rescale the input")
+    spread = float(np.abs(points - points.mean(axis=0)).max())
     if 0 < spread < COORDINATE_LIMITS[0]:
         return (f"the coordinates span only {spread:.3g}, too small for squared lengths (at least "
                 f"{COORDINATE_LIMITS[0]:.0e}); rescale the input")

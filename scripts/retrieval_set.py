@@ -1,15 +1,16 @@
 """Build the sketch-retrieval benchmark set used in docs/decisions.md (``corr bench-retrieval``).
 
-``python scripts/retrieval_set.py OUT`` writes ``OUT/collection`` (10 meshes of
-4 classes: the bundled cats, wolves and lion, and four poses of the synthetic
-person of ``tests/_humanoid.py``, the fourth made here) and ``OUT/queries``
+``python scripts/retrieval_set.py OUT`` writes ``OUT/collection`` (the
+studio's bundled retrieval collection, ``corrlib.resources.retrieval_collection``:
+10 meshes of 4 classes, the bundled cats, wolves and lion and the four poses
+of the synthetic person in ``resources/people``) and ``OUT/queries``
 (21 queries, class = file name without its number):
 
 * the side view and the top view of each of the 6 animal meshes, rendered
   (outline of the orthographic projection along the least and the middle
   principal axis);
 * the front view of the rest pose and of the fourth pose of the person;
-* the two human sketches of ``../shared/data/sketch2d``;
+* the two bundled human sketches (``resources/data/sketch2d``);
 * two MPEG-7 silhouettes of classes the collection holds: ``children-1``
   (a person) and ``dog-1`` (counted as the wolf class, the collection's
   canine);
@@ -27,8 +28,6 @@ from pathlib import Path
 
 import numpy as np
 
-ROOT = Path(__file__).resolve().parents[1]
-DATA = ROOT.parent / "shared" / "data"
 
 #: hand-drawn polygons (x, y), closed by repeating the first point
 DRAWN = {
@@ -44,34 +43,27 @@ DRAWN = {
              (7.8, 0), (7, 0), (7, 4), (2.5, 4), (2.5, 0), (1.7, 0), (1.7, 3.8), (1.1, 3.8), (1.1, 0), (0.3, 0),
              (0.3, 4)],
 }
-ANIMALS = {"cat0": "tosca/cat0.off", "cat1": "tosca/cat1.off", "cat2": "sumner/cat-00.off",
-           "wolf0": "tosca/wolf0.off", "wolf1": "tosca/wolf1.off", "lion0": "sumner/lion-00.off"}
+def _fail(message: str) -> None:
+    print(f"error: {message}", file=sys.stderr)
+    sys.exit(2)
 
 
 def main(out: Path) -> None:
-    sys.path.insert(0, str(ROOT / "tests"))
-    import _humanoid
-    import trimesh
-
     from corrlib.contour_bench import principal_frame, silhouette_query
+    from corrlib.errors import CorrError
     from corrlib.geometry.sections import render_silhouette
-    from corrlib.io import load_mesh
+    from corrlib.io import ensure_output_folder, load_mesh
+    from corrlib.resources import resource, retrieval_collection
 
     collection, queries = out / "collection", out / "queries"
     for folder in (collection, queries):
-        if folder.exists() and any(folder.iterdir()):
-            sys.exit(f"{folder} is not empty; choose a new output folder")
-        folder.mkdir(parents=True, exist_ok=True)
-    for name, relative in ANIMALS.items():
-        shutil.copy(DATA / relative, collection / f"{name}.off")
-    poses, _ = _humanoid.humanoids()
-    rotation = _humanoid._rotation
-    rest_vertices, faces = poses["human0"]
-    poses["human3"] = (_humanoid.posed(rest_vertices, {
-        "lua": rotation((0, 0, 1), 0.5), "rua": rotation((0, 0, 1), -1.2), "lth": rotation((0, 0, 1), 0.35),
-        "rth": rotation((0, 0, 1), -0.35), "head": rotation((1, 0, 0), 0.3)}), faces)
-    for name, (vertices, pose_faces) in poses.items():
-        trimesh.Trimesh(vertices, pose_faces, process=False).export(collection / f"{name}.off")
+        if folder.is_dir() and any(folder.iterdir()):
+            _fail(f"{folder} is not empty; choose a new output folder")
+        try:
+            ensure_output_folder(folder)
+        except CorrError as exc:
+            _fail(str(exc))
+    retrieval_collection(collection)
 
     count = 0
 
@@ -84,7 +76,7 @@ def main(out: Path) -> None:
         else:
             shutil.copy(source, target)
 
-    for name in ANIMALS:
+    for name in ("cat0", "cat1", "cat2", "wolf0", "wolf1", "lion0"):
         mesh = load_mesh(collection / f"{name}.off")
         label = name.rstrip("0123456789")
         write(silhouette_query(mesh).contour.points, label)
@@ -93,9 +85,9 @@ def main(out: Path) -> None:
     for name in ("human0", "human3"):
         write(silhouette_query(load_mesh(collection / f"{name}.off")).contour.points, "human")
     for sketch in "ab":
-        write(None, "human", source=DATA / f"sketch2d/human_sketch_{sketch}_contour.txt")
-    write(None, "human", ".gif", DATA / "silhouettes/mpeg7/children-1.gif")
-    write(None, "wolf", ".gif", DATA / "silhouettes/mpeg7/dog-1.gif")
+        write(None, "human", source=resource(f"data/sketch2d/human_sketch_{sketch}_contour.txt"))
+    write(None, "human", ".gif", resource("data/silhouettes/mpeg7/children-1.gif"))
+    write(None, "wolf", ".gif", resource("data/silhouettes/mpeg7/dog-1.gif"))
     for label, polygon in DRAWN.items():
         write(np.array(polygon + polygon[:1], dtype=float), label)
     print(f"{len(list(collection.iterdir()))} meshes in {collection}, {count} queries in {queries}")
@@ -103,5 +95,5 @@ def main(out: Path) -> None:
 
 if __name__ == "__main__":
     if len(sys.argv) != 2:
-        sys.exit("usage: python scripts/retrieval_set.py OUT")
+        _fail("usage: python scripts/retrieval_set.py OUT")
     main(Path(sys.argv[1]))

@@ -53,6 +53,11 @@ POSES = {
 }
 
 
+#: a fourth pose, only in the studio's bundled retrieval collection (``resources/people``): arms and legs spread
+RETRIEVAL_POSE = {"lua": _rotation((0, 0, 1), 0.5), "rua": _rotation((0, 0, 1), -1.2), "lth": _rotation((0, 0, 1), 0.35),
+                  "rth": _rotation((0, 0, 1), -0.35), "head": _rotation((1, 0, 0), 0.3)}
+
+
 def _segment_distance(points, a, b):
     ab = b - a
     t = np.clip(((points - a) @ ab) / (ab @ ab), 0.0, 1.0)
@@ -117,5 +122,23 @@ def write_dataset(folder) -> Path:
     return folder
 
 
+def write_retrieval_people(folder) -> Path:
+    """``human0.off`` … ``human3.off`` (the three poses and :data:`RETRIEVAL_POSE`): ``resources/people``."""
+    import trimesh
+
+    folder = Path(folder)
+    folder.mkdir(parents=True, exist_ok=True)
+    shapes, _ = humanoids()
+    rest_vertices, faces = shapes["human0"]
+    shapes["human3"] = (posed(rest_vertices, RETRIEVAL_POSE), faces)
+    for name, (vertices, pose_faces) in shapes.items():
+        trimesh.Trimesh(vertices, pose_faces, process=False).export(folder / f"{name}.off")
+    return folder
+
+
 if __name__ == "__main__":
-    print(write_dataset(sys.argv[1] if len(sys.argv) > 1 else "humanoid"))
+    # python tests/_humanoid.py OUT: the ground-truth dataset; --people OUT: the bundled retrieval people
+    if len(sys.argv) > 2 and sys.argv[1] == "--people":
+        print(write_retrieval_people(sys.argv[2]))
+    else:
+        print(write_dataset(sys.argv[1] if len(sys.argv) > 1 else "humanoid"))

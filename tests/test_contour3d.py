@@ -130,6 +130,8 @@ def test_minimum_ratio_equals_bisection_on_the_explicit_graph(seed):
     assert approx.lower_bound <= result.energy + 1e-12
     with pytest.raises(ParameterError, match="eps"):
         run(minimum_ratio_union([tiny_graph(seed)], eps=1.5))
+    with pytest.raises(ParameterError, match="at least one product graph"):
+        run(minimum_ratio_union([]))
 
 
 def test_ratio_does_not_collapse_where_the_paper_energy_must():

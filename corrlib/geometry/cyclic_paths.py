@@ -602,13 +602,23 @@ def minimum_ratio_union(graphs, *, eps: float = 0.0, token: CancelToken | None =
     """
     if not (0.0 <= eps < 1.0):
         raise ParameterError(f"eps must be in [0, 1), got {eps}")
+    if len(graphs) == 0:
+        raise ParameterError("the ratio search needs at least one product graph")
     token = token or CancelToken()
     curve_length = max(g.curve_length for g in graphs)
-    for graph in graphs:
-        graph.gain = 0.0
-    iterations = 0
-    bb = yield from branch_and_bound_union(graphs, token=token, max_iterations=max_iterations)
-    iterations += bb.iterations
+
+    def solve(gain):
+        """The global optimum of ``E − gain · D`` over every graph (the gains are reset afterwards)."""
+        for graph in graphs:
+            graph.gain = gain
+        try:
+            return (yield from branch_and_bound_union(graphs, token=token, max_iterations=max_iterations))
+        finally:
+            for graph in graphs:
+                graph.gain = 0.0
+
+    bb = yield from solve(0.0)
+    iterations = bb.iterations
     path, index = bb.path, bb.graph_index
     credit = graphs[index].credited_length(path)
     energy = graphs[index].path_energy(path)
@@ -616,29 +626,22 @@ def minimum_ratio_union(graphs, *, eps: float = 0.0, token: CancelToken | None =
     ratio = energy / max(credit, 1e-9 * curve_length)
     lower = -np.inf
     for _ in range(max_rounds):
-        for graph in graphs:
-            graph.gain = ratio
-        bb = yield from branch_and_bound_union(graphs, token=token, max_iterations=max_iterations)
+        bb = yield from solve(ratio)
         iterations += bb.iterations
         value = bb.lower_bound  # the optimum of E - ratio * D (exact unless the iteration cap stopped it)
-        tolerance = 1e-9 * max(abs(energy), 1e-300)
-        if value >= -tolerance:  # no path beats the current ratio
+        if value >= -1e-9 * max(abs(energy), 1e-300):  # no path beats the current ratio
             lower = ratio
             break
         lower = ratio + value / curve_length
-        candidate, candidate_index = bb.path, bb.graph_index
-        graph = graphs[candidate_index]
-        candidate_credit = graph.credited_length(candidate)
-        graph.gain = 0.0
-        candidate_energy = graph.path_energy(candidate)
+        graph = graphs[bb.graph_index]
+        candidate_credit = graph.credited_length(bb.path)
+        candidate_energy = graph.path_energy(bb.path)  # the gains are 0 again: the energy alone
         if candidate_credit <= 0 or candidate_energy / candidate_credit >= ratio:
             break  # the inner search stopped early (iteration cap): keep the bounds as they are
-        path, index, credit, energy = candidate, candidate_index, candidate_credit, candidate_energy
-        ratio = energy / credit
+        path, index, energy = bb.path, bb.graph_index, candidate_energy
+        ratio = energy / candidate_credit
         if lower * (1.0 + eps) >= ratio:
             break
-    for graph in graphs:
-        graph.gain = 0.0
     runs = sum(g.runs for g in graphs)
     result_path = CyclicPath(path.vertices, path.layers, float(ratio))
     return BranchAndBoundResult(result_path, float(ratio), float(min(lower, ratio)), float(ratio), iterations, runs,

@@ -187,10 +187,10 @@ class KernelMatchingParams:
                 isinstance(self.tau_max, (int, float)):
             try:
                 diffusion_times(self)  # raises ParameterError on a bad schedule, before any run
-            except (TypeError, ValueError, OverflowError) as exc:
-                if isinstance(exc, ParameterError):
-                    raise
-                # a value of the wrong type or range: validate_params names the field
+            except ParameterError:
+                raise
+            except (TypeError, ValueError, OverflowError):
+                pass  # a value of the wrong type or range: validate_params names the field
 
 
 def diffusion_times(params: KernelMatchingParams) -> np.ndarray:

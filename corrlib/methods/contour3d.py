@@ -72,6 +72,15 @@ outline itself with the whole surface, as the paper does. Half features are the 
 at its mirror image, so the matched curve may pass on either side of the
 body, as a silhouette cannot tell them apart either.
 
+Part term (the thesis' automatic part features; ``parts="auto"``, not the
+default): the protrusions of the filled silhouette and of the mesh
+(:mod:`corrlib.geometry.segmentation`: heat-kernel persistence, the same
+legs, head and tail in every pose) are matched by a small assignment on the
+mean node cost of each reading of the axes, and a contour point and a mesh
+vertex of parts that were not matched pay ``part_weight · d̄``. User part
+labels on both shapes replace it. See ``docs/decisions.md`` for why it is
+off by default.
+
 Scale normalisation (our definition, documented because the paper's edge
 length mixes 2D and 3D units): the mesh is scaled to unit surface area and
 the contour to enclose area ``area_ratio`` (default 1/2: a silhouette covers
@@ -115,6 +124,7 @@ from corrlib.geometry.cyclic_paths import ProductGraph, branch_and_bound_union, 
 from corrlib.geometry.elastic_paths import ElasticProductGraph
 from corrlib.geometry.intrinsic_axis import IntrinsicAxis, axis_mismatch, spectral_axes
 from corrlib.geometry.laplacian import mesh_laplacian
+from corrlib.geometry.segmentation import assign_parts, protrusion_parts
 from corrlib.geometry.spectrum import doubled_spectrum, eigenpairs, mesh_spectrum
 from corrlib.geometry.triangulate import fill_contour
 from corrlib.methods.base import ContourPath, MatchResult, SearchCertificate, param
@@ -176,6 +186,13 @@ class Contour3DParams:
     bending: float = param(1.0, label="Bending weight", low=0.0, high=1e3,
                            help="elastic energy: (1 − cos θ) per turn, in units of the mean node cost times the "
                                 "mean contour step.")
+    parts: str = param("none", label="Part features", choices=("auto", "none"),
+                       help="auto: the protrusions of the filled silhouette and of the mesh (heat-kernel persistence) "
+                            "are matched by a small assignment and points of non-matching parts pay the part "
+                            "weight; user part labels override them. none: no part term.")
+    part_weight: float = param(1.0, label="Part weight", low=0.0, high=1e3,
+                               help="Cost of matching points of different parts, in units of the mean feature "
+                                    "distance.")
     max_iterations: int = param(10000, label="Max iterations", low=1, high=10_000_000,
                                 help="Cap on branch-and-bound iterations (the bounds are reported).")
 
@@ -284,6 +301,9 @@ class PreparedQuery:
     doubled_features : (m, d) float or None
         Features of the doubled silhouette, the whole model's (None if the
         query was prepared for the half model only).
+    parts : (m,) int or None
+        Protrusions of the filled silhouette at the contour points (0: body;
+        None unless ``parts="auto"``).
     """
 
     points: np.ndarray
@@ -292,6 +312,7 @@ class PreparedQuery:
     contour: Contour2D
     axes: dict[str, list[IntrinsicAxis]]
     doubled_features: np.ndarray | None = None
+    parts: np.ndarray | None = None
 
     def model_features(self, model: str) -> np.ndarray:
         """(m, d) float: the contour's features under a shape model (see the module docstring)."""
@@ -316,11 +337,14 @@ class PreparedMesh:
     axes : dict of str -> list of IntrinsicAxis
         Per shape model, the intrinsic axes of the surface (whole) or of its
         even eigenfunctions (half).
+    parts : (n,) int or None
+        Protrusions of the surface (0: body; None unless ``parts="auto"``).
     """
 
     vertices: np.ndarray
     features: dict[str, np.ndarray]
     axes: dict[str, list[IntrinsicAxis]]
+    parts: np.ndarray | None = None
 
 
 def prepare_query(contour: Contour2D, params: Contour3DParams) -> PreparedQuery:
@@ -359,7 +383,10 @@ def prepare_query(contour: Contour2D, params: Contour3DParams) -> PreparedQuery:
                                             name=contour.name)
         doubled = spectral_features(d_evals, d_evecs, mass.diagonal(), params)[:m]
         axes["whole"] = _axes_at(spectral_axes(d_evals, d_evecs, mass.diagonal(), params.axis_modes), m)
-    return PreparedQuery(canonical.points, feats[:m], resampled.labels, resampled, axes, doubled)
+    parts = None
+    if params.parts == "auto":
+        parts = protrusion_parts(evals, evecs, filled.adjacency, params.area_ratio).labels[:m]
+    return PreparedQuery(canonical.points, feats[:m], resampled.labels, resampled, axes, doubled, parts)
 
 
 def _axes_at(axes: list[IntrinsicAxis], m: int) -> list[IntrinsicAxis]:
@@ -402,7 +429,10 @@ def prepare_mesh(mesh: TriMesh, params: Contour3DParams) -> PreparedMesh:
             features["half"] = spectral_features(evals * mesh.area, evecs, mass, params)
             axes["half"] = spectral_axes(evals, evecs, mass, params.axis_modes)
     verts = (mesh.vertices - mesh.vertices.mean(axis=0)) / np.sqrt(mesh.area)
-    return PreparedMesh(verts, features, axes)
+    parts = None
+    if params.parts == "auto":
+        parts = protrusion_parts(spectrum.evals, spectrum.evecs, mesh.adjacency, mesh.area).labels
+    return PreparedMesh(verts, features, axes, parts)
 
 
 def axis_scales(query: PreparedQuery, mesh: PreparedMesh, model: str, mean_distance: float,
@@ -420,6 +450,21 @@ def axis_cost(query: PreparedQuery, mesh: PreparedMesh, model: str, scales: np.n
         if scale > 0:
             cost = cost + scale * axis_mismatch(a.coordinate, b.coordinate, flipped=flipped)
     return cost
+
+
+def part_cost(query: PreparedQuery, mesh: PreparedMesh, cost: np.ndarray, mean_distance: float,
+              params: Contour3DParams) -> np.ndarray | float:
+    """``w_p d̄`` where the contour's part, matched to the mesh's parts under ``cost``, differs ((m, n) float).
+
+    The protrusions are matched by :func:`~corrlib.geometry.segmentation.assign_parts`
+    on the node cost of the reading (features and axis term), so that each
+    reading of the axes gets the part matching that agrees with it. A
+    protrusion of the contour without a partner costs nothing anywhere.
+    """
+    if query.parts is None or mesh.parts is None or params.part_weight == 0.0:
+        return 0.0
+    as_mesh = assign_parts(cost, query.parts, mesh.parts)[:, None]
+    return params.part_weight * mean_distance * ((as_mesh >= 0) & (as_mesh != mesh.parts[None, :]))
 
 
 def product_graph(cost: np.ndarray, contour_points: np.ndarray, mesh_vertices: np.ndarray, adjacency,
@@ -457,9 +502,12 @@ def match_prepared(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams,
                 for signs in itertools.product(*[(False, True) if scale > 0 else (False,)
                                                  for scale in scales[model]])]
     unit_cost = float(np.mean(next(iter(distances.values())) + labels))
-    graphs = [product_graph(distances[model] + labels + axis_cost(query, target, model, scales[model], signs),
-                            query.points, target.vertices, mesh.adjacency, params, unit_cost)
-              for model, signs in readings]
+    graphs = []
+    for model, signs in readings:
+        cost = distances[model] + labels + axis_cost(query, target, model, scales[model], signs)
+        if not isinstance(labels, np.ndarray):  # user part labels on both shapes replace the automatic parts
+            cost = cost + part_cost(query, target, cost, unit_distance, params)
+        graphs.append(product_graph(cost, query.points, target.vertices, mesh.adjacency, params, unit_cost))
     yield Progress("branch and bound", 0.1, f"{graphs[0].m} x {graphs[0].n} product graph, {len(graphs)} readings "
                                             "(shape model, direction of the axis)")
     with watch("search"):

@@ -47,7 +47,9 @@ from corrlib.shapes import Contour2D, TriMesh
 MESH_FILTER = dialog_filter("mesh", all_files=False)  # file-dialog filters: from corrlib.io.FORMATS
 CONTOUR_FILTER = dialog_filter("contour", all_files=False)
 
-DEFAULT_WINDOW_SIZE = (1500, 950)
+DEFAULT_WINDOW_SIZE = (1500, 950)  # without a screen to measure
+#: on first start the window takes this share of the screen's available width and height
+DEFAULT_SCREEN_SHARE = 0.92
 
 
 def _scrollable(widget: QWidget) -> QScrollArea:
@@ -143,6 +145,10 @@ class JobPanel(QWidget):
         self.log.appendPlainText(f"[{time.strftime('%H:%M:%S')}] {text}")
 
 
+#: how long the status bar shows the vertex under the mouse (milliseconds)
+HOVER_MESSAGE_MS = 3000
+
+
 class MainWindow(QMainWindow):
     """The studio. ``result_ready`` fires when a pair/contour result is on screen.
 
@@ -187,12 +193,14 @@ class MainWindow(QMainWindow):
         self.retrieval_view.run_requested.connect(self.run_retrieval)
         self.retrieval_view.open_pair.connect(self.open_retrieved_pair)
         self.compare_view.run_button.clicked.connect(self.run_compare)
+        for view in (self.pair_view, self.compare_view):
+            view.hovered.connect(lambda text: self.statusBar().showMessage(text, HOVER_MESSAGE_MS))
 
         self._build_docks()
         self._build_menus()
         self.statusBar().showMessage("Load shapes (File menu, drag and drop) or open the demo pair.")
         self.setAcceptDrops(True)
-        self.resize(*DEFAULT_WINDOW_SIZE)
+        self.resize(*self._default_size())
         state = self.settings.value("window/state")
         geometry = self.settings.value("window/geometry")
         if geometry is not None:
@@ -203,6 +211,14 @@ class MainWindow(QMainWindow):
         self.refresh_methods()
         # load the compiled kernels while the window is idle, not during the first solve
         QTimer.singleShot(WARM_UP_DELAY_MS, self._warm_up)
+
+    def _default_size(self) -> tuple[int, int]:
+        """Most of the screen (the 3D views get the space), or :data:`DEFAULT_WINDOW_SIZE` without a screen."""
+        screen = QGuiApplication.primaryScreen()
+        if screen is None:
+            return DEFAULT_WINDOW_SIZE
+        area = screen.availableGeometry()
+        return int(area.width() * DEFAULT_SCREEN_SHARE), int(area.height() * DEFAULT_SCREEN_SHARE)
 
     def _fit_to_screen(self) -> None:
         """Shrink the window (default or restored size) to the screen's available area, and keep it on it."""
@@ -307,6 +323,8 @@ class MainWindow(QMainWindow):
                            ("Morph frames (PLY)…", lambda: self.export_frames(".ply")),
                            ("Sequence picture strip (PNG)…", self.export_strip),
                            ("Screenshot of the view (PNG)…", self.export_screenshot),
+                           ("3D view, transparent background (PNG)…", self.export_transparent),
+                           ("Compare grid as one picture (PNG)…", self.export_compare_grid),
                            ("Comparison table (CSV)…", self.export_table)):
             action = QAction(text, self)
             action.triggered.connect(slot)
@@ -316,11 +334,11 @@ class MainWindow(QMainWindow):
         quit_action.triggered.connect(self.close)
         file_menu.addAction(quit_action)
         run_menu = self.menuBar().addMenu("&Run")
-        for text, slot in (("Run method", self.run_method), ("Cancel", self.cancel_jobs)):
-            action = QAction(text, self)
-            action.triggered.connect(slot)
-            run_menu.addAction(action)
+        for text, slot, shortcut in (("Run method", self.run_method, "Ctrl+R"), ("Cancel", self.cancel_jobs, "Esc")):
+            run_menu.addAction(self._action(text, slot, shortcut))
+        self._build_view_menu()
         help_menu = self.menuBar().addMenu("&Help")
+        help_menu.addAction(self._action("Keyboard shortcuts", self.show_shortcuts, "F1"))
         about = QAction("About", self)
         about.triggered.connect(self.show_about)
         help_menu.addAction(about)
@@ -332,6 +350,122 @@ class MainWindow(QMainWindow):
             action = QAction(text, self)
             action.triggered.connect(slot)
             toolbar.addAction(action)
+
+    def _action(self, text: str, slot, shortcut: str | None = None) -> QAction:
+        """A menu action; its shortcut works in the whole window (also while a 3D view has the focus)."""
+        action = QAction(text, self)
+        action.triggered.connect(slot)
+        if shortcut:
+            action.setShortcut(QKeySequence(shortcut))
+            action.setShortcutContext(Qt.WindowShortcut)
+        self.addAction(action)
+        return action
+
+    def _build_view_menu(self) -> None:
+        from PySide6.QtGui import QActionGroup
+
+        from corrlib.viewing import UP_AXES
+
+        view_menu = self.menuBar().addMenu("&View")
+        for text, view, shortcut in (("Front", "front", "Ctrl+1"), ("Side", "side", "Ctrl+2"),
+                                     ("Top", "top", "Ctrl+3"), ("Reset camera", "front", "Ctrl+0")):
+            view_menu.addAction(self._action(text, lambda _=False, v=view: self.show_view(v), shortcut))
+        up_menu = view_menu.addMenu("Up axis")
+        self.up_actions = QActionGroup(self)
+        for up in UP_AXES:
+            action = QAction("auto (the side the shape stands on)" if up == "auto" else up, self)
+            action.setCheckable(True)
+            action.setChecked(up == "auto")
+            action.setData(up)
+            action.triggered.connect(lambda _=False, u=up: self.set_up_axis(u))
+            self.up_actions.addAction(action)
+            up_menu.addAction(action)
+        view_menu.addSeparator()
+        view_menu.addAction(self._action("Save camera…", self.save_camera_dialog))
+        view_menu.addAction(self._action("Load camera…", self.load_camera_dialog))
+        view_menu.addSeparator()
+        view_menu.addAction(self._action("Next tab", lambda: self._step_tab(1), "Ctrl+PgDown"))
+        view_menu.addAction(self._action("Previous tab", lambda: self._step_tab(-1), "Ctrl+PgUp"))
+
+    def _step_tab(self, step: int) -> None:
+        self.tabs.setCurrentIndex((self.tabs.currentIndex() + step) % self.tabs.count())
+
+    def framed_views(self) -> list:
+        """The views with a camera and an up axis (View menu)."""
+        return [self.pair_view, self.compare_view, self.sequence_view, self.product_view]
+
+    def current_framed_view(self):
+        view = self.tabs.currentWidget()
+        return view if view in self.framed_views() else None
+
+    def show_view(self, view: str) -> None:
+        """Camera preset (front, side, top) in the current tab."""
+        target = self.current_framed_view()
+        if target is None:
+            self.statusBar().showMessage("this tab has no 3D camera")
+            return
+        target.show_view(view)
+
+    def set_up_axis(self, up: str) -> None:
+        """The up axis of every 3D view (``"auto"`` or ``"+x"`` … ``"-z"``)."""
+        for action in self.up_actions.actions():
+            action.setChecked(action.data() == up)
+        for view in self.framed_views():
+            view.up = up
+        for view in self.framed_views():
+            view.redraw()
+        self.retrieval_view.up = up  # the next ranking's thumbnails
+        self.statusBar().showMessage(f"up axis: {up}")
+
+    def save_camera_dialog(self) -> None:
+        path = self._save_path("Save camera", "Camera (*.json)")
+        if path:
+            self.save_camera(path)
+
+    def save_camera(self, path: str) -> None:
+        view = self.current_framed_view()
+        camera = None if view is None else view.camera()
+        if camera is None:
+            self.show_error("nothing is shown in this tab: there is no camera to save")
+            return
+        try:
+            camera.save(path)
+        except CorrError as exc:
+            self.show_error(str(exc))
+
+    def load_camera_dialog(self) -> None:
+        path, _ = QFileDialog.getOpenFileName(self, "Load camera", "", "Camera (*.json)")
+        if path:
+            self.load_camera(path)
+
+    def load_camera(self, path: str) -> None:
+        from corrlib.viewing import Camera
+
+        view = self.current_framed_view()
+        if view is None:
+            self.show_error("this tab has no 3D camera")
+            return
+        try:
+            view.set_camera(Camera.load(path))
+        except CorrError as exc:
+            self.show_error(str(exc))
+
+    def shortcut_list(self) -> list[tuple[str, str]]:
+        """(action, shortcut) of every action with a shortcut (Help ▸ Keyboard shortcuts)."""
+        rows = []
+        for action in self.findChildren(QAction):
+            if not action.shortcut().isEmpty() and action.text():
+                rows.append((action.text().replace("&", ""), action.shortcut().toString(QKeySequence.NativeText)))
+        return sorted(set(rows), key=lambda r: r[0])
+
+    def show_shortcuts(self) -> None:
+        rows = "".join(f"<tr><td>{name}</td><td><b>{keys}</b></td></tr>" for name, keys in self.shortcut_list())
+        text = (f"<table>{rows}</table><p>In a 3D view: drag to rotate, shift-drag to pan, wheel to zoom; "
+                "click a shape in Compare to inspect a vertex.</p>")
+        if self.interactive:
+            QMessageBox.information(self, "Keyboard shortcuts", text)
+        else:
+            self.job_panel.write(text)
 
     # ------------------------------------------------------------------ messages
 
@@ -620,8 +754,8 @@ class MainWindow(QMainWindow):
             self._on_loaded(payload)
             return
         if key == RETRIEVAL_KEY:
-            hits, thumbs = payload
-            self.retrieval_view.show_results(hits, thumbs)
+            hits, meshes = payload
+            self.retrieval_view.show_results(hits, meshes)
             self.job_panel.stopped(f"ranked {len(hits)} meshes")
             self.result_ready.emit(hits)
             return
@@ -696,6 +830,8 @@ class MainWindow(QMainWindow):
             return
         self.tabs.setCurrentWidget(self.compare_view)
         self.compare_view.clear_results(len(self._compare_queue))
+        self.compare_view.set_ground_truth(*(self.gt[:2] if self.gt is not None else (None, None)),
+                                           self.source.n_vertices)
         self._next_compare()
 
     def _next_compare(self) -> None:
@@ -824,6 +960,50 @@ class MainWindow(QMainWindow):
         pixmap.save(buffer, "PNG")
         with atomic_write(path, "wb") as fh:
             fh.write(bytes(data))
+
+    def export_transparent(self) -> None:
+        path = self._save_path("3D view with a transparent background", dialog_filter("picture", save=True))
+        if path:
+            self.save_transparent(path)
+
+    def save_transparent(self, path: str) -> None:
+        """The current tab's 3D view (every subplot) as a PNG with a transparent background."""
+        view = self.current_framed_view()
+        plotter = None if view is None else view.view_plotter()
+        if plotter is None or not view.framed_points():
+            self.show_error("this tab shows no 3D view to save")
+            return
+        self._save_plotter_picture(plotter, path, transparent=True)
+
+    def export_compare_grid(self) -> None:
+        if self.compare_view.plotter is None or not self.compare_view.rows:
+            self.show_error("run a comparison first: the compare grid is empty")
+            return
+        path = self._save_path("Compare grid", dialog_filter("picture", save=True))
+        if path:
+            self.save_compare_grid(path)
+
+    def save_compare_grid(self, path: str) -> None:
+        """Every view of the compare grid, with its captions, as one picture."""
+        if self.compare_view.plotter is None or not self.compare_view.rows:
+            self.show_error("run a comparison first: the compare grid is empty")
+            return
+        self._save_plotter_picture(self.compare_view.plotter, path, transparent=False)
+
+    def _save_plotter_picture(self, plotter, path: str, transparent: bool) -> None:
+        from PIL import Image
+
+        from corrlib.io import atomic_write, check_output_file
+
+        try:
+            check_output_file(path, "picture")
+            image = plotter.screenshot(transparent_background=transparent, return_img=True)
+            with atomic_write(path, "wb") as fh:
+                Image.fromarray(image).save(fh, format="PNG")
+        except CorrError as exc:
+            self.show_error(str(exc))
+            return
+        self.statusBar().showMessage(f"saved {path}")
 
     def export_table(self) -> None:
         from corrlib.io import atomic_write

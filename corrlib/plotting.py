@@ -38,29 +38,26 @@ def coordinate_colors(vertices: np.ndarray) -> np.ndarray:
     return np.clip((v - lo) / np.where(hi > lo, hi - lo, 1.0), 0.0, 1.0)
 
 
-def view_axes(reference: np.ndarray) -> np.ndarray:
-    """A viewing frame from the principal axes of a point set (used by the plots and the studio's thumbnails).
+def view_axes(reference: np.ndarray, up: str = "auto") -> np.ndarray:
+    """The viewing frame of the pictures: the front view of :mod:`corrlib.viewing` (the studio's framing).
 
     Parameters
     ----------
     reference : (n, 3) float
-        The points whose principal axes orient the view.
+        The points whose up axis and horizontal principal axes orient the view.
+    up : str
+        Up-axis setting (``"auto"`` or ``"+x"`` … ``"-z"``).
 
     Returns
     -------
     (3, 3) float
-        Rows: longest principal axis as x, shortest as depth (y), the middle one up (z); a proper
-        rotation, signs fixed by the third moment so that similar shapes face alike.
+        Rows: screen right as x, away from the viewer as y, up as z (a proper rotation; matplotlib's
+        ``view_init(elev, azim=-90)`` looks along +y).
     """
-    centred = reference - reference.mean(axis=0)
-    _, _, vt = np.linalg.svd(centred, full_matrices=False)
-    axes = np.stack([vt[0], vt[2], vt[1]])
-    # fix the sign ambiguity of principal axes by the third moment, so similar shapes face alike
-    skew = np.sum((centred @ axes.T) ** 3, axis=0)
-    axes[skew < 0] *= -1
-    if np.linalg.det(axes) < 0:
-        axes[1] *= -1
-    return axes
+    from corrlib.viewing import view_frame
+
+    frame = view_frame(reference, up)
+    return np.stack([frame.right, -frame.toward, frame.up])
 
 
 def draw_mesh(ax, vertices: np.ndarray, faces: np.ndarray, colors: np.ndarray, title: str = "",

@@ -54,16 +54,16 @@ def test_demo_pair_kernel_matching_colours_the_target(qtbot, window):
     assert result.map_xy.shape == (window.source.n_vertices,)
     for mode in ("texture", "error", "coordinates"):
         window.pair_view.mode.setCurrentText(mode)
-    # the sequence slider moves the vertices in place
+    # the sequence slider moves the vertices in place (drawn in the source's display frame)
     seq = window.sequence_view
     seq.slider.setValue(0)
     start = np.array(seq.mesh.points)
-    assert np.allclose(start, window.source.vertices)
+    assert np.allclose(start, seq.display.points(window.source.vertices))
     seq.slider.setValue(600)
     moved = np.array(seq.mesh.points)
-    assert np.abs(moved - start).max() > 1.0
+    assert np.abs(moved - start).max() > 0.01  # display units: the source's diagonal is 1
     expected = (1 - seq.t()) * window.source.vertices + seq.t() * window.target.vertices[result.map_xy]
-    assert np.allclose(moved, expected)
+    assert np.allclose(moved, seq.display.points(expected))
 
 
 @pytest.mark.slow
@@ -405,7 +405,7 @@ def test_divergence_free_sequence_uses_the_flow(qtbot, window, tmp_path):
     assert "divergence-free flow" in view.kind.text()
     assert np.allclose(view.positions(1.0), result.extras["morphed_vertices"], atol=1e-3)
     view.slider.setValue(view.slider.maximum())  # t = t max extrapolates along the flow
-    assert np.allclose(view.mesh.points, view.positions(view.t_max.value()), atol=1e-4)
+    assert np.allclose(view.mesh.points, view.display.points(view.positions(view.t_max.value())), atol=1e-6)
     paths = window.export_frames(".obj", folder=str(tmp_path))
     assert len(paths) == 11 and (tmp_path / "animation.glb").exists()
     assert np.allclose(load_mesh(paths[0]).vertices, view.positions(0.0), atol=1e-4)

@@ -15,7 +15,7 @@ import math
 import numpy as np
 from matplotlib.backends.backend_qtagg import FigureCanvasQTAgg
 from matplotlib.figure import Figure
-from PySide6.QtCore import Qt
+from PySide6.QtCore import Qt, Signal
 from PySide6.QtWidgets import (
     QComboBox,
     QHBoxLayout,
@@ -26,10 +26,12 @@ from PySide6.QtWidgets import (
     QSplitter,
     QTableWidget,
     QTableWidgetItem,
+    QTabWidget,
     QVBoxLayout,
     QWidget,
 )
 
+from app.views.camera import FramedView, ShapeDisplay, enable_hover, picked_vertex
 from app.views.scene import (
     ERROR_COLOR_MAX,
     PLAIN_COLOR,
@@ -47,19 +49,32 @@ COLUMNS = (("method", "registered method"), ("s", "runtime in seconds"), ("energ
            ("unmatched", "source vertices left unmatched"))
 #: what the method views show
 COLOR_MODES = ("colour transfer", "error heat map")
-METHOD_LIST_WIDTH = 220
-TABLE_CURVES_SPLIT = [620, 300]  # initial widths of the table and the error-curve plot
-VIEWS_BOTTOM_SPLIT = [500, 250]  # initial heights of the views and the table/plot row
+METHOD_LIST_ROWS = 2  # the method check list is a strip this many text lines high above the grid
+VIEWS_BOTTOM_SPLIT = [640, 260]  # initial heights of the grid and the table/curves tabs
 LABEL_FONT_SIZE = 8
+MARKER_SIZE = 14  # point inspection: pixels of the markers
+PARTNER_COLOR = "black"  # the method's partner of the inspected vertex
+TRUE_PARTNER_COLOR = "lime"  # its ground-truth partner
 
 
-class CompareView(QWidget):
-    """Queue of methods; each result adds a column of views, a table row and an error curve."""
+class CompareView(QWidget, FramedView):
+    """Queue of methods; each result adds a view to the grid, a table row and an error curve.
+
+    Point inspection: a click on a shape (or :meth:`inspect`) marks a source
+    vertex on the source view and, in every method's view, its partner under
+    that method (black) and, with ground truth, its true partner (green),
+    with the geodesic error in the view's caption.
+    """
+
+    hovered = Signal(str)  # "vertex i of <shape>" under the mouse
 
     def __init__(self, parent=None):
         super().__init__(parent)
-        self.methods = QListWidget()
-        self.methods.setMaximumWidth(METHOD_LIST_WIDTH)
+        self.methods = QListWidget()  # a wrapping strip of check boxes, so the grid gets the width
+        self.methods.setFlow(QListWidget.LeftToRight)
+        self.methods.setWrapping(True)
+        self.methods.setResizeMode(QListWidget.Adjust)
+        self.methods.setMaximumHeight(METHOD_LIST_ROWS * self.methods.fontMetrics().height() + 16)
         self.run_button = QPushButton("Run selected")
         self.color_mode = QComboBox()
         self.color_mode.addItems(COLOR_MODES)
@@ -73,31 +88,34 @@ class CompareView(QWidget):
         self.table.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeToContents)
         self.table.horizontalHeader().setSortIndicator(-1, Qt.AscendingOrder)  # insertion order until a click
         self.table.setSortingEnabled(True)
-        self.figure = Figure(figsize=(4, 3))
+        self.figure = Figure(figsize=(4, 3), layout="constrained")  # fits labels into any size
         self.canvas = FigureCanvasQTAgg(self.figure)
         self.plotter = None
         self.views_box = QVBoxLayout()
-        left = QVBoxLayout()
-        left.addWidget(self.methods, 1)
-        left.addWidget(self.run_button)
-        left.addWidget(self.color_mode)
-        left_w = QWidget()
-        left_w.setLayout(left)
+        top = QHBoxLayout()
+        top.addWidget(self.methods, 1)
+        controls = QVBoxLayout()
+        controls.addWidget(self.run_button)
+        controls.addWidget(self.color_mode)
+        top.addLayout(controls)
         views_w = QWidget()
         views_w.setLayout(self.views_box)
-        bottom = QSplitter(Qt.Horizontal)
-        bottom.addWidget(self.table)
-        bottom.addWidget(self.canvas)
-        bottom.setSizes(TABLE_CURVES_SPLIT)
+        self.bottom = QTabWidget()  # the table and the curves each get the full width
+        self.bottom.addTab(self.table, "Table")
+        self.bottom.addTab(self.canvas, "Error curves")
         right = QSplitter(Qt.Vertical)
         right.addWidget(views_w)
-        right.addWidget(bottom)
+        right.addWidget(self.bottom)
         right.setSizes(VIEWS_BOTTOM_SPLIT)
-        layout = QHBoxLayout(self)
-        layout.addWidget(left_w)
+        layout = QVBoxLayout(self)
+        layout.addLayout(top)
         layout.addWidget(right, 1)
         self.rows: list[dict] = []
         self.shapes = None  # (source, target) of the current comparison
+        self.displays: tuple[ShapeDisplay, ShapeDisplay] | None = None
+        self.true_partner: np.ndarray | None = None  # (n_x,) ground-truth target vertex, -1 where unknown
+        self.inspected: int | None = None  # the source vertex under inspection
+        self.captions: dict[int, str] = {}  # view index -> caption (for tests and the picture)
 
     def set_methods(self, specs) -> None:
         self.methods.clear()
@@ -123,9 +141,29 @@ class CompareView(QWidget):
             self.plotter.close()
             self.plotter.interactor.deleteLater()
             self.plotter = None
+        self.inspected = None
+        self.captions = {}
         if n_methods:
             self.plotter = make_plotter(self, shape=grid_shape(n_methods + 1))
             self.views_box.addWidget(self.plotter.interactor)
+            self.plotter.enable_point_picking(callback=self._on_pick, show_message=False, use_picker=True,
+                                              left_clicking=True, show_point=False)
+            enable_hover(self.plotter, self._hover_text, self.hovered.emit)
+
+    def set_ground_truth(self, source_rows, target_rows, n_source: int) -> None:
+        """Ground-truth rows (or None) of the pair being compared: the true partners of inspected vertices."""
+        self.true_partner = None
+        if source_rows is not None:
+            self.true_partner = np.full(n_source, -1, dtype=np.int64)
+            self.true_partner[np.asarray(source_rows)] = np.asarray(target_rows)
+
+    def framed_points(self) -> list[np.ndarray]:
+        if self.shapes is None or self.displays is None:
+            return []
+        return [d.points(s.vertices) for d, s in zip(self.displays, self.shapes)]
+
+    def redraw(self) -> None:
+        self._redraw_views(reset_camera=True)
 
     def add_result(self, source, target, result, report=None, n_unmatched: int = 0, per_vertex=None) -> None:
         """Add one method's result.
@@ -142,7 +180,9 @@ class CompareView(QWidget):
                "within": summary.get("within_0.05", np.nan), "auc": summary.get("auc", np.nan),
                "unmatched": n_unmatched, "result": result, "report": report, "per_vertex": per_vertex}
         self.rows.append(row)
-        self.shapes = (source, target)
+        if self.shapes != (source, target):
+            self.shapes = (source, target)
+            self.displays = (ShapeDisplay.of(source.vertices, self.up), ShapeDisplay.of(target.vertices, self.up))
         self.table.setSortingEnabled(False)  # rows are filled at their insertion position
         r = self.table.rowCount()
         self.table.insertRow(r)
@@ -159,13 +199,18 @@ class CompareView(QWidget):
         rows, cols = self.plotter.shape
         return (index // cols, index % cols) if index < rows * cols else None
 
-    def _redraw_views(self) -> None:
-        """Draw every view again (after a change of colour mode)."""
+    def _redraw_views(self, reset_camera: bool = False) -> None:
+        """Draw every view again (after a change of colour mode, up axis or inspected vertex)."""
         if self.plotter is None or not self.rows:
             return
+        if reset_camera:
+            source, target = self.shapes
+            self.displays = (ShapeDisplay.of(source.vertices, self.up), ShapeDisplay.of(target.vertices, self.up))
         self.plotter.clear_actors()
         for index in range(1, len(self.rows) + 1):
             self._draw_view(index, reset_camera=False)
+        if reset_camera:
+            self.fit_preset()
         self.plotter.render()
 
     def _draw_view(self, index: int, reset_camera: bool = True) -> None:
@@ -173,40 +218,117 @@ class CompareView(QWidget):
         if self.plotter is None or self.shapes is None:
             return
         source, target = self.shapes
+        src_points, tgt_points = self.framed_points()
         colors = coordinate_colors(source.vertices)
         heat = self.color_mode.currentText() == "error heat map"
+        v = self.inspected
         if index == 1:
             self.plotter.subplot(0, 0)
-            self.plotter.add_mesh(polydata(source.vertices, source.faces), scalars=colors, rgb=True)
-            self.plotter.add_text("source", font_size=LABEL_FONT_SIZE)
+            self.plotter.add_mesh(polydata(src_points, source.faces), scalars=colors, rgb=True)
+            caption = "source" if v is None else f"source: vertex {v}"
+            self._caption(0, caption)
+            if v is not None:
+                self._marker(src_points[v], PARTNER_COLOR)
         position = self._view_position(index)
         if position is None:
             return
         row = self.rows[index - 1]
         self.plotter.subplot(*position)
-        map_yx, per_vertex = row["result"].map_yx, row["per_vertex"]
+        result = row["result"]
+        map_yx, map_xy, per_vertex = result.map_yx, result.map_xy, row["per_vertex"]
+        error = None if v is None or per_vertex is None or not np.isfinite(per_vertex[v]) else float(per_vertex[v])
         if heat and per_vertex is not None:
-            mesh = polydata(source.vertices, source.faces)
-            mesh["error"] = spread_to_matched(source.vertices, per_vertex, row["result"].map_xy)
+            mesh = polydata(src_points, source.faces)
+            mesh["error"] = spread_to_matched(source.vertices, per_vertex, map_xy)
             self.plotter.add_mesh(mesh, scalars="error", cmap="inferno", clim=(0, ERROR_COLOR_MAX),
                                   nan_color=PLAIN_COLOR, show_scalar_bar=index == 1,
                                   scalar_bar_args={"title": "error", "n_labels": 4, "vertical": True,
                                                    "position_x": 0.85, "position_y": 0.15, "height": 0.7,
                                                    "width": 0.05, "label_font_size": 10, "title_font_size": 10})
-            self.plotter.add_text(f"{row['method']} (error on the source)", font_size=LABEL_FONT_SIZE)
+            caption = f"{row['method']} (error on the source)"
+            if v is not None:
+                self._marker(src_points[v], PARTNER_COLOR)
+                caption += f"\nvertex {v}: error {error:.3f}" if error is not None else f"\nvertex {v}: no error"
         elif heat:
-            self.plotter.add_mesh(polydata(source.vertices, source.faces), color=PLAIN_COLOR)
-            self.plotter.add_text(f"{row['method']}: no ground truth", font_size=LABEL_FONT_SIZE)
+            self.plotter.add_mesh(polydata(src_points, source.faces), color=PLAIN_COLOR)
+            caption = f"{row['method']}: no ground truth"
         elif map_yx is None:
-            self.plotter.add_text(f"{row['method']}: no target map", font_size=LABEL_FONT_SIZE)
+            caption = f"{row['method']}: no target map"
         else:
             tgt_colors = transfer_colors(colors, map_yx)
-            self.plotter.add_mesh(polydata(target.vertices, target.faces), scalars=tgt_colors, rgb=True)
-            self.plotter.add_text(row["method"], font_size=LABEL_FONT_SIZE)
+            self.plotter.add_mesh(polydata(tgt_points, target.faces), scalars=tgt_colors, rgb=True)
+            caption = row["method"]
+            if v is not None:
+                caption += "\n" + self._partner_caption(v, map_xy, error, tgt_points)
+        self._caption(index, caption)
         self.plotter.link_views()
         if reset_camera:
-            self.plotter.reset_camera()
+            self.fit_preset()
         self.plotter.render()
+
+    def _partner_caption(self, v: int, map_xy, error, tgt_points) -> str:
+        """Marks the partner and the true partner of source vertex ``v``; their caption line."""
+        partner = -1 if map_xy is None else int(map_xy[v])
+        text = f"{v} -> {partner}" if partner >= 0 else f"{v}: unmatched"
+        if partner >= 0:
+            self._marker(tgt_points[partner], PARTNER_COLOR)
+        true = -1 if self.true_partner is None else int(self.true_partner[v])
+        if true >= 0:
+            self._marker(tgt_points[true], TRUE_PARTNER_COLOR)
+            text += f" (true {true}" + (f", error {error:.3f})" if error is not None else ")")
+        return text
+
+    def _caption(self, index: int, text: str) -> None:
+        self.captions[index] = text
+        self.plotter.add_text(text, font_size=LABEL_FONT_SIZE)
+
+    def _marker(self, point: np.ndarray, color: str) -> None:
+        self.plotter.add_points(np.asarray(point, dtype=np.float64)[None], color=color, point_size=MARKER_SIZE,
+                                render_points_as_spheres=True, pickable=False, reset_camera=False)
+
+    def inspect(self, vertex: int | None) -> None:
+        """Mark source vertex ``vertex`` and its partners in every view (None: clear the marks)."""
+        if self.shapes is None:
+            return
+        if vertex is not None and not 0 <= int(vertex) < self.shapes[0].n_vertices:
+            raise IndexError(f"vertex {vertex} is not a vertex of the source ({self.shapes[0].n_vertices} vertices)")
+        self.inspected = None if vertex is None else int(vertex)
+        self._redraw_views()
+
+    def _view_of(self, renderer) -> int | None:
+        renderers = list(self.plotter.renderers) if self.plotter is not None else []
+        return renderers.index(renderer) if renderer in renderers else None
+
+    def _shape_under(self, view: int | None) -> str | None:
+        """"source" or "target": what view ``view`` shows (None: nothing)."""
+        if view is None or self.shapes is None or view > len(self.rows):
+            return None
+        if view == 0 or self.color_mode.currentText() == "error heat map":
+            return "source"
+        return "target" if self.rows[view - 1]["result"].map_yx is not None else None
+
+    def _on_pick(self, point, picker) -> None:
+        """A click: the source vertex under it, or the source vertex mapped to the target vertex under it."""
+        view = self._view_of(picker.GetRenderer())
+        shape = self._shape_under(view)
+        if shape is None or point is None:
+            return
+        src_points, tgt_points = self.framed_points()
+        vertex = picked_vertex(src_points if shape == "source" else tgt_points, point)
+        if shape == "target":
+            vertex = int(self.rows[view - 1]["result"].map_yx[vertex])
+            if vertex < 0:
+                return
+        self.inspect(vertex)
+
+    def _hover_text(self, renderer, point) -> str | None:
+        shape = self._shape_under(self._view_of(renderer))
+        if shape is None:
+            return None
+        src_points, tgt_points = self.framed_points()
+        index = 0 if shape == "source" else 1
+        vertex = picked_vertex((src_points, tgt_points)[index], point)
+        return f"vertex {vertex} of the {shape} ({self.shapes[index].name})"
 
     def _draw_curves(self) -> None:
         from corrlib.evaluation import cumulative_curve
@@ -229,7 +351,6 @@ class CompareView(QWidget):
         else:
             ax.text(0.5, 0.5, "load ground truth to see error curves", ha="center", va="center")
             ax.set_axis_off()
-        self.figure.tight_layout()
         self.canvas.draw_idle()
 
     def table_rows(self) -> list[list[str]]:

@@ -4,8 +4,10 @@ from __future__ import annotations
 
 import numpy as np
 import pyvista as pv
+from PySide6.QtCore import Signal
 from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QVBoxLayout, QWidget
 
+from app.views.camera import FramedView, ShapeDisplay, enable_hover, picked_vertex
 from app.views.scene import (
     LABEL_FONT_SIZE,
     ERROR_COLOR_MAX,
@@ -21,18 +23,21 @@ from corrlib.geometry.uv import checkerboard, cylindrical_uv
 MODES = ("coordinates", "function", "texture", "lines", "error")
 N_LINES = 12  # correspondence lines drawn before the user picks more
 ERROR_WITHIN = 0.05  # the info line gives the share of errors up to this
-LINES_GAP = 0.9  # lines mode: the target sits this many bounding-box diagonals right of the source
+LINES_GAP = 0.25  # lines mode: space between source and target, in display units (bounding-box diagonals)
 LINE_WIDTH = 2
 POINT_SIZE = 12
 
 
-class PairView(QWidget):
+class PairView(QWidget, FramedView):
     """Colour transfer (``colors_Y = colors_X[map_yx]``), texture transfer and error heat map.
 
     Nothing here computes more than colours: the errors and the source function
     arrive with the result (computed in the method's job, :func:`app.jobs.method_job`).
     Unmatched vertices (-1 in a map) are drawn grey and have no error.
+    The mouse resting on a shape shows the vertex under it (:attr:`hovered`).
     """
+
+    hovered = Signal(str)  # "vertex i of the source (name)"
 
     def __init__(self, parent=None):
         super().__init__(parent)
@@ -62,6 +67,9 @@ class PairView(QWidget):
         self.texture_image = checkerboard()
         self.picked: list[int] = []  # source vertices with correspondence lines
         self.lines = None  # the polydata of the correspondence lines (for tests)
+        self.displays: tuple[ShapeDisplay, ShapeDisplay] | None = None  # source's and target's display frames
+        self.shown_points: list[np.ndarray] = []  # display points of what is drawn (camera fitting)
+        enable_hover(self.plotter, self._hover_text, self.hovered.emit)
 
     def set_shapes(self, source, target) -> None:
         self.source, self.target, self.result, self.errors = source, target, None, None
@@ -94,36 +102,62 @@ class PairView(QWidget):
         self.info.setText(text)
         self.redraw()
 
+    def framed_points(self) -> list[np.ndarray]:
+        return self.shown_points
+
+    def _hover_text(self, renderer, point) -> str | None:
+        """The vertex under the mouse: of the shape drawn in that subplot (lines mode: the nearer shape)."""
+        if len(self.shown_points) != 2:
+            return None
+        renderers = list(self.plotter.renderers)
+        lines = self.mode.currentText() == "lines"
+        candidates = (0, 1) if lines else ((renderers.index(renderer),) if renderer in renderers else ())
+        best = None
+        for which in candidates:
+            vertex = picked_vertex(self.shown_points[which], point)
+            distance = np.linalg.norm(self.shown_points[which][vertex] - point)
+            if best is None or distance < best[0]:
+                best = (distance, which, vertex)
+        if best is None:
+            return None
+        _, which, vertex = best
+        shape = (self.source, self.target)[which]
+        return f"vertex {vertex} of the {('source', 'target')[which]} ({shape.name})"
+
     def redraw(self, *_args) -> None:
         p = self.plotter
         p.clear_actors()
         self.target_colors = None
+        self.shown_points = []
         if self.source is None or self.target is None:
             p.render()
             return
         mode = self.mode.currentText()
-        src = polydata(self.source.vertices, self.source.faces)
-        tgt = polydata(self.target.vertices, self.target.faces)
+        self.displays = (ShapeDisplay.of(self.source.vertices, self.up), ShapeDisplay.of(self.target.vertices, self.up))
+        src_points, tgt_points = self.displays[0].points(self.source.vertices), self.displays[1].points(self.target.vertices)
+        src = polydata(src_points, self.source.faces)
+        tgt = polydata(tgt_points, self.target.faces)
         if mode == "lines":
             self._draw_lines(src, tgt)
             return
         p.subplot(0, 0)
         p.add_text(f"source: {self.source.name}", font_size=LABEL_FONT_SIZE)
         if mode == "texture":
-            self._draw_texture(src)
+            self._draw_texture(src, tgt_points)
         elif mode == "error" and self.errors is not None:
             self._draw_errors(src, tgt)
         else:
             self._draw_colors(src, tgt, mode)
         p.add_text(f"target: {self.target.name}", font_size=LABEL_FONT_SIZE)
         p.link_views()
-        p.reset_camera()
+        self.shown_points = [src_points, tgt_points]
+        self.fit_preset()
         p.render()
 
     def _map_yx(self) -> np.ndarray | None:
         return None if self.result is None else self.result.map_yx
 
-    def _draw_texture(self, src) -> None:
+    def _draw_texture(self, src, tgt_points: np.ndarray) -> None:
         """Texture on the source's cylindrical UV map; the target's matched faces carry it, the others are grey."""
         p = self.plotter
         tex = pv.numpy_to_texture(self.texture_image)
@@ -133,18 +167,18 @@ class PairView(QWidget):
         p.subplot(0, 1)
         map_yx = self._map_yx()
         if map_yx is None:
-            p.add_mesh(polydata(self.target.vertices, self.target.faces), color=PLAIN_COLOR)
+            p.add_mesh(polydata(tgt_points, self.target.faces), color=PLAIN_COLOR)
             return
         matched = map_yx >= 0
         uv_y = np.zeros((self.target.n_vertices, 2))
         uv_y[matched] = uv[map_yx[matched]]
         textured = matched[self.target.faces].all(axis=1)  # faces with a partner at every corner
         if textured.any():
-            mesh = polydata(self.target.vertices, self.target.faces[textured])
+            mesh = polydata(tgt_points, self.target.faces[textured])
             mesh.active_texture_coordinates = uv_y
             p.add_mesh(mesh, texture=tex)
         if not textured.all():
-            p.add_mesh(polydata(self.target.vertices, self.target.faces[~textured]), color=[UNMATCHED_GREY] * 3)
+            p.add_mesh(polydata(tgt_points, self.target.faces[~textured]), color=[UNMATCHED_GREY] * 3)
 
     def _draw_errors(self, src, tgt) -> None:
         p = self.plotter
@@ -191,13 +225,8 @@ class PairView(QWidget):
         p.subplot(0, 0)
         colors = coordinate_colors(self.source.vertices)
         p.add_mesh(src, scalars=colors, rgb=True, pickable=True)
-        p.reset_camera()
-        # put the target to the right of the source as the camera sees it
-        cam = p.camera
-        right = np.cross(np.asarray(cam.focal_point) - np.asarray(cam.position), np.asarray(cam.up))
-        right /= max(np.linalg.norm(right), 1e-300)
-        width = max(self.source.bbox_diagonal, self.target.bbox_diagonal)
-        shift = LINES_GAP * width * right + self.source.vertices.mean(axis=0) - self.target.vertices.mean(axis=0)
+        # the target to the right of the source (both in display frames, of unit size)
+        shift = np.array([LINES_GAP + (np.ptp(src.points[:, 0]) + np.ptp(tgt.points[:, 0])) / 2, 0.0, 0.0])
         tgt.points = tgt.points + shift
         p.add_mesh(tgt, color=PLAIN_COLOR, pickable=False)
         map_xy = None if self.result is None else self.result.map_xy
@@ -207,8 +236,8 @@ class PairView(QWidget):
                 self.picked = list(farthest_point_sampling(self.source.vertices, min(N_LINES, self.source.n_vertices)))
             shown = [v for v in self.picked if map_xy[v] >= 0]  # an unmatched vertex has no partner to draw
             if shown:
-                starts = self.source.vertices[shown]
-                ends = self.target.vertices[map_xy[shown]] + shift
+                starts = src.points[shown]
+                ends = tgt.points[map_xy[shown]]
                 self.lines = pv.line_segments_from_points(np.column_stack([starts, ends]).reshape(-1, 3))
                 p.add_mesh(self.lines, color="black", line_width=LINE_WIDTH)
                 p.add_points(np.vstack([starts, ends]), scalars=np.vstack([colors[shown]] * 2), rgb=True,
@@ -221,13 +250,15 @@ class PairView(QWidget):
             p.enable_point_picking(callback=self._on_pick, show_message=False, use_picker=True,
                                    left_clicking=True, show_point=False)
             self._picking = True
-        p.reset_camera()
+        self.shown_points = [src.points, tgt.points]
+        self.fit_preset()
         p.render()
 
     def _on_pick(self, point, *_args) -> None:
         if self.source is None or self.mode.currentText() != "lines" or point is None:
             return
-        vertex = int(np.argmin(np.linalg.norm(self.source.vertices - np.asarray(point), axis=1)))
+        shown = self.displays[0].points(self.source.vertices)
+        vertex = int(np.argmin(np.linalg.norm(shown - np.asarray(point), axis=1)))
         self.add_line(vertex)
 
     def add_line(self, vertex: int) -> None:

@@ -5,13 +5,14 @@ from __future__ import annotations
 import numpy as np
 from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QVBoxLayout, QWidget
 
+from app.views.camera import FramedView, ShapeDisplay
 from app.views.scene import LABEL_FONT_SIZE, PLAIN_COLOR, LazyPlotter, hue_colors, polydata, polyline
 
 CURVE_WIDTH = 4  # line width of the query contour
 CURVE_TUBE_RADIUS = 0.004  # radius of the matched curve's tube, relative to the mesh's bounding-box diagonal
 
 
-class ProductView(QWidget):
+class ProductView(QWidget, FramedView):
     """Left: the query contour; right: the mesh with the matched curve; both coloured by contour position."""
 
     def __init__(self, parent=None):
@@ -35,6 +36,21 @@ class ProductView(QWidget):
         self.curve = None  # the matched curve's polydata (for tests)
         self.torus_curve = None  # the correspondence curve on the torus (for tests)
         self._pair = None
+        self._match = None  # the arguments of the last show_contour_match (redrawn on a new up axis)
+        self.mesh_points: np.ndarray | None = None  # the matched mesh in its display frame
+
+    def view_plotter(self):
+        return self._plotter.get() if self.mesh_points is not None else None
+
+    def framed_points(self) -> list[np.ndarray]:
+        return [] if self.mesh_points is None else [self.mesh_points]
+
+    def framed_renderers(self):
+        return [self.plotter.renderers[1]]  # the mesh; the contour keeps its 2D view
+
+    def redraw(self) -> None:
+        if self._match is not None:
+            self.show_contour_match(*self._match)
 
     @property
     def plotter(self):
@@ -42,6 +58,7 @@ class ProductView(QWidget):
 
     def show_contour_match(self, contour_points: np.ndarray, mesh, path_vertices: np.ndarray,
                            path_contour_index: np.ndarray, energy: float) -> None:
+        self._match = (contour_points, mesh, path_vertices, path_contour_index, energy)
         p = self.plotter
         p.clear_actors()
         m = contour_points.shape[0]
@@ -53,13 +70,14 @@ class ProductView(QWidget):
         p.view_xy()
         p.reset_camera()
         p.subplot(0, 1)
-        p.add_mesh(polydata(mesh.vertices, mesh.faces), color=PLAIN_COLOR, smooth_shading=True)
-        self.curve = polyline(mesh.vertices[path_vertices], closed=False)
+        self.mesh_points = ShapeDisplay.of(mesh.vertices, self.up).points(mesh.vertices)
+        p.add_mesh(polydata(self.mesh_points, mesh.faces), color=PLAIN_COLOR, smooth_shading=True)
+        self.curve = polyline(self.mesh_points[path_vertices], closed=False)
         self.curve["colors"] = hue_colors(path_contour_index / m)  # carried onto the tube's points
-        tube = self.curve.tube(radius=CURVE_TUBE_RADIUS * mesh.bbox_diagonal)
+        tube = self.curve.tube(radius=CURVE_TUBE_RADIUS)  # the display frame has unit diagonal
         p.add_mesh(tube, scalars="colors", rgb=True)
         p.add_text(f"{mesh.name}: matched curve (energy {energy:.4g})", font_size=LABEL_FONT_SIZE)
-        p.reset_camera()
+        self.fit_preset()
         p.subplot(0, 0)
         p.reset_camera()
         p.render()
@@ -69,6 +87,7 @@ class ProductView(QWidget):
         """Two contours: the product torus (3D) and the flat square, with the correspondence curve."""
         names = list(result.path.product_functions)
         self._pair = result
+        self._match, self.mesh_points = None, None  # no mesh: the presets do not apply to the torus
         self.function.blockSignals(True)
         self.function.clear()
         self.function.addItems(names)

@@ -20,49 +20,76 @@ from PySide6.QtWidgets import (
 )
 
 THUMBNAIL_PX = 160  # gallery thumbnails are square, this many pixels wide
-THUMBNAIL_DPI = 80
 GALLERY_SPACING_PX = 8
 THUMBNAIL_GREY = 0.8  # colour of the mesh in a thumbnail (the matched curve is crimson)
-CURVE_LIFT = 0.01  # the matched curve is drawn this fraction of the mesh extent towards the viewer
+CURVE_TUBE_RADIUS = 0.006  # radius of the matched curve's tube in display units (unit diagonal)
 
 
-def thumbnail_png(mesh, path_vertices: np.ndarray | None, size: int = THUMBNAIL_PX) -> bytes:
-    """PNG bytes of a mesh with its matched curve (matplotlib figure, safe in a worker thread)."""
-    from matplotlib.backends.backend_agg import FigureCanvasAgg
-    from matplotlib.figure import Figure
+class ThumbnailRenderer:
+    """Gallery thumbnails drawn off screen by VTK with the studio's framing (GUI thread only).
 
-    from corrlib.plotting import draw_mesh, view_axes
+    One off-screen plotter is reused for every thumbnail: the mesh in its
+    display frame (:class:`app.views.camera.ShapeDisplay`, the up-axis
+    setting of the 3D views) seen from the front preset, and the matched
+    curve as a crimson tube.
+    """
 
-    fig = Figure(figsize=(size / THUMBNAIL_DPI, size / THUMBNAIL_DPI), dpi=THUMBNAIL_DPI)
-    FigureCanvasAgg(fig)
-    ax = fig.add_subplot(1, 1, 1, projection="3d")
-    draw_mesh(ax, mesh.vertices, mesh.faces, np.full((mesh.n_vertices, 3), THUMBNAIL_GREY))
-    if path_vertices is not None:
-        axes = view_axes(mesh.vertices)
-        pts = (mesh.vertices[path_vertices] - mesh.vertices.mean(axis=0)) @ axes.T
-        ax.plot(pts[:, 0], pts[:, 1] - CURVE_LIFT * np.ptp(pts), pts[:, 2], color="crimson", lw=2)
-    fig.subplots_adjust(0, 0, 1, 1)
-    buf = io.BytesIO()
-    fig.savefig(buf, format="png")
-    return buf.getvalue()
+    def __init__(self, size: int = THUMBNAIL_PX):
+        self.size = size
+        self._plotter = None
+
+    def _get(self):
+        if self._plotter is None:
+            import pyvista as pv
+
+            self._plotter = pv.Plotter(off_screen=True, window_size=(self.size, self.size))
+            self._plotter.set_background("white")
+        return self._plotter
+
+    def png(self, mesh, path_vertices: np.ndarray | None, up: str = "auto") -> bytes:
+        """PNG bytes of the thumbnail of ``mesh`` with its matched curve."""
+        from PIL import Image
+
+        from app.views.camera import ShapeDisplay, show_preset
+        from app.views.scene import polydata, polyline
+
+        plotter = self._get()
+        plotter.clear_actors()
+        points = ShapeDisplay.of(mesh.vertices, up).points(mesh.vertices)
+        plotter.add_mesh(polydata(points, mesh.faces), color=[THUMBNAIL_GREY] * 3, smooth_shading=True)
+        if path_vertices is not None and len(path_vertices) > 1:
+            plotter.add_mesh(polyline(points[path_vertices], closed=False).tube(radius=CURVE_TUBE_RADIUS),
+                             color="crimson")
+        show_preset(plotter, [points], "front")
+        image = plotter.screenshot(return_img=True)
+        buf = io.BytesIO()
+        Image.fromarray(image).save(buf, format="PNG")
+        return buf.getvalue()
+
+    def close(self) -> None:
+        if self._plotter is not None:
+            self._plotter.close()
+            self._plotter = None
 
 
 def retrieval_job(query, folder: str, params=None):
-    """Job factory for the worker: ranking plus thumbnails (numpy/bytes only)."""
+    """Job factory for the worker: the ranking and every ranked mesh (numpy only; thumbnails are drawn by
+    the view)."""
+    from corrlib.errors import CorrError
     from corrlib.io import load_mesh
     from corrlib.retrieval import mesh_files, retrieve
 
     def factory(token):
         files = mesh_files(folder)
         hits = yield from retrieve(query, files, params, token=token)
-        thumbs = []
+        meshes = []
         for hit in hits:
             token.raise_if_cancelled()
             try:
-                thumbs.append(thumbnail_png(load_mesh(hit.path), hit.path_vertices))
-            except Exception:  # a broken mesh has no thumbnail; its error is listed
-                thumbs.append(b"")
-        return hits, thumbs
+                meshes.append(None if hit.error else load_mesh(hit.path))
+            except CorrError:  # a broken mesh has no thumbnail; its error is listed
+                meshes.append(None)
+        return hits, meshes
 
     return factory
 
@@ -100,6 +127,8 @@ class RetrievalView(QWidget):
         layout.addLayout(top)
         layout.addWidget(self.gallery, 1)
         self.hits = []
+        self.thumbnails = ThumbnailRenderer()
+        self.up = "auto"  # the up-axis setting of the 3D views (thumbnails follow it)
 
     def set_query(self, contour) -> None:
         self.query = contour
@@ -114,10 +143,12 @@ class RetrievalView(QWidget):
         if folder:
             self.set_folder(folder)
 
-    def show_results(self, hits, thumbs) -> None:
+    def show_results(self, hits, meshes) -> None:
+        """The ranked gallery: ``hits`` (best first) and their meshes (None where loading failed)."""
         self.hits = hits
         self.gallery.clear()
-        for rank, (hit, png) in enumerate(zip(hits, thumbs), 1):
+        for rank, (hit, mesh) in enumerate(zip(hits, meshes), 1):
+            png = b"" if mesh is None else self.thumbnails.png(mesh, hit.path_vertices, self.up)
             text = f"{rank}. {hit.path.name}\n" + (f"E = {hit.energy:.4g}" if not hit.error else "failed")
             item = QListWidgetItem(text)
             if png:
@@ -136,4 +167,4 @@ class RetrievalView(QWidget):
             self.open_pair.emit(self.query, item.data(Qt.UserRole))
 
     def close_plotters(self) -> None:
-        pass
+        self.thumbnails.close()

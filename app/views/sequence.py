@@ -17,6 +17,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
+from app.views.camera import FramedView, ShapeDisplay
 from app.views.scene import LABEL_FONT_SIZE, LazyPlotter, coordinate_colors, polydata
 from corrlib.methods.divergence_free import SEQUENCE_T_MAX
 
@@ -29,7 +30,7 @@ FRAME_INTERVAL_MS = 30  # playback timer period
 PICTURE_STRIP_FRAMES = 6
 
 
-class SequenceView(QWidget):
+class SequenceView(QWidget, FramedView):
     """Slider over t in [0, t_max] (t > 1 extrapolates), play/pause, speed, loop."""
 
     def __init__(self, parent=None):
@@ -71,6 +72,20 @@ class SequenceView(QWidget):
         self.mesh = None
         self.positions: Callable[[float], np.ndarray] | None = None
         self.source = None
+        self.display: ShapeDisplay | None = None  # the source's display frame (every frame is drawn in it)
+        self.description = ""
+
+    def view_plotter(self):
+        return self._plotter.get() if self.mesh is not None else None
+
+    def framed_points(self) -> list[np.ndarray]:
+        return [] if self.mesh is None else self.ends
+
+    def redraw(self) -> None:
+        if self.source is not None and self.positions is not None:
+            value = self.slider.value()
+            self.set_sequence(self.source, self.positions, self.description)
+            self.slider.setValue(value)
 
     @property
     def plotter(self):
@@ -80,12 +95,16 @@ class SequenceView(QWidget):
         """Show ``source`` deforming along ``positions(t)`` (see :func:`corrlib.morph.sequence_positions`)."""
         self.source = source
         self.positions = positions
+        self.description = description
         self.kind.setText(description)
         self.plotter.clear_actors()
-        self.mesh = polydata(source.vertices, source.faces)
+        self.display = ShapeDisplay.of(source.vertices, self.up)
+        self.mesh = polydata(self.display.points(source.vertices), source.faces)
         self.plotter.add_mesh(self.mesh, scalars=coordinate_colors(source.vertices), rgb=True)
         self.plotter.add_text(source.name, font_size=LABEL_FONT_SIZE)
-        self.plotter.reset_camera()
+        # fitted to the source and the target pose (t = 1), so that the whole motion stays in view
+        self.ends = [self.mesh.points.copy(), self.display.points(positions(1.0))]
+        self.fit_preset()
         self.slider.setValue(0)
         self._on_slider(0)
 
@@ -97,7 +116,7 @@ class SequenceView(QWidget):
         self.label.setText(f"t = {t:.2f}")
         if self.mesh is None or self.positions is None:
             return
-        self.mesh.points[:] = self.positions(t)  # in place: no new VTK objects while scrubbing
+        self.mesh.points[:] = self.display.points(self.positions(t))  # in place: no new VTK objects while scrubbing
         self.mesh.Modified()
         self.plotter.update()  # one repaint, scheduled by Qt (render() would draw twice)
 

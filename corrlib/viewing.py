@@ -1,0 +1,202 @@
+"""How a shape is shown: its up axis, the front/side/top views and a camera as plain data (Qt- and VTK-free).
+
+The studio's views, its retrieval thumbnails and the CLI's pictures all frame
+a shape with the same rules, so a shape looks alike everywhere.
+
+**Up axis.** Mesh files put "up" along one of their coordinate axes, by
+convention of the dataset (TOSCA: +z, the Sumner meshes and most graphics
+files: +y). The automatic choice is the side a standing shape rests on: for
+each of the six directions ±x, ±y, ±z, the vertices within the lowest 3 % of
+the shape's extent along it (its *bottom slab*) cover some share of the
+shape's footprint (convex hulls of their projections onto the perpendicular
+plane). Four paws or two feet spread over the footprint; a nose, a tail tip,
+a head or a hand does not. The direction whose slab covers the largest share
+is down. A user can override it (``+x`` … ``-z``).
+
+**Views.** With ``up`` fixed, the horizontal principal axes of the vertices
+give the long and the short horizontal extent. ``front`` looks at the broad
+side (along the short horizontal axis: an animal's flank, a person's front or
+back), ``side`` at the narrow side (along the long horizontal axis), ``top``
+down the up axis. The sign of a horizontal axis is arbitrary; it is fixed so
+that its largest coordinate component is positive, which keeps the views of
+one dataset alike.
+"""
+
+from __future__ import annotations
+
+import json
+from dataclasses import asdict, dataclass
+from pathlib import Path
+
+import numpy as np
+
+from corrlib.errors import FileFormatError, ParameterError
+
+#: the values of an up-axis setting
+UP_AXES = ("auto", "+x", "-x", "+y", "-y", "+z", "-z")
+#: the camera presets
+VIEWS = ("front", "side", "top")
+#: thickness of the bottom slab of the automatic up axis, a fraction of the extent
+SUPPORT_SLAB = 0.03
+
+
+def axis_vector(name: str) -> np.ndarray:
+    """(3,) float unit vector of ``"+x"`` … ``"-z"``."""
+    if name not in UP_AXES[1:]:
+        raise ParameterError(f"up axis must be one of {', '.join(UP_AXES)}, got {name!r}")
+    vector = np.zeros(3)
+    vector["xyz".index(name[1])] = 1.0 if name[0] == "+" else -1.0
+    return vector
+
+
+def _hull_area(points_2d: np.ndarray) -> float:
+    from scipy.spatial import ConvexHull, QhullError
+
+    if points_2d.shape[0] < 3:
+        return 0.0
+    try:
+        return float(ConvexHull(points_2d).volume)  # the "volume" of a 2D hull is its area
+    except QhullError:  # collinear points
+        return 0.0
+
+
+def support_shares(vertices: np.ndarray) -> dict[str, float]:
+    """Share of the footprint covered by the bottom slab, for each of ``+x`` … ``-z`` as up (see the module)."""
+    v = np.asarray(vertices, dtype=np.float64)
+    v = v - v.mean(axis=0)
+    shares = {}
+    for name in UP_AXES[1:]:
+        up = axis_vector(name)
+        axis = int(np.argmax(np.abs(up)))
+        others = [a for a in range(3) if a != axis]
+        height = v @ up
+        extent = float(np.ptp(height))
+        slab = v[height <= height.min() + SUPPORT_SLAB * extent, :][:, others] if extent > 0 else v[:0, others]
+        footprint = _hull_area(v[:, others])
+        shares[name] = _hull_area(slab) / footprint if footprint > 0 else 0.0
+    return shares
+
+
+def detect_up(vertices: np.ndarray) -> str:
+    """The automatic up axis (``"+x"`` … ``"-z"``) of a shape (see the module docstring)."""
+    shares = support_shares(vertices)
+    return max(UP_AXES[1:], key=lambda name: shares[name])
+
+
+@dataclass(frozen=True)
+class ViewFrame:
+    """Orthonormal frame of a shape's views (rows of :attr:`matrix`).
+
+    Attributes
+    ----------
+    right : (3,) float
+        Screen right in the front view (the long horizontal axis).
+    up : (3,) float
+    toward : (3,) float
+        From the shape toward the camera of the front view.
+    """
+
+    right: np.ndarray
+    up: np.ndarray
+    toward: np.ndarray
+
+    @property
+    def matrix(self) -> np.ndarray:
+        """(3, 3) rows right, up, toward (a proper rotation)."""
+        return np.stack([self.right, self.up, self.toward])
+
+    def direction(self, view: str) -> tuple[np.ndarray, np.ndarray]:
+        """Unit vector from the shape toward the camera (3,) and the screen's up (3,) of a preset view."""
+        if view == "front":
+            return self.toward, self.up
+        if view == "side":
+            return self.right, self.up
+        if view == "top":
+            return self.up, -self.toward
+        raise ParameterError(f"view must be one of {', '.join(VIEWS)}, got {view!r}")
+
+
+def _signed(axis: np.ndarray) -> np.ndarray:
+    return axis if axis[np.argmax(np.abs(axis))] > 0 else -axis
+
+
+def view_frame(vertices: np.ndarray, up: str = "auto") -> ViewFrame:
+    """The :class:`ViewFrame` of a shape with the given up-axis setting."""
+    if up not in UP_AXES:
+        raise ParameterError(f"up axis must be one of {', '.join(UP_AXES)}, got {up!r}")
+    v = np.asarray(vertices, dtype=np.float64)
+    up_vector = axis_vector(detect_up(v) if up == "auto" else up)
+    centred = v - v.mean(axis=0)
+    horizontal = centred - np.outer(centred @ up_vector, up_vector)
+    _, _, vt = np.linalg.svd(horizontal, full_matrices=False)
+    long_axis = vt[0] - (vt[0] @ up_vector) * up_vector
+    long_axis = _signed(long_axis / max(np.linalg.norm(long_axis), 1e-300))
+    toward = np.cross(long_axis, up_vector)  # right x up = toward the viewer (a right-handed screen)
+    return ViewFrame(long_axis, up_vector, toward)
+
+
+@dataclass
+class Camera:
+    """A camera as plain data (position, focal point, view up, view angle in degrees), saved as JSON.
+
+    The format follows what viewers such as Polyscope write for a view: one
+    JSON object with these four fields.
+    """
+
+    position: tuple[float, float, float]
+    focal_point: tuple[float, float, float]
+    view_up: tuple[float, float, float]
+    view_angle: float = 30.0
+
+    def save(self, path) -> Path:
+        from corrlib.io import atomic_write, check_output_file
+
+        path = check_output_file(path, "camera file")
+        with atomic_write(path) as fh:
+            json.dump({"corrlib_camera": 1, **asdict(self)}, fh, indent=2)
+        return path
+
+    @classmethod
+    def load(cls, path) -> "Camera":
+        from corrlib.io import read_text
+
+        text = read_text(path, "camera file")
+        try:
+            data = json.loads(text)
+            vectors = [tuple(float(x) for x in data[key]) for key in ("position", "focal_point", "view_up")]
+            angle = float(data.get("view_angle", 30.0))
+        except (ValueError, TypeError, KeyError) as exc:
+            raise FileFormatError(f"{path}: not a camera file (expected a JSON object with position, focal_point "
+                                  f"and view_up as 3 numbers each): {exc}") from None
+        if any(len(vec) != 3 for vec in vectors) or not np.all(np.isfinite(np.concatenate(vectors + [[angle]]))):
+            raise FileFormatError(f"{path}: position, focal_point and view_up must be 3 finite numbers each")
+        if np.linalg.norm(np.subtract(vectors[0], vectors[1])) == 0 or np.linalg.norm(vectors[2]) == 0:
+            raise FileFormatError(f"{path}: the camera sits on its focal point or has no up vector")
+        if not 0.0 < angle < 180.0:
+            raise FileFormatError(f"{path}: view_angle must be in (0, 180) degrees, got {angle}")
+        return cls(*vectors, view_angle=angle)
+
+
+def fitted_camera(vertices: np.ndarray, frame: ViewFrame, view: str = "front", aspect: float = 1.0,
+                  view_angle: float = 30.0, margin: float = 1.05) -> Camera:
+    """The camera of a preset view that fits the shape tightly into a viewport of width/height ``aspect``.
+
+    The distance is the smallest at which every vertex lies within the view
+    angle shrunk by ``margin`` (each vertex's own depth counts, so the nearest
+    wide part decides): the shape fills its viewport instead of its bounding
+    sphere.
+    """
+    if aspect <= 0:
+        raise ParameterError(f"aspect must be positive, got {aspect!r}")
+    v = np.asarray(vertices, dtype=np.float64)
+    toward, screen_up = frame.direction(view)
+    screen_right = np.cross(screen_up, toward)
+    lo, hi = v.min(axis=0), v.max(axis=0)
+    centre = (lo + hi) / 2
+    rel = v - centre
+    tan_half = np.tan(np.radians(view_angle) / 2)
+    across = np.maximum(np.abs(rel @ screen_right) / aspect, np.abs(rel @ screen_up)) / tan_half
+    # vertex i is in view from distance d along `toward` if across_i * margin <= d - depth_i
+    distance = max(float(np.max(rel @ toward + margin * across)), 1e-12)
+    position = centre + distance * toward
+    return Camera(tuple(position), tuple(centre), tuple(screen_up), view_angle)

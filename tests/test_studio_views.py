@@ -1,0 +1,229 @@
+"""The studio's framing and inspection: up axis, camera presets and files, point inspection across the compare
+views, hover, shortcuts, picture exports and VTK thumbnails (real window under Xvfb)."""
+
+import os
+
+import numpy as np
+import pytest
+
+os.environ.setdefault("QT_QPA_PLATFORM", "xcb")
+pytest.importorskip("pyvistaqt")
+
+from _data import TOSCA  # noqa: E402
+from _studio import wait_loaded  # noqa: E402
+
+
+def load_demo(qtbot, win):
+    win.load_demo()
+    wait_loaded(qtbot, win)
+
+
+def compare(qtbot, win, methods):
+    from PySide6.QtCore import Qt
+
+    view = win.compare_view
+    for i in range(view.methods.count()):
+        item = view.methods.item(i)
+        item.setCheckState(Qt.Checked if item.data(Qt.UserRole) in methods else Qt.Unchecked)
+    with qtbot.waitSignal(win.result_ready, timeout=180_000):
+        win.run_compare()
+    qtbot.waitUntil(lambda: not win.runner.is_running("compare"), timeout=180_000)
+    return view
+
+
+def camera_direction(camera):
+    d = np.subtract(camera.position, camera.focal_point)
+    return d / np.linalg.norm(d)
+
+
+def test_up_axis_and_camera_presets(qtbot, window):
+    """TOSCA stands on -z: auto puts +z up in the display frame (+y); the presets look from +z (front),
+    +x (side) and +y (top) of the display frame; an override re-frames every view."""
+    with qtbot.waitSignal(window.result_ready, timeout=180_000):
+        load_demo(qtbot, window)
+        window.run_method(method="descriptor-nn")
+    view = window.pair_view
+    window.tabs.setCurrentWidget(view)
+    source_display = view.displays[0]
+    assert np.allclose(source_display.rotation[1], [0, 0, 1])  # the wolf's up is the file's +z
+    points = source_display.points(window.source.vertices)
+    assert np.linalg.norm(np.ptp(points, axis=0)) == pytest.approx(1.0)  # unit diagonal
+    for preset, direction, up in (("front", [0, 0, 1], [0, 1, 0]), ("side", [1, 0, 0], [0, 1, 0]),
+                                  ("top", [0, 1, 0], [0, 0, -1])):
+        window.show_view(preset)
+        camera = view.camera()
+        assert np.allclose(camera_direction(camera), direction, atol=1e-9), preset
+        assert np.allclose(camera.view_up, up, atol=1e-9)
+    # every mode draws both shapes in their display frames (nothing in file units, off the camera)
+    from app.views.pair import MODES
+
+    for mode in MODES:
+        view.mode.setCurrentText(mode)
+        drawn = [actor.GetBounds() for r in view.plotter.renderers for actor in r.actors.values()
+                 if hasattr(actor, "GetMapper") and actor.GetMapper() is not None and actor.GetMapper().GetInput()
+                 is not None and actor.GetMapper().GetInput().GetNumberOfPoints() > 100]
+        assert len(drawn) >= 2, mode
+        assert all(max(abs(b) for b in bounds) < 2.0 for bounds in drawn), mode
+    view.mode.setCurrentText("coordinates")
+    # the mouse on a shape names the vertex under it (the status bar shows it)
+    assert view._hover_text(view.plotter.renderers[1], view.shown_points[1][10]) == "vertex 10 of the target (wolf1.off)"
+    with qtbot.waitSignal(view.hovered):
+        view.hovered.emit("vertex 3 of the source (wolf0.off)")
+    assert window.statusBar().currentMessage() == "vertex 3 of the source (wolf0.off)"
+    # both linked subplots share the camera
+    cams = [r.camera for r in view.plotter.renderers]
+    assert all(np.allclose(c.position, cams[0].position) for c in cams)
+    window.set_up_axis("+x")
+    assert np.allclose(view.displays[0].rotation[1], [1, 0, 0])
+    assert window.up_actions.checkedAction().data() == "+x"
+    assert window.compare_view.up == window.sequence_view.up == "+x"
+    window.set_up_axis("auto")
+    assert np.allclose(view.displays[0].rotation[1], [0, 0, 1])
+
+
+def test_camera_save_and_load(qtbot, window, tmp_path):
+    with qtbot.waitSignal(window.result_ready, timeout=180_000):
+        load_demo(qtbot, window)
+        window.run_method(method="descriptor-nn")
+    window.tabs.setCurrentWidget(window.pair_view)
+    window.show_view("side")
+    saved = window.pair_view.camera()
+    window.save_camera(str(tmp_path / "side.json"))
+    window.show_view("top")
+    assert not np.allclose(window.pair_view.camera().position, saved.position)
+    window.load_camera(str(tmp_path / "side.json"))
+    assert np.allclose(window.pair_view.camera().position, saved.position)
+    assert np.allclose(window.pair_view.camera().view_up, saved.view_up)
+    # a bad camera file: a named error, the window goes on
+    errors = []
+    window.error_shown.connect(errors.append)
+    (tmp_path / "bad.json").write_text("{}")
+    window.load_camera(str(tmp_path / "bad.json"))
+    assert errors and "bad.json" in errors[-1]
+    window.tabs.setCurrentWidget(window.retrieval_view)  # no 3D camera here
+    window.save_camera(str(tmp_path / "none.json"))
+    assert not (tmp_path / "none.json").exists() and "no camera to save" in errors[-1]
+
+
+def test_point_inspection_across_compare_views(qtbot, window):
+    """A source vertex marked in every view with each method's partner and the true one (the demo's
+    identity ground truth), by a click on the source, a click on a target, or inspect()."""
+    load_demo(qtbot, window)
+    view = compare(qtbot, window, ("descriptor-nn", "fmap-zoomout"))
+    assert view.true_partner is not None and np.array_equal(view.true_partner, np.arange(window.source.n_vertices))
+    vertex = 1234
+    n_actors = sum(len(r.actors) for r in view.plotter.renderers)
+    view.inspect(vertex)
+    assert view.captions[0] == f"source: vertex {vertex}"
+    for index, row in enumerate(view.rows, 1):
+        partner = int(row["result"].map_xy[vertex])
+        caption = view.captions[index]
+        assert f"{vertex} -> {partner}" in caption and f"true {vertex}" in caption
+        error = row["per_vertex"][vertex]
+        assert f"error {error:.3f}" in caption
+    # one marker on the source, a partner and a true partner on each target
+    assert sum(len(r.actors) for r in view.plotter.renderers) == n_actors + 1 + 2 * len(view.rows)
+
+    class Picker:
+        def __init__(self, renderer):
+            self.renderer = renderer
+
+        def GetRenderer(self):
+            return self.renderer
+
+    src_points, tgt_points = view.framed_points()
+    view._on_pick(src_points[77], Picker(view.plotter.renderers[0]))
+    assert view.inspected == 77
+    # a click on a target vertex inspects the source vertex that method maps there
+    row = view.rows[0]
+    target_vertex = 500
+    view._on_pick(tgt_points[target_vertex], Picker(view.plotter.renderers[1]))
+    assert view.inspected == int(row["result"].map_yx[target_vertex])
+    assert view._hover_text(view.plotter.renderers[0], src_points[42]) == f"vertex 42 of the source (wolf0.off)"
+    assert "of the target" in view._hover_text(view.plotter.renderers[1], tgt_points[42])
+    # the heat maps show the source: the marker sits on the vertex and the caption gives its error
+    view.color_mode.setCurrentText("error heat map")
+    view.inspect(vertex)
+    assert all(f"vertex {vertex}: error" in view.captions[i] for i in range(1, len(view.rows) + 1))
+    with pytest.raises(IndexError):
+        view.inspect(window.source.n_vertices)
+    view.inspect(None)
+    assert view.captions[0] == "source"
+
+
+def test_picture_exports(qtbot, window, tmp_path):
+    from PIL import Image
+
+    load_demo(qtbot, window)
+    errors = []
+    window.error_shown.connect(errors.append)
+    window.save_compare_grid(str(tmp_path / "empty.png"))
+    assert errors and "compare grid is empty" in errors[-1] and not (tmp_path / "empty.png").exists()
+    view = compare(qtbot, window, ("descriptor-nn",))
+    window.save_compare_grid(str(tmp_path / "grid.png"))
+    grid = np.asarray(Image.open(tmp_path / "grid.png"))
+    assert grid.shape[:2] == tuple(view.plotter.window_size[::-1])
+    assert grid[..., :3].std() > 10  # shapes drawn, not a blank picture
+    window.save_transparent(str(tmp_path / "clear.png"))
+    clear = np.asarray(Image.open(tmp_path / "clear.png"))
+    assert clear.shape[2] == 4
+    assert clear[0, 0, 3] == 0 and clear[..., 3].max() == 255  # transparent background, opaque shapes
+    window.tabs.setCurrentWidget(window.retrieval_view)
+    window.save_transparent(str(tmp_path / "none.png"))
+    assert "no 3D view" in errors[-1] and not (tmp_path / "none.png").exists()
+
+
+def test_shortcuts_are_listed_and_work(qtbot, window):
+    """Every shortcut is in Help > Keyboard shortcuts, and a key press triggers its action from a widget
+    that does not handle the key itself (the method box)."""
+    from PySide6.QtCore import Qt
+    from PySide6.QtGui import QAction
+
+    listed = dict(window.shortcut_list())
+    for action in ("Run method", "Cancel", "Front", "Side", "Top", "Reset camera", "Next tab", "Previous tab",
+                   "Keyboard shortcuts"):
+        assert action in listed, action
+    actions = {a.text(): a for a in window.findChildren(QAction)}
+    window.activateWindow()
+    qtbot.waitUntil(window.isActiveWindow, timeout=5000)  # shortcuts go to the active window
+    window.method_box.setFocus()
+    for text, key, modifier in (("Front", Qt.Key_1, Qt.ControlModifier), ("Top", Qt.Key_3, Qt.ControlModifier),
+                                ("Next tab", Qt.Key_PageDown, Qt.ControlModifier)):
+        with qtbot.waitSignal(actions[text].triggered, timeout=2000):
+            qtbot.keyClick(window.method_box, key, modifier)
+    window.tabs.setCurrentIndex(0)
+    actions["Previous tab"].trigger()
+    assert window.tabs.currentIndex() == window.tabs.count() - 1
+    actions["Next tab"].trigger()
+    assert window.tabs.currentIndex() == 0
+    window.show_shortcuts()  # not interactive: written to the job log
+    assert "Ctrl+R" in window.job_panel.log.toPlainText()
+
+
+def test_thumbnails_are_rendered_upright_by_vtk():
+    """A standing wolf's thumbnail (front preset, auto up) is wider than tall and its legs are at the bottom:
+    more of the bottom row band is background than of the body's band."""
+    from io import BytesIO
+
+    from PIL import Image
+
+    from app.views.retrieval import ThumbnailRenderer
+    from corrlib.io import load_mesh
+
+    renderer = ThumbnailRenderer(size=200)
+    try:
+        wolf = load_mesh(TOSCA / "wolf0.off")
+        image = np.asarray(Image.open(BytesIO(renderer.png(wolf, np.arange(0, 400, 7)))))[..., :3]
+    finally:
+        renderer.close()
+    shape = np.any(image < 240, axis=2)
+    rows, cols = np.flatnonzero(shape.any(axis=1)), np.flatnonzero(shape.any(axis=0))
+    width, height = np.ptp(cols) + 1, np.ptp(rows) + 1
+    assert width > height and width > 0.85 * 200  # fills the thumbnail across
+    crimson = (image[..., 0] > 150) & (image[..., 1] < 80) & (image[..., 2] < 100)
+    assert crimson.sum() > 20  # the matched curve is drawn
+    top, bottom = rows[0], rows[-1]
+    band = (bottom - top) // 5
+    upper = shape[top:top + band].mean()
+    lower = shape[bottom - band:bottom + 1].mean()
+    assert lower < upper  # legs below, the back above

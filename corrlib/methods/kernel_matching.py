@@ -151,7 +151,7 @@ class KernelMatchingParams:
     n_times: int = param(10, label="Times", low=1, high=100, help="Log-spaced diffusion times.")
     times: str = param("", label="Explicit times / area",
                        help="Comma-separated relative times (decreasing) replacing the log-spaced schedule.")
-    iters_per_time: int = param(3, label="Iterations per time", low=1, high=100,
+    iters_per_time: int = param(2, label="Iterations per time", low=1, high=100,
                                 help="DC iterations (linear assignments) per time; stops early when the "
                                      "map no longer changes.")
     n_seeds: int = param(3000, label="Seeds", low=10, high=100_000,

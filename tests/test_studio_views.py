@@ -12,6 +12,8 @@ pytest.importorskip("pyvistaqt")
 from _data import TOSCA  # noqa: E402
 from _studio import wait_loaded  # noqa: E402
 
+from app.views.camera import HOVER_INTERVAL  # noqa: E402
+
 
 def load_demo(qtbot, win):
     win.load_demo()
@@ -29,6 +31,21 @@ def compare(qtbot, win, methods):
         win.run_compare()
     qtbot.waitUntil(lambda: not win.runner.is_running("compare"), timeout=180_000)
     return view
+
+
+def mouse_event(widget, kind, x, y):
+    """A real Qt mouse event on a 3D view's widget (VTK's interactor turns it into its own event)."""
+    from PySide6.QtCore import QPointF, Qt
+    from PySide6.QtGui import QMouseEvent
+    from PySide6.QtWidgets import QApplication
+
+    types = {"move": QMouseEvent.MouseMove, "press": QMouseEvent.MouseButtonPress,
+             "release": QMouseEvent.MouseButtonRelease}
+    button = Qt.NoButton if kind == "move" else Qt.LeftButton
+    buttons = Qt.LeftButton if kind == "press" else Qt.NoButton
+    pos = QPointF(x, y)
+    QApplication.sendEvent(widget, QMouseEvent(types[kind], pos, widget.mapToGlobal(pos), button, buttons,
+                                               Qt.NoModifier))
 
 
 def camera_direction(camera):
@@ -67,9 +84,14 @@ def test_up_axis_and_camera_presets(qtbot, window):
     view.mode.setCurrentText("coordinates")
     # the mouse on a shape names the vertex under it (the status bar shows it)
     assert view._hover_text(view.plotter.renderers[1], view.shown_points[1][10]) == "vertex 10 of the target (wolf1.off)"
-    with qtbot.waitSignal(view.hovered):
-        view.hovered.emit("vertex 3 of the source (wolf0.off)")
-    assert window.statusBar().currentMessage() == "vertex 3 of the source (wolf0.off)"
+    seen = []
+    view.hovered.connect(seen.append)
+    widget = view.plotter.interactor
+    for x in range(widget.width() // 8, widget.width() // 2, widget.width() // 40):  # across the source
+        mouse_event(widget, "move", x, widget.height() // 2)
+        qtbot.wait(2 * int(1000 * HOVER_INTERVAL))
+    assert seen and all(text.startswith("vertex ") and "of the source (wolf0.off)" in text for text in seen)
+    assert window.statusBar().currentMessage() == seen[-1]
     # both linked subplots share the camera
     cams = [r.camera for r in view.plotter.renderers]
     assert all(np.allclose(c.position, cams[0].position) for c in cams)
@@ -131,6 +153,15 @@ def test_point_inspection_across_compare_views(qtbot, window):
         def GetRenderer(self):
             return self.renderer
 
+    # a real click in the middle of the source's view (top left of the grid) inspects a source vertex
+    widget = view.plotter.interactor
+    rows, cols = view.plotter.shape
+    x, y = widget.width() // (2 * cols), widget.height() // (2 * rows)
+    view.inspect(None)
+    mouse_event(widget, "press", x, y)
+    mouse_event(widget, "release", x, y)
+    qtbot.waitUntil(lambda: view.inspected is not None, timeout=3000)
+    assert view.captions[0] == f"source: vertex {view.inspected}"
     src_points, tgt_points = view.framed_points()
     view._on_pick(src_points[77], Picker(view.plotter.renderers[0]))
     assert view.inspected == 77

@@ -411,9 +411,7 @@ class MainWindow(QMainWindow):
         for action in self.up_actions.actions():
             action.setChecked(action.data() == up)
         for view in self.framed_views():
-            view.up = up
-        for view in self.framed_views():
-            view.redraw()
+            view.set_up_axis(up)
         self.retrieval_view.up = up  # the next ranking's thumbnails
         self.statusBar().showMessage(f"up axis: {up}")
 
@@ -976,7 +974,7 @@ class MainWindow(QMainWindow):
         self._save_plotter_picture(plotter, path, transparent=True)
 
     def export_compare_grid(self) -> None:
-        if self.compare_view.plotter is None or not self.compare_view.rows:
+        if not self.compare_view.has_results():
             self.show_error("run a comparison first: the compare grid is empty")
             return
         path = self._save_path("Compare grid", dialog_filter("picture", save=True))
@@ -985,7 +983,7 @@ class MainWindow(QMainWindow):
 
     def save_compare_grid(self, path: str) -> None:
         """Every view of the compare grid, with its captions, as one picture."""
-        if self.compare_view.plotter is None or not self.compare_view.rows:
+        if not self.compare_view.has_results():
             self.show_error("run a comparison first: the compare grid is empty")
             return
         self._save_plotter_picture(self.compare_view.plotter, path, transparent=False)

@@ -61,7 +61,7 @@ def test_up_axis_and_camera_presets(qtbot, window):
         window.run_method(method="descriptor-nn")
     view = window.pair_view
     window.tabs.setCurrentWidget(view)
-    source_display = view.displays[0]
+    source_display = view.displayed.displays[0]
     assert np.allclose(source_display.rotation[1], [0, 0, 1])  # the wolf's up is the file's +z
     points = source_display.points(window.source.vertices)
     assert np.linalg.norm(np.ptp(points, axis=0)) == pytest.approx(1.0)  # unit diagonal
@@ -74,8 +74,10 @@ def test_up_axis_and_camera_presets(qtbot, window):
     # every mode draws both shapes in their display frames (nothing in file units, off the camera)
     from app.views.pair import MODES
 
+    framed = view.displayed
     for mode in MODES:
         view.mode.setCurrentText(mode)
+        assert view.displayed is framed  # the display frames are computed once per pair and up axis
         drawn = [actor.GetBounds() for r in view.plotter.renderers for actor in r.actors.values()
                  if hasattr(actor, "GetMapper") and actor.GetMapper() is not None and actor.GetMapper().GetInput()
                  is not None and actor.GetMapper().GetInput().GetNumberOfPoints() > 100]
@@ -96,11 +98,11 @@ def test_up_axis_and_camera_presets(qtbot, window):
     cams = [r.camera for r in view.plotter.renderers]
     assert all(np.allclose(c.position, cams[0].position) for c in cams)
     window.set_up_axis("+x")
-    assert np.allclose(view.displays[0].rotation[1], [1, 0, 0])
+    assert np.allclose(view.displayed.displays[0].rotation[1], [1, 0, 0])
     assert window.up_actions.checkedAction().data() == "+x"
     assert window.compare_view.up == window.sequence_view.up == "+x"
     window.set_up_axis("auto")
-    assert np.allclose(view.displays[0].rotation[1], [0, 0, 1])
+    assert np.allclose(view.displayed.displays[0].rotation[1], [0, 0, 1])
 
 
 def test_camera_save_and_load(qtbot, window, tmp_path):

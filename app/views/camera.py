@@ -49,6 +49,35 @@ class ShapeDisplay:
         return (np.asarray(vertices, dtype=np.float64) - self.centre) @ self.rotation.T / self.scale
 
 
+@dataclass(frozen=True)
+class Displayed:
+    """Shapes in their display frames, for one up-axis setting (computed once, reused by every redraw).
+
+    Attributes
+    ----------
+    shapes : tuple of TriMesh
+    up : str
+    displays : tuple of ShapeDisplay
+    points : tuple of (n_i, 3) float
+        Every shape's vertices in its display frame.
+    """
+
+    shapes: tuple
+    up: str
+    displays: tuple
+    points: tuple
+
+    @classmethod
+    def of(cls, shapes, up: str = "auto", reuse: "Displayed | None" = None) -> "Displayed":
+        """The shapes' display frames; ``reuse`` is returned instead when it holds the same shapes and up axis."""
+        shapes = tuple(shapes)
+        if reuse is not None and reuse.up == up and len(reuse.shapes) == len(shapes) \
+                and all(a is b for a, b in zip(reuse.shapes, shapes)):
+            return reuse
+        displays = tuple(ShapeDisplay.of(shape.vertices, up) for shape in shapes)
+        return cls(shapes, up, displays, tuple(d.points(shape.vertices) for d, shape in zip(displays, shapes)))
+
+
 def viewport_aspect(plotter, renderer=None) -> float:
     """Width / height in pixels of a renderer's viewport (the first renderer by default).
 
@@ -114,7 +143,8 @@ class FramedView:
         return getattr(self, "plotter", None)
 
     def framed_points(self) -> list[np.ndarray]:
-        raise NotImplementedError
+        """The display points the view shows (every view defines it; empty: nothing shown yet)."""
+        return []
 
     def framed_renderers(self):
         """The renderers the presets move (None: all of the plotter's)."""

@@ -31,7 +31,7 @@ from PySide6.QtWidgets import (
     QWidget,
 )
 
-from app.views.camera import FramedView, ShapeDisplay, enable_hover, picked_vertex
+from app.views.camera import Displayed, FramedView, enable_hover, picked_vertex
 from app.views.scene import (
     ERROR_COLOR_MAX,
     PLAIN_COLOR,
@@ -112,7 +112,7 @@ class CompareView(QWidget, FramedView):
         layout.addWidget(right, 1)
         self.rows: list[dict] = []
         self.shapes = None  # (source, target) of the current comparison
-        self.displays: tuple[ShapeDisplay, ShapeDisplay] | None = None
+        self.displayed: Displayed | None = None  # source and target in their display frames
         self.true_partner: np.ndarray | None = None  # (n_x,) ground-truth target vertex, -1 where unknown
         self.inspected: int | None = None  # the source vertex under inspection
         self.captions: dict[int, str] = {}  # view index -> caption (for tests and the picture)
@@ -158,9 +158,11 @@ class CompareView(QWidget, FramedView):
             self.true_partner[np.asarray(source_rows)] = np.asarray(target_rows)
 
     def framed_points(self) -> list[np.ndarray]:
-        if self.shapes is None or self.displays is None:
-            return []
-        return [d.points(s.vertices) for d, s in zip(self.displays, self.shapes)]
+        return [] if self.displayed is None else list(self.displayed.points)
+
+    def has_results(self) -> bool:
+        """Whether the grid shows at least one method's result."""
+        return self.plotter is not None and bool(self.rows)
 
     def redraw(self) -> None:
         self._redraw_views(reset_camera=True)
@@ -180,9 +182,8 @@ class CompareView(QWidget, FramedView):
                "within": summary.get("within_0.05", np.nan), "auc": summary.get("auc", np.nan),
                "unmatched": n_unmatched, "result": result, "report": report, "per_vertex": per_vertex}
         self.rows.append(row)
-        if self.shapes != (source, target):
-            self.shapes = (source, target)
-            self.displays = (ShapeDisplay.of(source.vertices, self.up), ShapeDisplay.of(target.vertices, self.up))
+        self.shapes = (source, target)
+        self.displayed = Displayed.of(self.shapes, self.up, reuse=self.displayed)
         self.table.setSortingEnabled(False)  # rows are filled at their insertion position
         r = self.table.rowCount()
         self.table.insertRow(r)
@@ -203,9 +204,7 @@ class CompareView(QWidget, FramedView):
         """Draw every view again (after a change of colour mode, up axis or inspected vertex)."""
         if self.plotter is None or not self.rows:
             return
-        if reset_camera:
-            source, target = self.shapes
-            self.displays = (ShapeDisplay.of(source.vertices, self.up), ShapeDisplay.of(target.vertices, self.up))
+        self.displayed = Displayed.of(self.shapes, self.up, reuse=self.displayed)
         self.plotter.clear_actors()
         for index in range(1, len(self.rows) + 1):
             self._draw_view(index, reset_camera=False)

@@ -7,7 +7,7 @@ import pyvista as pv
 from PySide6.QtCore import Signal
 from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QVBoxLayout, QWidget
 
-from app.views.camera import FramedView, ShapeDisplay, enable_hover, picked_vertex
+from app.views.camera import Displayed, FramedView, enable_hover, picked_vertex
 from app.views.scene import (
     LABEL_FONT_SIZE,
     ERROR_COLOR_MAX,
@@ -67,7 +67,7 @@ class PairView(QWidget, FramedView):
         self.texture_image = checkerboard()
         self.picked: list[int] = []  # source vertices with correspondence lines
         self.lines = None  # the polydata of the correspondence lines (for tests)
-        self.displays: tuple[ShapeDisplay, ShapeDisplay] | None = None  # source's and target's display frames
+        self.displayed: Displayed | None = None  # source and target in their display frames
         self.shown_points: list[np.ndarray] = []  # display points of what is drawn (camera fitting)
         enable_hover(self.plotter, self._hover_text, self.hovered.emit)
 
@@ -133,8 +133,8 @@ class PairView(QWidget, FramedView):
             p.render()
             return
         mode = self.mode.currentText()
-        self.displays = (ShapeDisplay.of(self.source.vertices, self.up), ShapeDisplay.of(self.target.vertices, self.up))
-        src_points, tgt_points = self.displays[0].points(self.source.vertices), self.displays[1].points(self.target.vertices)
+        self.displayed = Displayed.of((self.source, self.target), self.up, reuse=self.displayed)
+        src_points, tgt_points = self.displayed.points
         src = polydata(src_points, self.source.faces)
         tgt = polydata(tgt_points, self.target.faces)
         if mode == "lines":
@@ -257,9 +257,7 @@ class PairView(QWidget, FramedView):
     def _on_pick(self, point, *_args) -> None:
         if self.source is None or self.mode.currentText() != "lines" or point is None:
             return
-        shown = self.displays[0].points(self.source.vertices)
-        vertex = int(np.argmin(np.linalg.norm(shown - np.asarray(point), axis=1)))
-        self.add_line(vertex)
+        self.add_line(picked_vertex(self.displayed.points[0], point))
 
     def add_line(self, vertex: int) -> None:
         """Add a correspondence line from a source vertex (picked with the mouse)."""

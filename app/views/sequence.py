@@ -74,6 +74,7 @@ class SequenceView(QWidget, FramedView):
         self.source = None
         self.display: ShapeDisplay | None = None  # the source's display frame (every frame is drawn in it)
         self.description = ""
+        self.ends: list[np.ndarray] = []  # the source and the target pose (t = 1) in the display frame
 
     def view_plotter(self):
         return self._plotter.get() if self.mesh is not None else None

@@ -83,6 +83,8 @@ def test_up_axis_and_camera_presets(qtbot, window):
                  is not None and actor.GetMapper().GetInput().GetNumberOfPoints() > 100]
         assert len(drawn) >= 2, mode
         assert all(max(abs(b) for b in bounds) < 2.0 for bounds in drawn), mode
+        widths = [r.GetViewport()[2] - r.GetViewport()[0] for r in view.plotter.renderers]
+        assert widths == ([1.0, 0.0] if mode == "lines" else [0.5, 0.5]), mode  # lines: one scene, full width
     view.mode.setCurrentText("coordinates")
     # the mouse on a shape names the vertex under it (the status bar shows it)
     assert view._hover_text(view.plotter.renderers[1], view.shown_points[1][10]) == "vertex 10 of the target (wolf1.off)"

@@ -42,6 +42,8 @@ class PairView(QWidget, FramedView):
     def __init__(self, parent=None):
         super().__init__(parent)
         self.plotter = make_plotter(self, shape=(1, 2))
+        # side by side; the lines mode gives the first renderer the whole width (both shapes in one scene)
+        self.split_viewports = [r.GetViewport() for r in self.plotter.renderers]
         self.mode = QComboBox()
         self.mode.addItems(MODES)
         self.mode.setToolTip("coordinates: source coloured by position; function: by its second Laplace-"
@@ -137,7 +139,11 @@ class PairView(QWidget, FramedView):
         src_points, tgt_points = self.displayed.points
         src = polydata(src_points, self.source.faces)
         tgt = polydata(tgt_points, self.target.faces)
-        if mode == "lines":
+        lines = mode == "lines"
+        for renderer, viewport in zip(p.renderers, self.split_viewports):
+            renderer.SetViewport(*((0.0, 0.0, 1.0, 1.0) if lines and renderer is p.renderers[0] else
+                                   (1.0, 0.0, 1.0, 1.0) if lines else viewport))
+        if lines:
             self._draw_lines(src, tgt)
             return
         p.subplot(0, 0)
@@ -243,9 +249,6 @@ class PairView(QWidget, FramedView):
                 p.add_points(np.vstack([starts, ends]), scalars=np.vstack([colors[shown]] * 2), rgb=True,
                              point_size=POINT_SIZE, render_points_as_spheres=True)
         p.add_text("click the source to add a correspondence line", font_size=LABEL_FONT_SIZE)
-        p.subplot(0, 1)
-        p.add_text("(lines mode: both shapes on the left)", font_size=LABEL_FONT_SIZE)
-        p.subplot(0, 0)
         if not getattr(self, "_picking", False):
             p.enable_point_picking(callback=self._on_pick, show_message=False, use_picker=True,
                                    left_clicking=True, show_point=False)

@@ -5,6 +5,7 @@ import math
 
 import numpy as np
 import pytest
+from scipy.spatial.distance import cdist
 
 from corrlib.deformation.basis import DivFreeBasis, potential_indices
 from corrlib.deformation.flow import flow, flow_with_jacobian, trajectory, velocity
@@ -183,6 +184,24 @@ def test_e_step_is_a_normalised_mixture_with_an_outlier_share():
     assert np.all(np.isfinite(far)) and far.sum(1).max() < 1e-6
 
 
+@pytest.mark.parametrize("outlier", [0.0, 0.1])
+def test_fused_e_step_moments_equal_the_full_mixture(outlier):
+    from corrlib.deformation.mixture import mixture_moments
+
+    pos, targ = RNG.uniform(0, 1, (30, 3)), RNG.uniform(0, 1, (45, 3))
+    feats = RNG.uniform(0, 0.2, (30, 45))
+    for sigma2 in (0.3, 0.01, 1e-4):  # wide, annealed, and so narrow that most terms underflow
+        p = e_step(cdist(pos, targ, "sqeuclidean") + 0.7 * feats, sigma2, outlier)
+        mass, y_hat = mixture_moments(pos, targ, sigma2, outlier, feats, 0.7)
+        assert np.allclose(mass, p.sum(1), rtol=1e-12, atol=1e-300)
+        assert np.allclose(y_hat, (p @ targ) / p.sum(1)[:, None], rtol=1e-10, atol=1e-12)
+    mass, y_hat = mixture_moments(pos, targ, 0.01, outlier)  # no features
+    p = e_step(cdist(pos, targ, "sqeuclidean"), 0.01, outlier)
+    assert np.allclose(mass, p.sum(1)) and np.allclose(y_hat, (p @ targ) / p.sum(1)[:, None])
+    far_mass, far_mean = mixture_moments(pos + 50.0, targ, 0.01, 0.1)  # all mass to the outliers, no overflow
+    assert np.all(np.isfinite(far_mean)) and far_mass.max() < 1e-6
+
+
 def test_gauss_newton_step_solves_the_regularised_normal_equations():
     n, k = 12, 7
     jac = RNG.standard_normal((n, 3, k))
@@ -194,12 +213,31 @@ def test_gauss_newton_step_solves_the_regularised_normal_equations():
     wr = np.repeat(w, 3)
     expected = np.linalg.solve(j.T @ (wr[:, None] * j) + np.diag(prec),
                                -(j.T @ (wr * (pos - targ).ravel()) + prec * a))
-    assert np.allclose(gauss_newton_step(pos, jac.copy(), targ, w, a, prec), expected)
+    assert np.allclose(gauss_newton_step(pos, jac.copy(), targ, w, a, prec, rtol=1e-14), expected)
     # for a linear model one step reaches the minimum: the gradient vanishes there
-    delta = gauss_newton_step(pos, jac.copy(), targ, w, a, prec)
+    delta = gauss_newton_step(pos, jac.copy(), targ, w, a, prec, rtol=1e-14)
     res = (pos - targ).ravel() + j @ delta
     grad = j.T @ (wr * res) + prec * (a + delta)
     assert np.abs(grad).max() < 1e-10
+
+
+def test_inexact_gauss_newton_step_meets_its_residual_and_descends():
+    n, k = 200, 120
+    jac = RNG.standard_normal((n, 3, k)) * np.geomspace(1, 1e-3, k)  # ill-conditioned, like high frequencies
+    pos, targ = RNG.standard_normal((n, 3)), RNG.standard_normal((n, 3))
+    w, a = RNG.uniform(0.1, 1, n), RNG.standard_normal(k)
+    prec = 1e-4 * np.arange(1, k + 1) ** 1.5
+    j, wr = jac.reshape(3 * n, k), np.repeat(w, 3)
+    normal = j.T @ (wr[:, None] * j) + np.diag(prec)
+    rhs = -(j.T @ (wr * (pos - targ).ravel()) + prec * a)
+    for rtol in (1e-1, 1e-2, 1e-6):
+        delta = gauss_newton_step(pos, jac.copy(), targ, w, a, prec, rtol=rtol)
+        assert np.linalg.norm(normal @ delta - rhs) <= rtol * np.linalg.norm(rhs) * (1 + 1e-9)
+        assert delta @ rhs > 0  # the step lowers the quadratic model: a descent direction
+    # no prior and a field that moves no sample: a finite least-norm step, the idle field untouched
+    jac[:, :, 5] = 0.0
+    delta = gauss_newton_step(pos, jac.copy(), targ, w, np.zeros(k), np.zeros(k), rtol=1e-8)
+    assert np.all(np.isfinite(delta)) and delta[5] == 0.0
 
 
 def test_candidate_rotations_are_proper_and_recover_a_rotation(wolf_pair):

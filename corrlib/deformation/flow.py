@@ -205,6 +205,9 @@ def flow(basis: DivFreeBasis, points, coeffs, t: float = 1.0, n_steps: int = 20)
 def _eval_point(x, a, freqs, s, c, ss, pairs, vals, vel, jac):
     """Velocity (3,), its Jacobian (3, 3) and every field's value (3, 3Q) at ``x``.
 
+    Only the non-zero components of the field values are written (component d of the d-th field of a
+    potential is 0): ``vals`` must start as zeros.
+
     ``pairs`` (6, M, M) is scratch for the products of the first two axes' tables, so every
     gradient or Hessian entry of a potential costs one multiplication.
     """
@@ -270,15 +273,12 @@ def _eval_point(x, a, freqs, s, c, ss, pairs, vals, vel, jac):
         j21 += a1 * h12 - a0 * h22
         j22 += a1 * h13 - a0 * h23
         k = 3 * q
-        vals[0, k] = 0.0
         vals[1, k] = g3
         vals[2, k] = -g2
         vals[0, k + 1] = -g3
-        vals[1, k + 1] = 0.0
         vals[2, k + 1] = g1
         vals[0, k + 2] = g2
         vals[1, k + 2] = -g1
-        vals[2, k + 2] = 0.0
     vel[0] = v0
     vel[1] = v1
     vel[2] = v2
@@ -294,15 +294,24 @@ def _eval_point(x, a, freqs, s, c, ss, pairs, vals, vel, jac):
 
 
 @numba.njit(cache=True, fastmath=True, nogil=True)
-def _sensitivity_step(base, inner, vals, jac, scale, out):
-    """out = base + scale (vals + jac inner), all (3, K): one line of Eq. C.15 (``out`` may be ``base``)."""
+def _sensitivity_step(base, inner, vals, jac, scale, out, coef):
+    """out = base + scale (vals + jac inner), all (3, K): one line of Eq. C.15 (``out`` may be ``base``).
+
+    ``coef`` (4,) is scratch of the arrays' dtype: the scalars are rounded to it first, so that with
+    float32 sensitivities the loop runs in float32 lanes instead of widening every element.
+    """
     n_cols = base.shape[1]
+    coef[3] = scale
+    s = coef[3]
     for i in range(3):
-        j0 = jac[i, 0]
-        j1 = jac[i, 1]
-        j2 = jac[i, 2]
+        coef[0] = jac[i, 0]
+        coef[1] = jac[i, 1]
+        coef[2] = jac[i, 2]
+        j0 = coef[0] * s
+        j1 = coef[1] * s
+        j2 = coef[2] * s
         for k in range(n_cols):
-            out[i, k] = base[i, k] + scale * (vals[i, k] + j0 * inner[0, k] + j1 * inner[1, k] + j2 * inner[2, k])
+            out[i, k] = base[i, k] + s * vals[i, k] + j0 * inner[0, k] + j1 * inner[1, k] + j2 * inner[2, k]
 
 
 @numba.njit(cache=True, parallel=True, fastmath=True, nogil=True)
@@ -314,22 +323,23 @@ def _flow_jacobian_kernel(points, a, freqs, n_freq, steps, h, out_x, out_dx):
         c = np.empty((3, n_freq))
         ss = np.empty((3, n_freq))
         pairs = np.empty((6, n_freq, n_freq))
-        vals = np.empty((3, n_cols), out_dx.dtype)
+        vals = np.zeros((3, n_cols), out_dx.dtype)  # the entries _eval_point leaves alone stay 0
         dx = np.zeros((3, n_cols), out_dx.dtype)
         dm = np.empty((3, n_cols), out_dx.dtype)
         vel = np.empty(3)
         jac = np.empty((3, 3))
+        coef = np.empty(4, out_dx.dtype)
         x = points[n].copy()
         mid = np.empty(3)
         for _ in range(steps):
             _eval_point(x, a, freqs, s, c, ss, pairs, vals, vel, jac)
             for i in range(3):
                 mid[i] = x[i] + 0.5 * h * vel[i]
-            _sensitivity_step(dx, dx, vals, jac, 0.5 * h, dm)
+            _sensitivity_step(dx, dx, vals, jac, 0.5 * h, dm, coef)
             _eval_point(mid, a, freqs, s, c, ss, pairs, vals, vel, jac)
             for i in range(3):
                 x[i] += h * vel[i]
-            _sensitivity_step(dx, dm, vals, jac, h, dx)
+            _sensitivity_step(dx, dm, vals, jac, h, dx, coef)
         out_x[n] = x
         for i in range(3):
             for k in range(n_out):

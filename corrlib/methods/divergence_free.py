@@ -61,11 +61,12 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-import scipy.linalg
 from scipy.spatial.distance import cdist
 
 from corrlib.deformation.basis import DivFreeBasis
 from corrlib.deformation.flow import check_points, flow_with_jacobian
+from corrlib.deformation.mixture import (LARGEST_EXPONENT, SMALLEST_EXPONENT, mixture_moments,
+                                         outlier_log_constant)
 from corrlib.deformation.model import Deformation, Frames, StoredSteps
 from corrlib.errors import InputError
 from corrlib.geometry.sampling import farthest_point_sampling
@@ -197,14 +198,9 @@ def feature_factor(coords_x, coords_y, feats_x, feats_y) -> float:
 # ----------------------------------------------------------------------------- EM
 
 
-#: E-step terms below e^SMALLEST_EXPONENT of their row's best are exact zeros (no slow subnormals)
-SMALLEST_EXPONENT = -60.0
-#: the outlier term's exponent is clipped below the float64 overflow of exp (e^709.8)
-LARGEST_EXPONENT = 700.0
-
-
 def e_step(dist: np.ndarray, sigma2: float, outlier: float) -> np.ndarray:
-    """Soft correspondences of Eq. 10.14.
+    """Soft correspondences of Eq. 10.14 (the whole matrix; the EM uses their moments,
+    :func:`~corrlib.deformation.mixture.mixture_moments`).
 
     Parameters
     ----------
@@ -226,7 +222,7 @@ def e_step(dist: np.ndarray, sigma2: float, outlier: float) -> np.ndarray:
     np.exp(z, out=p, where=z > SMALLEST_EXPONENT)
     denom = p.sum(axis=1, keepdims=True)
     if outlier > 0:
-        log_const = 1.5 * math.log(2.0 * math.pi * sigma2) + math.log(outlier / (1.0 - outlier) * m / n)
+        log_const = outlier_log_constant(sigma2, outlier, n, m)
         denom += np.exp(np.minimum(log_const + shift / (2.0 * sigma2), LARGEST_EXPONENT))
     return p / denom
 
@@ -242,8 +238,21 @@ def huber_penalty(residual_norm: np.ndarray, r0: float) -> np.ndarray:
     return np.where(r <= r0, 0.5 * r * r, r0 * (r - 0.5 * r0))
 
 
-def gauss_newton_step(positions, jac, targets, weights, coeffs, prior_precision) -> np.ndarray:
-    """One Gauss–Newton step on ``Σ_n w_n |x_n(a) - ŷ_n|²/2 + Σ_k a_k² / (2 λ_k)`` (Eq. C.12).
+#: relative residual at which the conjugate gradients of a Gauss–Newton step stop (the forcing term)
+GN_RTOL = 1e-2
+
+
+def gauss_newton_step(positions, jac, targets, weights, coeffs, prior_precision, *,
+                      rtol: float = GN_RTOL) -> np.ndarray:
+    """One (inexact) Gauss–Newton step on ``Σ_n w_n |x_n(a) - ŷ_n|²/2 + Σ_k a_k² / (2 λ_k)`` (Eq. C.12).
+
+    The normal equations ``(Jᵀ W J + Λ⁻¹) δ = -(Jᵀ W r + Λ⁻¹ a)`` are solved by conjugate gradients
+    preconditioned with their diagonal, with ``J`` applied as it is (two products of the (3N, K) matrix per
+    CG iteration) instead of forming and factorising the (K, K) matrix ``Jᵀ W J`` (N K² + K³/3 operations
+    per step). The iteration stops at a residual below ``rtol`` times the right-hand side: an inexact
+    Newton step (Dembo, Eisenstat & Steihaug 1982; Nocedal & Wright 2006, §7.1). Every CG iterate from 0
+    lowers the quadratic model, so a truncated step is a descent direction; within the EM the step's error
+    at the default ``rtol`` is far below what the next E-step changes (see the decisions record).
 
     Parameters
     ----------
@@ -259,31 +268,50 @@ def gauss_newton_step(positions, jac, targets, weights, coeffs, prior_precision)
         ``a``.
     prior_precision : (K,) float
         ``1/λ_k`` times the prior weight.
+    rtol : float
+        Relative residual of the normal equations at which CG stops (at most K iterations).
 
     Returns
     -------
     (K,) float
-        The update δ solving ``(Jᵀ W J + Λ⁻¹) δ = -(Jᵀ W r + Λ⁻¹ a)``.
+        The update δ.
     """
     n, _, k = jac.shape
     sw = np.sqrt(weights)
-    jw = np.multiply(jac, sw.astype(jac.dtype)[:, None, None], out=jac)
-    jw_t = jw.reshape(3 * n, k).T  # (K, 3N), Fortran-ordered view: what BLAS wants, no copy
-    residual = ((positions - targets) * sw[:, None]).reshape(-1)
-    # numpy's matmul (syrk for A Aᵀ) and Cholesky release the GIL, so the studio stays responsive
-    normal = (jw_t @ jw_t.T).astype(np.float64)  # Jᵀ W J
-    normal[np.diag_indices(k)] += prior_precision
-    rhs = -(jw_t @ residual.astype(jw.dtype)).astype(np.float64) - prior_precision * coeffs
-    try:
-        lower = np.linalg.cholesky(normal)
-    except np.linalg.LinAlgError:
-        # without a prior the system can be singular: least-norm solution
-        return np.linalg.lstsq(normal, rhs, rcond=None)[0]
-    half = scipy.linalg.solve_triangular(lower, rhs, lower=True, check_finite=False)
-    return scipy.linalg.solve_triangular(lower.T, half, lower=False, check_finite=False)
+    jw = np.multiply(jac, sw.astype(jac.dtype)[:, None, None], out=jac).reshape(3 * n, k)  # W^½ J
+    residual = ((positions - targets) * sw[:, None]).reshape(-1).astype(jw.dtype)
+    rhs = -(jw.T @ residual).astype(np.float64) - prior_precision * coeffs
+    diagonal = np.einsum("ij,ij->j", jw, jw, dtype=np.float64) + prior_precision
+    diagonal[diagonal <= 0] = 1.0  # a field no sample moves and no prior holds: unpreconditioned
+
+    def normal_times(v):  # (Jᵀ W J + Λ⁻¹) v; numpy's products release the GIL, so the studio stays responsive
+        return (jw.T @ (jw @ v.astype(jw.dtype))).astype(np.float64) + prior_precision * v
+
+    delta = np.zeros(k)
+    r = rhs.copy()
+    z = r / diagonal
+    direction = z.copy()
+    rz = r @ z
+    stop = rtol * np.linalg.norm(rhs)
+    for _ in range(k):
+        if np.linalg.norm(r) <= stop:
+            break
+        a_dir = normal_times(direction)
+        curvature = direction @ a_dir
+        if curvature <= 0:  # singular without a prior: the least-norm part found so far is the step
+            break
+        alpha = rz / curvature
+        delta += alpha * direction
+        r -= alpha * a_dir
+        z = r / diagonal
+        rz_next = r @ z
+        direction = z + (rz_next / rz) * direction
+        rz = rz_next
+    return delta
 
 
-def em_iteration(basis, start, targets_y, feature_dist, coeffs, sigma2_e, precision, params, watch):
+def em_iteration(basis, start, targets_y, feature_dist, coeffs, sigma2_e, precision, params, watch,
+                 feature_scale: float = 1.0):
     """One EM iteration: flow with derivatives, E-step, one Gauss–Newton step.
 
     Parameters
@@ -293,8 +321,8 @@ def em_iteration(basis, start, targets_y, feature_dist, coeffs, sigma2_e, precis
         Source samples in the unit cube (t = 0).
     targets_y : (M, 3) float
         Target samples in the unit cube.
-    feature_dist : (N, M) float or 0.0
-        The (annealed) feature term of the E-step distance.
+    feature_dist : (N, M) float or None
+        Feature distances of the E-step distance.
     coeffs : (K,) float
     sigma2_e : float
         E-step variance.
@@ -302,6 +330,8 @@ def em_iteration(basis, start, targets_y, feature_dist, coeffs, sigma2_e, precis
         β / λ_k.
     params : DivergenceFreeParams
     watch : Stopwatch
+    feature_scale : float
+        Factor of ``feature_dist`` in the E-step distance (its annealed weight).
 
     Returns
     -------
@@ -316,12 +346,7 @@ def em_iteration(basis, start, targets_y, feature_dist, coeffs, sigma2_e, precis
     with watch("flow"):
         pos, jac = flow_with_jacobian(basis, start, coeffs, params.n_steps, dtype=np.float32)
     with watch("e-step"):
-        # the feature term shrinks with σ² so its share of the exponent stays that of Eq. 10.17 at σ²
-        dist = _sq_distances(pos, targets_y)
-        dist += feature_dist
-        prob = e_step(dist, sigma2_e, params.outlier)
-        mass = prob.sum(axis=1)
-        y_hat = (prob @ targets_y) / np.maximum(mass, 1e-300)[:, None]
+        mass, y_hat = mixture_moments(pos, targets_y, sigma2_e, params.outlier, feature_dist, feature_scale)
         rnorm = np.linalg.norm(pos - y_hat, axis=1)
         robust = huber_weights(rnorm, params.huber)
         weights = mass * robust / (params.sigma2 * n)
@@ -417,7 +442,6 @@ def fit(points_x, points_y, params: DivergenceFreeParams | None = None, token=No
     basis = DivFreeBasis(params.n_fields)
     start = frames.source_to_cube(px[sx])
     targets_y = frames.target_to_cube(py[sy])
-    fixed = w * feat_dist if feat_dist is not None else 0.0
     precision = params.prior_weight / basis.prior_variance
     coeffs = np.zeros(basis.n_fields)
     trace = []
@@ -427,8 +451,9 @@ def fit(points_x, points_y, params: DivergenceFreeParams | None = None, token=No
     for it in range(1, params.max_iter + 1):
         if token is not None:
             token.raise_if_cancelled()
-        delta, energy, rnorm = em_iteration(basis, start, targets_y, fixed * (sigma2_e / params.sigma2), coeffs,
-                                            sigma2_e, precision, params, watch)
+        # the feature term shrinks with σ² so its share of the exponent stays that of Eq. 10.17 at σ²
+        delta, energy, rnorm = em_iteration(basis, start, targets_y, feat_dist, coeffs, sigma2_e, precision, params,
+                                            watch, feature_scale=w * sigma2_e / params.sigma2)
         coeffs = coeffs + delta
         sigma2_e = max(params.sigma2_min, sigma2_e * params.anneal)
         step = float(np.linalg.norm(delta))

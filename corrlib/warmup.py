@@ -16,12 +16,17 @@ def warm_up() -> None:
     import scipy.sparse as sp
 
     from corrlib.assignment import linear_assignment
+    from corrlib.deformation.basis import DivFreeBasis
+    from corrlib.deformation.flow import flow, flow_with_jacobian
+    from corrlib.deformation.mixture import mixture_moments
     from corrlib.descriptors.shot import shot
     from corrlib.geometry.cholesky import CholeskySolver
     from corrlib.geometry.cyclic_paths import ProductGraph, branch_and_bound
+    from corrlib.geometry.geodesics import GeodesicSolver
     from corrlib.geometry.sampling import farthest_point_sampling
     from corrlib.methods.contour3d import node_costs
     from corrlib.progress import run
+    from corrlib.shapes import TriMesh
 
     rng = np.random.default_rng(0)
     for dtype in (np.float64, np.float32):
@@ -33,7 +38,15 @@ def warm_up() -> None:
     run(branch_and_bound(ProductGraph(cost, ring[:5, :2], ring, adj)))
     sphere_v = np.array([[0, 0, 1], [1, 0, 0], [0, 1, 0], [-1, 0, 0], [0, -1, 0], [0, 0, -1]], float)
     sphere_f = np.array([[0, 1, 2], [0, 2, 3], [0, 3, 4], [0, 4, 1], [5, 2, 1], [5, 3, 2], [5, 4, 3], [5, 1, 4]])
-    shot(sphere_v, sphere_f, radius=2.0, min_neighbors=1)
+    sphere = TriMesh(sphere_v, sphere_f, validate=False)
+    shot(sphere.vertices, sphere.faces, radius=2.0, min_neighbors=1)  # a mesh's arrays are read-only
     farthest_point_sampling(rng.random((6, 3)), 3)
     path_graph = sp.diags([-1.0, 2.5, -1.0], [-1, 0, 1], shape=(8, 8), format="csc")
     CholeskySolver(path_graph).solve(rng.random((8, 2)))
+    GeodesicSolver(sphere).pair_distances(np.arange(3), np.arange(3, 6))
+    # divergence-free: the flow (dense maps, morphs), the flow with float32 derivatives and the E-step (EM)
+    basis = DivFreeBasis(6)
+    cube_points = 0.25 + 0.5 * rng.random((4, 3))
+    flow(basis, cube_points, 0.01 * rng.random(6), n_steps=2)
+    flow_with_jacobian(basis, cube_points, 0.01 * rng.random(6), n_steps=2, dtype=np.float32)
+    mixture_moments(cube_points, cube_points[::-1], 0.01, 0.1, rng.random((4, 4)), 0.5)

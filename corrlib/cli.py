@@ -161,6 +161,24 @@ def _parse_overrides(pairs: list[str]) -> dict:
     return out
 
 
+def _preload_plotting():
+    """Start importing the plotting library in a thread; returns it (join before writing the pictures).
+
+    The pictures are written after the solver, and importing matplotlib takes about half a second; the
+    solvers spend most of their time in compiled code that releases the GIL, so the import runs alongside.
+    """
+    import threading
+
+    def load():
+        from corrlib.plotting import _pyplot
+
+        _pyplot()
+
+    thread = threading.Thread(target=load, name="preload-plotting", daemon=True)
+    thread.start()
+    return thread
+
+
 def _write_match_outputs(result, source, target, out: Path, *, quiet: bool = False) -> None:
     """The result files of a match beside the stem ``out``, all or none of them."""
     from corrlib.io import staged_output
@@ -257,7 +275,9 @@ def cmd_match(args) -> int:
             raise CorrError(f"method {spec.name!r} does not take an initial map (--init)")
     if args.times:
         overrides["times"] = args.times
+    plotting = _preload_plotting()
     result = solve(spec, source, target, callback=_progress_printer(args.quiet), initial=initial, **overrides)
+    plotting.join()
     print(f"method {result.method}: energy {result.energy}, {result.timings.get('total', 0):.2f} s")
     if result.energy_trace is not None:
         trace = result.energy_trace
@@ -276,8 +296,10 @@ def cmd_refine(args) -> int:
         raise CorrError(f"method {spec.name!r} does not refine a map (methods that do: "
                         f"{', '.join(m.name for m in _refining_methods())})")
     initial = _initial_match(args.init, source, target)
+    plotting = _preload_plotting()
     result = solve(spec, source, target, callback=_progress_printer(args.quiet), initial=initial,
                    **_parse_overrides(args.param))
+    plotting.join()
     print(f"method {result.method}: {result.timings.get('total', 0):.2f} s")
     _write_match_outputs(result, source, target, Path(args.output), quiet=args.quiet)
     return 0

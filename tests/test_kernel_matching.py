@@ -84,17 +84,19 @@ def test_cat_pair_with_symmetric_ground_truth(cat_pair):
     result = solve("kernel-matching", cat0, cat1)
     report = geodesic_errors(result.map_xy, cat1, gt["cat0"], gt["cat1"], gt_target_sym=gt["cat1.sym"]).summary()
     # cat0/cat1 are remeshed independently and not quite isometric. Measured with the defaults: mean 0.029 and
-    # 87.3 % of points within 0.05 (symmetric), 99.8 % within 0.1; the issue's target is 80 %. (With seeds at
-    # vertices instead of surface points: 77 %.)
+    # 88.8 % of points within 0.05 (symmetric), 99.8 % within 0.1; the first issue's target was 80 %, issue 19
+    # keeps 87 % as the floor of any speed change. (With seeds at vertices instead of surface points: 77 %.)
     assert report["mean_sym"] <= 0.035, report
-    assert report["within_0.05_sym"] >= 0.84, report
+    assert report["within_0.05_sym"] >= 0.87, report
     assert report["within_0.1_sym"] >= 0.99, report
     # left matched to left everywhere (orientation-aware initialisation, initial alignment from the most similar
-    # matches as a second start): without symmetry mean 0.029 and 87.0 % within 0.05. With the first start only
-    # (init_fraction=1) the front legs end swapped (77 % without symmetry, 84 % with); without the orientation
-    # features 44 % / 87 %.
+    # matches as a second start): the same without symmetry. With the first start only (init_fraction=1) the
+    # front legs end swapped (77 % without symmetry, 84 % with, measured with 3000 seeds); without the
+    # orientation features 44 % / 87 %.
     assert report["mean"] <= 0.035, report
-    assert report["within_0.05"] >= 0.83, report
+    assert report["within_0.05"] >= 0.87, report
+    back = solve("kernel-matching", cat1, cat0)  # the other direction: 88.0 % (86.0 % with 3000 seeds)
+    assert geodesic_errors(back.map_xy, cat0, gt["cat1"], gt["cat0"]).summary()["within_0.05"] >= 0.87
     assert result.extras["start"] == "initial alignment"  # the second start wins here (see above)
 
 
@@ -270,8 +272,8 @@ def test_scores_without_negligible_decays_equal_the_full_product(cat_pair):
 @pytest.mark.slow
 def test_non_isometric_pair_from_the_functional_map():
     """The Sumner lion -> cat (approximate ground truth lion2cat): from the orientation-aware functional map
-    the kernel matching reaches mean 0.059, median 0.042 (measured); from the descriptors mean 0.27, median
-    0.048 (whole legs on the wrong leg)."""
+    the kernel matching reaches mean 0.059, median 0.042 (measured); from the descriptors mean 0.138, median
+    0.051 (some legs on the wrong leg; 0.256 / 0.048 with 3000 seeds)."""
     from _data import SUMNER
     from corrlib.io import load_mesh
 

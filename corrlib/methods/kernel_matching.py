@@ -154,7 +154,7 @@ class KernelMatchingParams:
     iters_per_time: int = param(2, label="Iterations per time", low=1, high=100,
                                 help="DC iterations (linear assignments) per time; stops early when the "
                                      "map no longer changes.")
-    n_seeds: int = param(3000, label="Seeds", low=10, high=100_000,
+    n_seeds: int = param(2000, label="Seeds", low=10, high=100_000,
                          help="Farthest points of the surfaces (inside triangles too) matched first with the whole "
                               "schedule.")
     growth: float = param(3.0, label="Growth factor", low=1.5, high=100.0,

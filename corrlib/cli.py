@@ -170,9 +170,9 @@ def _preload_plotting():
     import threading
 
     def load():
-        from corrlib.plotting import _pyplot
+        from corrlib.plotting import preload
 
-        _pyplot()
+        preload()
 
     thread = threading.Thread(target=load, name="preload-plotting", daemon=True)
     thread.start()

@@ -19,6 +19,11 @@ def _pyplot():
     return plt
 
 
+def preload() -> None:
+    """Import matplotlib with its off-screen backend (about half a second), e.g. in a thread before pictures."""
+    _pyplot()
+
+
 def _save_figure(fig, path) -> Path:
     """Write a figure as PNG atomically and close it."""
     from corrlib.io import atomic_write

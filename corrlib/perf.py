@@ -263,8 +263,8 @@ def suite_divfree(repeat: int, quick: bool = False) -> None:
         result = solve("divergence-free", cat0, cat1)
         total = time.perf_counter() - start_time
         split = ", ".join(f"{k} {v:.2f} s" for k, v in result.timings.items() if k != "total")
-        _line(f"divergence-free match cat0 -> cat1, {result.extras['iterations']} iterations  [issue 19: CLI wall <= 60 s]",
-              total, split)
+        _line(f"divergence-free match cat0 -> cat1, {result.extras['iterations']} iterations  "
+              "[issue 19: CLI wall <= 60 s]", total, split)
         print(f"peak resident memory: {peak_rss_mb():.0f} MB (before the run: {rss_before:.0f} MB)")
         gt = {n: load_vts(resource(f"data/tosca/{n}.vts")) for n in ("cat0", "cat1", "cat1.sym")}
         report = geodesic_errors(result.map_xy, cat1, gt["cat0"], gt["cat1"],

@@ -13,7 +13,7 @@ from corrlib.errors import InputError, ParameterError
 from corrlib.evaluation import geodesic_errors
 from corrlib.methods import make_params, solve
 from corrlib.deformation.model import Deformation, Frames
-from corrlib.methods.divergence_free import DivergenceFreeParams, candidate_rotations, e_step, fit, gauss_newton_step
+from corrlib.methods.divergence_free import DivergenceFreeParams, candidate_rotations, fit, gauss_newton_step
 from corrlib.progress import run
 from corrlib.shapes import TriMesh, signed_volume
 
@@ -170,18 +170,17 @@ def test_flow_rejects_bad_input():
 # ----------------------------------------------------------------------------- EM parts
 
 
-def test_e_step_is_a_normalised_mixture_with_an_outlier_share():
-    dist = RNG.uniform(0, 0.5, (30, 40))
-    p = e_step(dist, 0.01, 0.0)
-    assert np.allclose(p.sum(1), 1.0)
-    q = e_step(dist, 0.01, 0.5)
-    assert np.all(q.sum(1) < 1.0) and np.all(q.sum(1) > 0)
-    # independent evaluation of Eq. 10.14 in log space
-    g = np.exp(-dist / 0.02)
-    c = (2 * math.pi * 0.01) ** 1.5 * 1.0 * 40 / 30
-    assert np.allclose(q, g / (g.sum(1, keepdims=True) + c))
-    far = e_step(dist + 50.0, 0.01, 0.1)  # huge distances: no overflow, all mass to the outliers
-    assert np.all(np.isfinite(far)) and far.sum(1).max() < 1e-6
+def full_mixture(dist, sigma2, outlier):
+    """Eq. 10.14 as written, the whole (N, M) matrix in log space (reference for the fused E-step)."""
+    from scipy.special import logsumexp
+
+    n, m = dist.shape
+    log_g = -dist / (2 * sigma2)
+    terms = [logsumexp(log_g, axis=1, keepdims=True)]
+    if outlier > 0:
+        c = (2 * math.pi * sigma2) ** 1.5 * outlier / (1 - outlier) * m / n
+        terms.append(np.full((n, 1), math.log(c)))
+    return np.exp(log_g - logsumexp(np.hstack(terms), axis=1, keepdims=True))
 
 
 @pytest.mark.parametrize("outlier", [0.0, 0.1])
@@ -191,15 +190,23 @@ def test_fused_e_step_moments_equal_the_full_mixture(outlier):
     pos, targ = RNG.uniform(0, 1, (30, 3)), RNG.uniform(0, 1, (45, 3))
     feats = RNG.uniform(0, 0.2, (30, 45))
     for sigma2 in (0.3, 0.01, 1e-4):  # wide, annealed, and so narrow that most terms underflow
-        p = e_step(cdist(pos, targ, "sqeuclidean") + 0.7 * feats, sigma2, outlier)
+        dist = cdist(pos, targ, "sqeuclidean") + 0.7 * feats
+        p = full_mixture(dist, sigma2, outlier)
         mass, y_hat = mixture_moments(pos, targ, sigma2, outlier, feats, 0.7)
         assert np.allclose(mass, p.sum(1), rtol=1e-12, atol=1e-300)
-        assert np.allclose(y_hat, (p @ targ) / p.sum(1)[:, None], rtol=1e-10, atol=1e-12)
+        # the weighted mean does not depend on the outlier share (it cancels), which may leave p itself 0
+        assert np.allclose(y_hat, full_mixture(dist, sigma2, 0.0) @ targ, rtol=1e-10, atol=1e-12)
     mass, y_hat = mixture_moments(pos, targ, 0.01, outlier)  # no features
-    p = e_step(cdist(pos, targ, "sqeuclidean"), 0.01, outlier)
+    p = full_mixture(cdist(pos, targ, "sqeuclidean"), 0.01, outlier)
     assert np.allclose(mass, p.sum(1)) and np.allclose(y_hat, (p @ targ) / p.sum(1)[:, None])
+    if outlier == 0:
+        assert np.allclose(mass, 1.0)  # no outliers: every sample is wholly matched
+    else:
+        assert np.all((mass > 0) & (mass < 1))
     far_mass, far_mean = mixture_moments(pos + 50.0, targ, 0.01, 0.1)  # all mass to the outliers, no overflow
     assert np.all(np.isfinite(far_mean)) and far_mass.max() < 1e-6
+    with pytest.raises(InputError, match="do not fit"):
+        mixture_moments(pos, targ, 0.01, 0.1, feats[:, :10])
 
 
 def test_gauss_newton_step_solves_the_regularised_normal_equations():

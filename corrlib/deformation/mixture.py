@@ -9,8 +9,7 @@ mean ``ŷ_n = Σ_m P_nm y_m / p_n`` of the target samples, with
 
 ``f`` the fixed feature distances of Eq. 10.17 scaled by ``s`` and ``c`` the
 outlier constant of the CPD form. :func:`mixture_moments` computes both row
-by row without forming the (N, M) arrays of distances and probabilities
-(which the reference :func:`corrlib.methods.divergence_free.e_step` does):
+by row without forming the (N, M) arrays of distances and probabilities:
 one pass over the feature distances per iteration instead of several passes
 over three float64 arrays of that size.
 """
@@ -21,6 +20,8 @@ import math
 
 import numba
 import numpy as np
+
+from corrlib.errors import InputError
 
 #: terms below e^SMALLEST_EXPONENT of their row's best are exact zeros (no slow subnormals)
 SMALLEST_EXPONENT = -60.0
@@ -102,7 +103,7 @@ def mixture_moments(pos, targets, sigma2: float, outlier: float, feats=None, fea
     targets = np.ascontiguousarray(targets, dtype=np.float64)
     feats = np.zeros((0, 0)) if feats is None else np.ascontiguousarray(feats, dtype=np.float64)
     if feats.shape[0] and feats.shape != (len(pos), len(targets)):
-        raise ValueError(f"feature distances {feats.shape} do not fit {len(pos)} x {len(targets)} samples")
+        raise InputError(f"feature distances {feats.shape} do not fit {len(pos)} x {len(targets)} samples")
     log_const = outlier_log_constant(sigma2, outlier, len(pos), len(targets)) if outlier > 0 else math.nan
     mass = np.empty(len(pos))
     y_hat = np.empty((len(pos), 3))

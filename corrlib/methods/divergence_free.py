@@ -65,8 +65,7 @@ from scipy.spatial.distance import cdist
 
 from corrlib.deformation.basis import DivFreeBasis
 from corrlib.deformation.flow import check_points, flow_with_jacobian
-from corrlib.deformation.mixture import (LARGEST_EXPONENT, SMALLEST_EXPONENT, mixture_moments,
-                                         outlier_log_constant)
+from corrlib.deformation.mixture import mixture_moments
 from corrlib.deformation.model import Deformation, Frames, StoredSteps
 from corrlib.errors import InputError
 from corrlib.geometry.sampling import farthest_point_sampling
@@ -196,35 +195,6 @@ def feature_factor(coords_x, coords_y, feats_x, feats_y) -> float:
 
 
 # ----------------------------------------------------------------------------- EM
-
-
-def e_step(dist: np.ndarray, sigma2: float, outlier: float) -> np.ndarray:
-    """Soft correspondences of Eq. 10.14 (the whole matrix; the EM uses their moments,
-    :func:`~corrlib.deformation.mixture.mixture_moments`).
-
-    Parameters
-    ----------
-    dist : (N, M) float
-        Eq. 10.17 distances between source and target samples.
-    sigma2 : float
-    outlier : float
-        ω in [0, 1).
-
-    Returns
-    -------
-    (N, M) float
-        ``P_nm``; rows sum to at most 1 (the rest is the outlier's share).
-    """
-    n, m = dist.shape
-    shift = dist.min(axis=1, keepdims=True)  # stabilise: multiply numerator and denominator by e^{shift/2σ²}
-    z = (dist - shift) * (-0.5 / sigma2)
-    p = np.zeros_like(z)
-    np.exp(z, out=p, where=z > SMALLEST_EXPONENT)
-    denom = p.sum(axis=1, keepdims=True)
-    if outlier > 0:
-        log_const = outlier_log_constant(sigma2, outlier, n, m)
-        denom += np.exp(np.minimum(log_const + shift / (2.0 * sigma2), LARGEST_EXPONENT))
-    return p / denom
 
 
 def huber_weights(residual_norm: np.ndarray, r0: float) -> np.ndarray:

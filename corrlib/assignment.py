@@ -13,7 +13,11 @@
   O(N_CANDIDATES) instead of a scan of the row. The result is within
   ``m · ε_final`` of the optimum (``m`` bidding rows); ``ε_final`` defaults to
   ``1e-9 × (score range) / max(n_rows, n_cols)``, so the objective matches
-  the exact optimum to ~1e-9 of the score range. It releases the GIL (cells
+  the exact optimum to ~1e-9 of the score range — but never below the
+  precision of the scores themselves (``finfo(dtype).eps × max |score|``):
+  a float32 score is only known to that, and finer bids would only reorder
+  its rounding (the objective's own rounding error over ``m`` rows is of the
+  same order as the bound ``m · ε``). It releases the GIL (cells
   can be solved in threads) and polls a cancellation flag once per ε phase.
 * ``"scipy"``: :func:`scipy.optimize.linear_sum_assignment` (exact; the
   Jonker–Volgenant algorithm is slow on the smooth, near-tied scores of
@@ -232,7 +236,9 @@ def _auction_solve(s: np.ndarray, eps_final: float | None, eps_start: float | No
     m, n = s.shape
     span = float(s.max() - s.min())
     if eps_final is None:
-        eps_final = max(span, 1e-300) * 1e-9 / n
+        # 1e-9 of the range per row, but no finer than the scores' own precision: a float32 score is known
+        # to about eps32 * |s|, so bids below that only reorder ties of the rounding
+        eps_final = max(max(span, 1e-300) * 1e-9 / n, float(np.finfo(s.dtype).eps) * float(np.abs(s).max()))
     if not (np.isfinite(eps_final) and eps_final > 0):  # NaN would never stop the ε-scaling
         raise ParameterError(f"eps_final must be positive and finite, got {eps_final}")
     # a bid below the floating-point resolution of the scores does not move a price: two rows would
@@ -278,7 +284,8 @@ def linear_assignment(score, *, slack: float | None = None, method: str = "aucti
         Score of leaving an element unmatched (partial matching).
     method : {"auction", "scipy"}
     eps_final : float, optional
-        Final ε of the auction (default ``1e-9 × range / max(n_rows, n_cols)``).
+        Final ε of the auction (default ``1e-9 × range / max(n_rows, n_cols)``, at least the scores'
+        precision ``finfo(dtype).eps × max |score|``).
     eps_start : float, optional
         First ε of the auction as a fraction of the score range (default 1/4, or 1e-3 with warm prices; a
         warm start from a less similar problem is faster with a larger one).

@@ -221,3 +221,17 @@ def test_a_price_war_hands_over_to_the_exact_solver(monkeypatch):
         got = linear_assignment(score, capacity=capacity)
         assert np.all(got >= 0) and np.all(np.bincount(got, minlength=40) <= capacity)
         assert assignment_score(score, got) == pytest.approx(assignment_score(score, expected))
+
+
+def test_float32_scores_are_solved_to_their_own_precision():
+    """The auction stops at the scores' precision: the gap to the exact optimum of the float32 values is at most
+    ``m · eps32 · max |s|``, the order of the objective's own rounding; float64 scores keep 1e-9 of the range."""
+    rng = np.random.default_rng(3)
+    eps32 = float(np.finfo(np.float32).eps)
+    for n in (50, 200, 400):
+        base = rng.normal(size=(n, 20)) @ rng.normal(size=(20, n))  # smooth, near-tied like kernel scores
+        s32 = base.astype(np.float32)
+        gap = exact_value(s32.astype(np.float64)) - assignment_score(s32, linear_assignment(s32))
+        assert -1e-9 <= gap <= n * eps32 * float(np.abs(s32).max())
+        gap64 = exact_value(base) - assignment_score(base, linear_assignment(base))
+        assert -1e-9 <= gap64 <= 1e-8 * np.ptp(base)

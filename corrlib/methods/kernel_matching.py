@@ -160,7 +160,8 @@ class KernelMatchingParams:
     growth: float = param(3.0, label="Growth factor", low=1.5, high=100.0,
                           help="Sample growth per scale until every vertex is matched.")
     max_cell: int = param(1000, label="Max cell size", low=50, high=20_000,
-                          help="Largest Voronoi cell solved as one assignment at the finer scales.")
+                          help="Planned cell size at the finer scales: each pass uses enough Voronoi cells that an "
+                               "average one holds 0.7 of it (the cells are uneven; one may exceed it).")
     cell_overlap: float = param(0.1, label="Cell overlap", low=0.0, high=10.0,
                                 help="Target cells are widened across their borders by about half this "
                                      "length (relative to √area) so that cells overlap; 0: disjoint cells.")

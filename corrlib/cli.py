@@ -267,7 +267,7 @@ def cmd_match(args) -> int:
     spec = get_method(args.method)
     initial = None
     if args.init:
-        if args.init in ("descriptors", "fmap"):
+        if args.init in ("descriptors", "fmap", "best"):
             overrides["init"] = args.init
         elif spec.refines:
             initial = _initial_match(args.init, source, target)
@@ -613,8 +613,9 @@ def _add_match_parsers(sub) -> None:
     p.add_argument("target")
     p.add_argument("--method", default="kernel-matching", help="registered method (see `corr methods`)")
     p.add_argument("--param", action="append", metavar="NAME=VALUE", help="method parameter (repeatable)")
-    p.add_argument("--init", help="descriptors | fmap | a map file (one target index per source vertex) | "
-                                  "a landmarks file (source target per line), for methods that refine")
+    p.add_argument("--init", help="descriptors | fmap | best (both, kernel matching) | a map file (one target index "
+                                  "per source vertex) | a landmarks file (source target per line), for methods "
+                                  "that refine")
     p.add_argument("--times", help="comma-separated diffusion times relative to the area (kernel matching)")
     _add_output(p, "result")
 

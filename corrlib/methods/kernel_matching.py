@@ -76,7 +76,7 @@ Map convention: ``map_xy[i]`` = vertex of Y matched to vertex i of X.
 from __future__ import annotations
 
 from concurrent.futures import ThreadPoolExecutor
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 
 import numpy as np
 
@@ -125,9 +125,10 @@ PROGRESS_INIT, PROGRESS_SMOOTHING = 0.05, 0.98
 class KernelMatchingParams:
     n_eigs: int = param(500, label="Eigenpairs", low=10, high=3000,
                         help="Laplace–Beltrami eigenpairs of the heat kernels (spectral form).")
-    init: str = param("descriptors", label="Initialisation", choices=("descriptors", "fmap"),
-                      help="Linear assignment on descriptors, or the functional-maps baseline's map "
-                           "(a given map or landmarks can be passed to the solver instead).")
+    init: str = param("descriptors", label="Initialisation", choices=("descriptors", "fmap", "best"),
+                      help="Linear assignment on descriptors, or the functional-maps baseline's map, or both "
+                           "(\"best\": the final map whose orientation-aware descriptors agree best is kept; "
+                           "twice the time). A given map or landmarks can be passed to the solver instead.")
     descriptor: str = param("shot", label="Descriptor", choices=DESCRIPTOR_KINDS,
                             help="Descriptor of the initial assignment and of the μ term (SHOT tells left "
                                  "from right, the spectral ones do not).")
@@ -816,7 +817,7 @@ def choose_start(state: KernelState):
         if second is not None:
             what = (f"kernel score of the {state.anchors_x.size} landmarks" if state.landmarks_only else
                     f"kernel score of the most similar {state.params.init_fraction:.0%} of the initial matches")
-            yield Progress("initial alignment", PROGRESS_DC[0], what)
+            yield Progress("initial alignment", PROGRESS_DC[0] + PROGRESS_DC[1] * state.step / state.total_steps, what)
             other_start, other_prices = second.result()
             state.watch.times["second start (concurrent)"] = sum(second_watch.times.values())
             other = yield from dc_iterations(state, other_start, other_prices, 0, best.kernel_scale,
@@ -964,9 +965,63 @@ def kernel_matching(source, target, params: KernelMatchingParams, token, initial
     return (yield from kernel_result(state, full_map_xy, full_map_yx))
 
 
+def orientation_agreement(source, target, map_xy: np.ndarray, spec_x: Spectrum, spec_y: Spectrum) -> float:
+    """Mean agreement ``<O_X(x), O_Y(m(x))>`` of the standardised orientation-aware descriptors along a map.
+
+    The descriptors (:func:`~corrlib.descriptors.orientation.orientation_descriptors`, signed area forms of
+    heat kernel signature pairs) change sign under a reflection, so the agreement is large for a map that
+    keeps left on left and negative for its mirror image — which the kernel energy cannot tell apart, since
+    a reflection of a symmetric shape preserves the heat kernels. Unmatched vertices (-1) are left out.
+    """
+    or_x, or_y = _standardised(orientation_descriptors(source, spec_x), orientation_descriptors(target, spec_y))
+    ok = map_xy >= 0
+    if not np.any(ok):
+        return 0.0
+    return float(np.mean(np.sum(or_x[ok] * or_y[map_xy[ok]], axis=1)))
+
+
+def _scaled_progress(generator, low: float, high: float, label: str):
+    """Re-yield a solver generator's reports with fractions mapped into ``[low, high]``; returns its result."""
+    while True:
+        try:
+            report = next(generator)
+        except StopIteration as stop:
+            return stop.value
+        fraction = low + (high - low) * report.fraction if report.fraction >= 0 else report.fraction
+        yield Progress(report.stage, fraction, f"{label}: {report.message}" if report.message else label)
+
+
+def best_of_both_starts(source, target, params: KernelMatchingParams, token):
+    """``init="best"``: kernel matching from the descriptor start and from the functional-maps baseline; the
+    map with the higher :func:`orientation_agreement` is returned.
+
+    Why not the kernel energy: the two starts fail differently — a half-flipped map from the descriptors, a
+    whole reflection or another symmetric turn from the functional map — and maps that differ by a
+    symmetry have nearly the same kernel energy (on the people the reflected map's is even higher). The
+    orientation-aware descriptors are odd under a reflection, so their agreement decides (see
+    ``docs/decisions.md``). ``extras["init"]`` names the start kept, ``extras["orientation_agreement"]``
+    holds both scores; the timings are those of the map kept plus ``"other start"`` (the other run's sum).
+    """
+    results = {}
+    for index, init in enumerate(("descriptors", "fmap")):
+        sub = replace(params, init=init)
+        results[init] = yield from _scaled_progress(kernel_matching(source, target, sub, token), index / 2,
+                                                    (index + 1) / 2, f"start {index + 1}/2 ({init})")
+    spec_x, spec_y = mesh_spectrum(source, params.n_eigs), mesh_spectrum(target, params.n_eigs)
+    scores = {init: orientation_agreement(source, target, r.map_xy, spec_x, spec_y) for init, r in results.items()}
+    kept = max(scores, key=lambda init: scores[init])  # descriptors first: a tie keeps the default start
+    other = "fmap" if kept == "descriptors" else "descriptors"
+    result = results[kept]
+    result.extras.update({"init": kept, "orientation_agreement": scores})
+    result.timings["other start"] = float(sum(results[other].timings.values()))
+    return result
+
+
 def solve_kernel_matching(source, target, params: KernelMatchingParams, token, *,
                           initial: InitialMatch | None = None):
     """Registered solver (``initial``: optional :class:`InitialMatch` for refinement)."""
+    if initial is None and params.init == "best":
+        return (yield from best_of_both_starts(source, target, params, token))
     return (yield from kernel_matching(source, target, params, token, initial))
 
 

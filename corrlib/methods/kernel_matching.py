@@ -21,8 +21,8 @@ The stages, each a function below sharing one :class:`KernelState`:
 3. :func:`seed_problem` — eigenfunctions, descriptor similarities and the
    anchors' alignment at the seeds (:class:`SeedProblem`).
 4. :func:`choose_start` — DC iterations of the first (largest) time from the
-   initial map and from the aligned start (:func:`aligned_start`); the higher
-   objective goes on.
+   initial map and from the aligned start (:func:`aligned_start`, formed on a
+   thread beside the first start's iterations); the higher objective goes on.
 5. :func:`dc_iterations` — DC iterations at one diffusion time, each one
    :func:`dc_step` (objective :func:`dc_objective`, score :func:`seed_score`);
    run over the decreasing time schedule (coarse, global alignment first).
@@ -63,6 +63,11 @@ Design choices, in brief (the measurements behind them are in
   vertex counts (for differently meshed shapes). The seeds stay matched by a
   permutation: with capacities the QAP gains by piling seeds onto one target
   (``k_Y(y, y)`` is the kernel's maximum).
+* ``init="best"`` (:func:`best_of_both_starts`): the whole pipeline from the
+  descriptors and from the functional-maps baseline, keeping the map whose
+  orientation-aware descriptors agree best (:func:`orientation_agreement`).
+  The kernel energy is the wrong judge here: maps that differ by a
+  reflection of a symmetric shape have nearly equal kernel energies.
 * ``smooth_k``: a last pointwise step projects the map onto the first
   eigenfunctions and gives every vertex its best-scoring partner (no longer
   bijective, which suits independently remeshed shapes).

@@ -234,14 +234,28 @@ def _progress_printer(quiet: bool):
     return callback
 
 
-def _initial_match(value: str, source, target):
+def _init_choices(spec) -> tuple:
+    """The named initialisations a method offers (the choices of its ``init`` parameter), e.g. "fmap"."""
+    import dataclasses
+
+    for f in dataclasses.fields(spec.params):
+        if f.name == "init":
+            return tuple(f.metadata.get("choices") or ())
+    return ()
+
+
+def _initial_match(value: str, source, target, spec=None):
     """``--init``: a map file (one target index per source vertex) or a landmarks file (two columns)."""
     from corrlib.io import load_map, load_pairs, read_text
     from corrlib.methods.base import InitialMatch
 
     path = Path(value)
     if not path.exists():
-        raise FileFormatError(f"{path}: --init is neither 'descriptors', 'fmap' nor an existing file")
+        if spec is None or not _init_choices(spec):
+            raise FileFormatError(f"{path}: --init is not an existing file")
+        named = ", ".join(repr(c) for c in _init_choices(spec))
+        raise FileFormatError(f"{path}: --init is neither a named initialisation of {spec.name} ({named}) "
+                              f"nor an existing file")
     if path.suffix.lower() != ".npz":
         rows = [line.split("#", 1)[0].split() for line in read_text(path, "--init").splitlines()]
         rows = [row for row in rows if row]
@@ -267,10 +281,10 @@ def cmd_match(args) -> int:
     spec = get_method(args.method)
     initial = None
     if args.init:
-        if args.init in ("descriptors", "fmap", "best"):
+        if args.init in _init_choices(spec):
             overrides["init"] = args.init
         elif spec.refines:
-            initial = _initial_match(args.init, source, target)
+            initial = _initial_match(args.init, source, target, spec)
         else:
             raise CorrError(f"method {spec.name!r} does not take an initial map (--init)")
     if args.times:

@@ -90,6 +90,23 @@ def run(generator: Generator[Progress, None, T], callback: Callable[[Progress], 
             callback(report)
 
 
+def scaled_progress(generator: Generator[Progress, None, T], low: float, high: float,
+                    label: str = "") -> Generator[Progress, None, T]:
+    """Re-yield a solver generator's reports with their fractions mapped into ``[low, high]``; return its result.
+
+    For a solver that runs others one after the other (each reports 0 to 1 of its own work). Unknown
+    fractions (negative) stay unknown; ``label`` prefixes the messages.
+    """
+    while True:
+        try:
+            report = next(generator)
+        except StopIteration as stop:
+            return stop.value
+        fraction = low + (high - low) * report.fraction if report.fraction >= 0 else report.fraction
+        message = f"{label}: {report.message}" if label and report.message else (label or report.message)
+        yield Progress(report.stage, fraction, message)
+
+
 def peak_rss_mb() -> float:
     """Peak resident memory of this process so far, in MB (Linux ``ru_maxrss`` is in kB)."""
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0

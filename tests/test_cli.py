@@ -154,6 +154,21 @@ def test_match_kernel_with_init_file(tmp_path, capsys):
     assert main(args[:5] + ["--init", str(tmp_path / "nothing.txt")]) == 2
 
 
+
+def test_named_initialisations_come_from_the_method(tmp_path, capsys):
+    """--init names are the method's own ``init`` choices; anything else must be a file, and the error lists
+    the names (nothing is written)."""
+    pair = [str(TOSCA / "wolf0.off"), str(TOSCA / "wolf1.off")]
+    out = tmp_path / "r"
+    assert main(["match", *pair, "--method", "kernel-matching", "--init", "bestest", "-o", str(out), "-q"]) == 2
+    err = capsys.readouterr().err
+    assert "neither a named initialisation of kernel-matching" in err and "'best'" in err and "'fmap'" in err
+    assert main(["match", *pair, "--method", "divergence-free", "--init", "best", "-o", str(out), "-q"]) == 2
+    assert "'kernel-matching'" in capsys.readouterr().err  # divergence-free names its own choices
+    assert main(["refine", *pair, "--method", "kernel-matching", "--init", "best", "-o", str(out), "-q"]) == 2
+    assert "not an existing file" in capsys.readouterr().err
+    assert not list(tmp_path.iterdir())
+
 def test_match_contours(tmp_path, capsys):
     out = tmp_path / "cc"
     assert main(["match-contours", str(SILHOUETTES / "mpeg7" / "dog-1.gif"), str(SILHOUETTES / "horse.png"),

@@ -284,7 +284,6 @@ def test_non_isometric_pair_from_the_functional_map():
     assert report["median"] <= 0.05 and report["mean"] <= 0.15, report
 
 
-
 def _people_mirror_pair():
     """human3 and the mirror image of human0 (x -> -x, faces reversed) with the ground truth: the rest pose
     human0 is left-right symmetric, so the partner of vertex v is the vertex at v's mirrored position."""

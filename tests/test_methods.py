@@ -170,3 +170,18 @@ def test_typed_result_parts_survive_save_and_load(tmp_path):
     assert loaded.search.gap == pytest.approx(0.1)
     assert loaded.extras["band_size"] == 0.25 and np.array_equal(loaded.extras["path_map_xy"], np.arange(7))
     assert loaded.deformation is None
+
+
+def test_scaled_progress_maps_fractions_and_returns_the_result():
+    from corrlib.progress import scaled_progress
+
+    def solver():
+        yield Progress("a", 0.0, "start")
+        yield Progress("b", -1.0, "")
+        yield Progress("c", 1.0, "done")
+        return 42
+
+    reports = []
+    assert run(scaled_progress(solver(), 0.5, 1.0, "second"), callback=reports.append) == 42
+    assert [r.fraction for r in reports] == [0.5, -1.0, 1.0]  # an unknown fraction stays unknown
+    assert [r.message for r in reports] == ["second: start", "second", "second: done"]

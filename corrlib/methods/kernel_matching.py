@@ -99,7 +99,7 @@ from corrlib.geometry.sampling import (
 from corrlib.geometry.spectrum import Spectrum, mesh_spectrum
 from corrlib.methods.base import InitialMatch, MatchResult, param
 from corrlib.methods.registry import MethodSpec, register
-from corrlib.progress import Progress, Stopwatch
+from corrlib.progress import Progress, Stopwatch, scaled_progress
 
 #: threads solving the cells of a refinement pass: the auction releases the GIL, so cells can overlap; two,
 #: for the two-core development machine (every cell in flight also holds its dense score block)
@@ -985,17 +985,6 @@ def orientation_agreement(source, target, map_xy: np.ndarray, spec_x: Spectrum, 
     return float(np.mean(np.sum(or_x[ok] * or_y[map_xy[ok]], axis=1)))
 
 
-def _scaled_progress(generator, low: float, high: float, label: str):
-    """Re-yield a solver generator's reports with fractions mapped into ``[low, high]``; returns its result."""
-    while True:
-        try:
-            report = next(generator)
-        except StopIteration as stop:
-            return stop.value
-        fraction = low + (high - low) * report.fraction if report.fraction >= 0 else report.fraction
-        yield Progress(report.stage, fraction, f"{label}: {report.message}" if report.message else label)
-
-
 def best_of_both_starts(source, target, params: KernelMatchingParams, token):
     """``init="best"``: kernel matching from the descriptor start and from the functional-maps baseline; the
     map with the higher :func:`orientation_agreement` is returned.
@@ -1010,8 +999,8 @@ def best_of_both_starts(source, target, params: KernelMatchingParams, token):
     results = {}
     for index, init in enumerate(("descriptors", "fmap")):
         sub = replace(params, init=init)
-        results[init] = yield from _scaled_progress(kernel_matching(source, target, sub, token), index / 2,
-                                                    (index + 1) / 2, f"start {index + 1}/2 ({init})")
+        results[init] = yield from scaled_progress(kernel_matching(source, target, sub, token), index / 2,
+                                                   (index + 1) / 2, f"start {index + 1}/2 ({init})")
     spec_x, spec_y = mesh_spectrum(source, params.n_eigs), mesh_spectrum(target, params.n_eigs)
     scores = {init: orientation_agreement(source, target, r.map_xy, spec_x, spec_y) for init, r in results.items()}
     kept = max(scores, key=lambda init: scores[init])  # descriptors first: a tie keeps the default start

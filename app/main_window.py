@@ -30,6 +30,7 @@ from PySide6.QtWidgets import (
 )
 
 import corrlib
+from app.gui_gc import collect_on_gui_thread
 from app.jobs import LoadedShape, MethodOutcome, describe, load_job, method_job
 from app.param_form import ParamForm
 from app.sketch import SketchPanel
@@ -169,6 +170,7 @@ class MainWindow(QMainWindow):
         self.source = self.target = None
         self.gt: tuple | None = None  # (source rows, target rows, target mirrored rows or None)
         self.last_result = None
+        self._collector = collect_on_gui_thread(self)  # no cyclic GC on worker threads (see app.gui_gc)
         self.runner = JobRunner(self)
         self.runner.progress.connect(self._on_progress)
         self.runner.finished.connect(self._on_finished)
@@ -1033,4 +1035,5 @@ class MainWindow(QMainWindow):
             self.loading_finished.emit()  # nothing more will load: release whoever waits for the loads
         for view in (self.pair_view, self.product_view, self.sequence_view, self.retrieval_view, self.compare_view):
             view.close_plotters()
+        self._collector.release(self)
         super().closeEvent(event)

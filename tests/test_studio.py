@@ -189,6 +189,38 @@ def test_close_during_a_run(qtbot, tmp_path):
     assert settings.value("window/state") is not None
 
 
+def test_reference_cycles_are_collected_on_the_gui_thread(qtbot, tmp_path):
+    """Cycles made in a worker thread are freed by the GUI thread's collector while a window is open
+    (a Qt/VTK object destroyed on a worker thread crashes the process); closing restores automatic GC."""
+    import gc
+    import threading
+
+    freed_on: list[str] = []
+
+    class Node:
+        def __init__(self):
+            self.me = self
+
+        def __del__(self):
+            freed_on.append(threading.current_thread().name)
+
+    win = make_window(qtbot, tmp_path / "s.ini")
+    assert not gc.isenabled()
+
+    def make_cycles():
+        for _ in range(3 * gc.get_threshold()[0]):
+            Node()
+            [[] for _ in range(4)]  # allocations that would trigger a generation-0 collection here
+
+    worker = threading.Thread(target=make_cycles, name="worker")
+    worker.start()
+    worker.join()
+    qtbot.waitUntil(lambda: len(freed_on) >= 3 * gc.get_threshold()[0], timeout=10_000)
+    assert set(freed_on) == {threading.main_thread().name}
+    win.close()
+    assert gc.isenabled()
+
+
 def test_the_window_fits_a_laptop_screen(qtbot, tmp_path):
     """Every dock scrolls instead of imposing its content's height, so the window's minimum size is below
     1280 x 720; at that size every dock stays on screen and the central views keep most of the width."""

@@ -29,15 +29,18 @@ def explicit_product_optimum(graph: ProductGraph, gain: float = 0.0) -> float:
     m, n = graph.m, graph.n
     node = lambda i, j: i * n + j  # noqa: E731
     adj = graph.adjacency.tocoo()
+    # the directed edge penalties (times length) as given to the graph, looked up per edge
+    extra = sp.csr_matrix((graph.extra, graph.indices, graph.indptr), shape=(n, n)).todense()
     rows, cols, w = [], [], []
     for i in range(m + 1):
         for j, k, length in zip(adj.row, adj.col, adj.data):
             rows.append(node(i, j)), cols.append(node(i, k))
-            w.append(0.5 * (graph.cost[i, j] + graph.cost[i, k]) * length)
+            w.append(0.5 * (graph.cost[i, j] + graph.cost[i, k]) * length + extra[j, k])
             if i < m:
                 a = np.sqrt(graph.step2[i])
                 rows.append(node(i, j)), cols.append(node(i + 1, k))
-                w.append(0.5 * (graph.cost[i, j] + graph.cost[i + 1, k]) * np.hypot(length, a) - gain * min(a, length))
+                w.append(0.5 * (graph.cost[i, j] + graph.cost[i + 1, k]) * np.hypot(length, a) - gain * min(a, length)
+                         + extra[j, k])
         if i < m:
             for j in range(n):
                 rows.append(node(i, j)), cols.append(node(i + 1, j))
@@ -105,6 +108,46 @@ def test_branch_and_bound_equals_brute_force(seed):
         approx = run(branch_and_bound(tiny_graph(seed), eps=eps))
         assert exact <= approx.energy <= (1 + eps) * exact + 1e-12
         assert approx.lower_bound <= exact + 1e-12
+
+
+def directed_penalties(seed, adjacency) -> sp.csr_matrix:
+    """Random non-negative penalties per unit length, different for j -> k and k -> j (half of them zero)."""
+    rng = np.random.default_rng(100 + seed)
+    pattern = sp.csr_matrix(adjacency)
+    pattern = (pattern + pattern.T).tocoo()
+    values = rng.random(pattern.nnz) * (rng.random(pattern.nnz) < 0.5)
+    return sp.csr_matrix((values, (pattern.row, pattern.col)), shape=pattern.shape)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_directed_edge_penalties_keep_the_search_exact(seed):
+    """Penalties that depend on the direction of a graph edge (the side view's wrong-way cost): the
+    branch-and-bound optimum equals the explicit product graph's, the heuristic's backward search stays
+    admissible (it walks each edge with its forward penalty), the energy recomputed edge by edge agrees,
+    and the closing detour pays the penalties too."""
+    node_cost, curve, points, adjacency = tiny_instance(seed, 7, 1)
+    penalty = directed_penalties(seed, adjacency)
+    graph = ProductGraph(node_cost, curve, points, adjacency, edge_penalty=penalty)
+    assert np.any(graph.extra > 0)
+    exact = explicit_product_optimum(graph)
+    result = run(branch_and_bound(graph))
+    assert result.energy == pytest.approx(exact, rel=1e-12)
+    assert graph.path_energy(result.path) == pytest.approx(result.energy, rel=1e-12)
+    plain = ProductGraph(node_cost, curve, points, adjacency)
+    assert exact >= explicit_product_optimum(plain) - 1e-12  # penalties only add
+    # the same penalties walked the other way round are a different problem: reversing the curve and the
+    # penalties' direction together gives back the same optimum
+    reversed_graph = ProductGraph(node_cost[np.r_[0, 6:0:-1]], curve[np.r_[0, 6:0:-1]], points, adjacency,
+                                  edge_penalty=penalty.T)
+    assert run(branch_and_bound(reversed_graph)).energy == pytest.approx(exact, rel=1e-12)
+    everything = np.ones(graph.n, dtype=bool)
+    _, _, t = graph.shortest(everything, everything)
+    energy, closed = graph.close_by_detour(graph.backtrack(t))
+    assert energy == pytest.approx(graph.path_energy(closed), rel=1e-12)
+    ratio = run(minimum_ratio_union([ProductGraph(node_cost, curve, points, adjacency, edge_penalty=penalty)]))
+    assert explicit_product_optimum(graph, ratio.energy) == pytest.approx(0.0, abs=1e-9)
+    with pytest.raises(InputError, match="non-negative"):
+        ProductGraph(node_cost, curve, points, adjacency, edge_penalty=-penalty)
 
 
 @pytest.mark.parametrize("seed", range(4))
@@ -244,7 +287,9 @@ def test_result_is_invariant_to_similarity_transforms(wolf_pair):
     rot = trimesh.transformations.random_rotation_matrix(np.random.default_rng(2).random(3))[:3, :3]
     moved_mesh = TriMesh(3.7 * wolf1.vertices @ rot.T + [1, 2, 3], wolf1.faces, name="moved")
     other = solve("contour3d", moved_contour, moved_mesh, n_contour=60, eps=0.0)
-    assert other.energy == pytest.approx(base.energy, rel=1e-6)
+    # the even eigenpairs and the side view's symmetry-curve cost come from a reflection estimated by least
+    # squares on each mesh: equal to ~1e-5
+    assert other.energy == pytest.approx(base.energy, rel=2e-5)
     assert np.mean(other.map_xy == base.map_xy) > 0.95
 
 
@@ -418,9 +463,9 @@ def test_elastic_energy_does_not_collapse_where_the_paper_energy_does():
     query = cut_query(lion, "main")
     scores = {}
     for energy in ("paper", "elastic"):
-        # the paper's node cost, so that only the path energy differs
+        # the paper's node cost (no axis, no side-view terms), so that only the path energy differs
         result = solve("contour3d", query.contour, lion, n_contour=60, energy=energy, features="paper", axis_weight=0,
-                       model="flat")
+                       model="flat", view="front")
         assert result.search.optimal
         gt = query.ground_truth(result.path.contour_points, lion.vertices)
         scores[energy] = score_curve(result.map_xy, result.path.vertices, gt, lion, query.length_3d)
@@ -430,7 +475,7 @@ def test_elastic_energy_does_not_collapse_where_the_paper_energy_does():
     assert scores["elastic"]["mean_error"] < scores["paper"]["mean_error"] - 0.05
     for energy in ("ratio", "elastic-ratio"):
         result = solve("contour3d", query.contour, lion, n_contour=60, energy=energy, features="paper",
-                       axis_weight=0, model="flat")
+                       axis_weight=0, model="flat", view="front")
         assert result.search.optimal and "per contour length" in result.energy_meaning
         gt = query.ground_truth(result.path.contour_points, lion.vertices)
         assert score_curve(result.map_xy, result.path.vertices, gt, lion, query.length_3d)["coverage"] > 0.9

@@ -121,6 +121,21 @@ def even_spectrum(spectrum, mirror: np.ndarray, k: int) -> tuple[np.ndarray, np.
     evecs : (n, k) float
         M-orthonormal even eigenfunctions.
     """
+    return _parity_spectrum(spectrum, mirror, k, even=True)
+
+
+def odd_eigenfunction(spectrum, mirror: np.ndarray) -> np.ndarray:
+    """(n,) float: the lowest eigenfunction that the reflection negates (``g ∘ S = −g``).
+
+    Rayleigh–Ritz on the range of ``(I − C_s) / 2``, as :func:`even_spectrum`
+    on the even one. It is of one sign on each half of the shape (the
+    Dirichlet ground state of a half, extended oddly) and zero on the curve
+    of symmetry.
+    """
+    return _parity_spectrum(spectrum, mirror, 1, even=False)[1][:, 0]
+
+
+def _parity_spectrum(spectrum, mirror: np.ndarray, k: int, even: bool) -> tuple[np.ndarray, np.ndarray]:
     phi = spectrum.evecs
     mirror = np.asarray(mirror)
     if mirror.shape != (phi.shape[0],):
@@ -128,10 +143,11 @@ def even_spectrum(spectrum, mirror: np.ndarray, k: int) -> tuple[np.ndarray, np.
     mass = spectrum.mass.diagonal()
     c = phi.T @ (mass[:, None] * phi[mirror])
     projector_evals, projector_evecs = np.linalg.eigh(0.5 * np.eye(c.shape[0]) + 0.25 * (c + c.T))
-    basis = projector_evecs[:, projector_evals > 0.5]
+    basis = projector_evecs[:, projector_evals > 0.5] if even else projector_evecs[:, projector_evals < 0.5]
     if basis.shape[1] < k:
-        raise ParameterError(f"only {basis.shape[1]} of {spectrum.k} eigenfunctions are even; "
-                             f"{k} even eigenpairs need more eigenpairs of the mesh")
+        parity = "even" if even else "odd"
+        raise ParameterError(f"only {basis.shape[1]} of {spectrum.k} eigenfunctions are {parity}; "
+                             f"{k} {parity} eigenpairs need more eigenpairs of the mesh")
     laplacian = basis.T @ (spectrum.evals[:, None] * basis)
     evals, ritz = np.linalg.eigh(0.5 * (laplacian + laplacian.T))
     return evals[:k], phi @ (basis @ ritz[:, :k])

@@ -44,7 +44,7 @@ from corrlib.progress import CancelToken, Progress
 
 @numba.njit(cache=True, nogil=True)
 def _layered_dijkstra(cost, step2, graph_points, indptr, indices, edge_len, source_mask, target_mask,
-                      upper, heuristic, cancel, dist, pred, origin, stretch, gain):
+                      upper, heuristic, cancel, dist, pred, origin, stretch, gain, extra):
     """Multi-source shortest paths through all layers; returns (best end vertex, its cost).
 
     ``stretch`` adds ``stretch * |b - a|`` to every edge, ``a`` and ``b`` its
@@ -55,7 +55,8 @@ def _layered_dijkstra(cost, step2, graph_points, indptr, indices, edge_len, sour
     and the graph (the credited length of :meth:`ProductGraph.credited_length`;
     the parametric problem of the ratio energy). Edges within a layer never
     get a credit, so they stay non-negative and every layer's Dijkstra is exact
-    whatever the distances it starts from.
+    whatever the distances it starts from. ``extra`` (one entry per CSR edge)
+    is added to every move along that directed graph edge.
 
     ``dist``/``pred``/``origin`` (L, n) are overwritten: distance, predecessor
     (``j`` within the layer, ``n + j`` from vertex j of the previous layer,
@@ -102,7 +103,7 @@ def _layered_dijkstra(cost, step2, graph_points, indptr, indices, edge_len, sour
                 for e in range(indptr[j], indptr[j + 1]):
                     k = indices[e]
                     nd = (dj + 0.5 * (cj + cost[i, k]) * np.sqrt(s2 + edge_len[e] * edge_len[e])
-                          + stretch * abs(edge_len[e] - step) - gain * min(edge_len[e], step))
+                          + stretch * abs(edge_len[e] - step) - gain * min(edge_len[e], step) + extra[e])
                     if nd < d[k] and nd + h[k] < upper:
                         d[k] = nd
                         p[k] = n + j
@@ -118,7 +119,7 @@ def _layered_dijkstra(cost, step2, graph_points, indptr, indices, edge_len, sour
             cj = cost[i, j]
             for e in range(indptr[j], indptr[j + 1]):
                 k = indices[e]
-                nd = dj + (0.5 * (cj + cost[i, k]) + stretch) * edge_len[e]
+                nd = dj + (0.5 * (cj + cost[i, k]) + stretch) * edge_len[e] + extra[e]
                 if nd < d[k] and nd + h[k] < upper:
                     d[k] = nd
                     p[k] = j
@@ -183,10 +184,17 @@ class ProductGraph:
     stretch : float
         Weight of the stretching term ``|b - a|`` per edge (graph length
         against curve length); 0 is the paper's energy.
+    edge_penalty : (n, n) sparse, optional
+        Non-negative cost per unit graph length of walking the directed graph
+        edge ``j → k`` (within a layer or to the next), added to the edge's
+        cost; it may differ from ``k → j`` (e.g. a curve that must keep one
+        side of the surface on its left). Entries outside the adjacency are
+        ignored. The backward search of the heuristic walks every edge with
+        the penalty of its forward direction, so it stays exact.
     """
 
     def __init__(self, node_cost, curve_points, graph_points, adjacency, *, directed: bool = False,
-                 closing_shift: int = 0, n_starts: int | None = None, stretch: float = 0.0):
+                 closing_shift: int = 0, n_starts: int | None = None, stretch: float = 0.0, edge_penalty=None):
         cost = np.asarray(node_cost, dtype=np.float64)
         curve = np.asarray(curve_points, dtype=np.float64)
         pts = np.asarray(graph_points, dtype=np.float64)
@@ -227,6 +235,13 @@ class ProductGraph:
         self.indptr, self.indices, self.edge_len = csr_arrays(adj)
         # the backward search of the heuristic walks the edges in reverse
         self._reverse = csr_arrays(adj.T)
+        # directed extra cost of every graph edge, aligned with the forward and the reversed CSR order
+        self.extra = self._edge_extra(edge_penalty, n)
+        edge_ids = csr_matrix((np.arange(1, self.indices.size + 1, dtype=np.float64), self.indices, self.indptr),
+                              shape=(n, n))
+        reverse_ids = csr_matrix(edge_ids.T)
+        reverse_ids.sort_indices()
+        self._reverse_extra = np.ascontiguousarray(self.extra[reverse_ids.data.astype(np.int64) - 1])
         self.adjacency = csr_matrix((self.edge_len, self.indices, self.indptr), shape=(n, n))
         # admissible heuristic (remaining cost to the last layer); zero until compute_heuristic()
         self.heuristic = np.zeros((m + 1, n))
@@ -238,6 +253,20 @@ class ProductGraph:
         self.origin = np.empty((m + 1, n), dtype=np.int32)
         self.runs = 0
         self.run_seconds = 0.0
+
+    def _edge_extra(self, edge_penalty, n: int) -> np.ndarray:
+        """(nnz,) float: ``penalty(j → k) · |j k|`` for every directed edge in CSR order (zeros without one)."""
+        if edge_penalty is None:
+            return np.zeros(self.indices.size)
+        penalty = csr_matrix(edge_penalty)
+        if penalty.shape != (n, n):
+            raise InputError(f"edge penalties must be an ({n}, {n}) matrix, got {penalty.shape}")
+        penalty.sort_indices()
+        rows = np.repeat(np.arange(n), np.diff(self.indptr))
+        values = np.asarray(penalty[rows, self.indices]).ravel()
+        if not np.all(np.isfinite(values)) or values.min(initial=0.0) < 0:
+            raise InputError("edge penalties must be finite and non-negative")
+        return np.ascontiguousarray(values * self.edge_len)
 
     def compute_heuristic(self, cancel: np.ndarray | None = None) -> None:
         """Exact cost-to-go ignoring where the path must end: one backward layered Dijkstra.
@@ -255,7 +284,7 @@ class ProductGraph:
         t, _ = _layered_dijkstra(np.ascontiguousarray(self.cost[::-1]), np.ascontiguousarray(self.step2[::-1]),
                                  self.graph_points, indptr, indices, edge_len, everything,
                                  everything, np.inf, np.zeros((self.m + 1, self.n)), flag, self.dist, self.pred,
-                                 self.origin, self.stretch, self.gain)
+                                 self.origin, self.stretch, self.gain, self._reverse_extra)
         self.runs += 1
         self.run_seconds += time.perf_counter() - start
         if t == -2:
@@ -312,7 +341,7 @@ class ProductGraph:
         start = time.perf_counter()
         t, c = _layered_dijkstra(self.cost, self.step2, self.graph_points, self.indptr, self.indices,
                                  self.edge_len, sources, targets, float(upper), self.heuristic, flag,
-                                 self.dist, self.pred, self.origin, self.stretch, self.gain)
+                                 self.dist, self.pred, self.origin, self.stretch, self.gain, self.extra)
         self.runs += 1
         self.run_seconds += time.perf_counter() - start
         if t == -2:
@@ -369,7 +398,7 @@ class ProductGraph:
             layer_cost = self.cost[self.m]
             tails = np.repeat(np.arange(self.n), np.diff(self.indptr))
             self._closing_weights = csr_matrix(
-                ((0.5 * (layer_cost[tails] + layer_cost[self.indices]) + self.stretch) * self.edge_len,
+                ((0.5 * (layer_cost[tails] + layer_cost[self.indices]) + self.stretch) * self.edge_len + self.extra,
                  self.indices, self.indptr), shape=(self.n, self.n))
         dist, pred = dijkstra(self._closing_weights, directed=True, indices=t, return_predecessors=True)
         if not np.isfinite(dist[s]):
@@ -402,6 +431,9 @@ class ProductGraph:
             a2 = self.step2[i0] if i1 == i0 + 1 else 0.0
             total += 0.5 * (self.cost[i0, j0] + self.cost[i1, j1]) * np.sqrt(a2 + b2)
             total += self.stretch * abs(np.sqrt(b2) - np.sqrt(a2))
+            if j1 != j0:
+                e = self.indptr[j0] + np.searchsorted(self.indices[self.indptr[j0]:self.indptr[j0 + 1]], j1)
+                total += self.extra[e]
         return float(total - self.gain * self.credited_length(path))
 
     def credited_length(self, path: CyclicPath) -> float:
@@ -590,9 +622,11 @@ def minimum_ratio_union(graphs, *, eps: float = 0.0, token: CancelToken | None =
     handful of rounds. A collapsed matching, whose curve points keep their
     match, has a small ``D`` and a large ratio however small its energy.
 
-    Bounds: for every path ``E − λ D ≥ v`` (the last optimum) and ``D ≤ L``
-    (the curve's length), so ``R ≥ λ + v / L``. With ``eps > 0`` the search stops
-    once that lower bound times ``1 + eps`` reaches ``λ``.
+    Bounds: the optimum of ``E − μ D`` is non-negative exactly when no path
+    has a ratio below ``μ``, so a round that finds it non-negative certifies
+    ``R ≥ μ``. With ``eps > 0`` every round solves at ``μ = λ / (1 + eps)``
+    instead of ``λ``: either it certifies that ``λ`` is within ``1 + eps`` of
+    the optimum, or its path improves the ratio by at least that factor.
 
     Returns
     -------
@@ -624,24 +658,22 @@ def minimum_ratio_union(graphs, *, eps: float = 0.0, token: CancelToken | None =
     energy = graphs[index].path_energy(path)
     # a matching of the paper's optimum that never moves has no ratio yet: start from the smallest credit
     ratio = energy / max(credit, 1e-9 * curve_length)
-    lower = -np.inf
+    lower = -np.inf  # no certificate yet
     for _ in range(max_rounds):
-        bb = yield from solve(ratio)
+        probe = ratio / (1.0 + eps)
+        bb = yield from solve(probe)
         iterations += bb.iterations
-        value = bb.lower_bound  # the optimum of E - ratio * D (exact unless the iteration cap stopped it)
-        if value >= -1e-9 * max(abs(energy), 1e-300):  # no path beats the current ratio
-            lower = ratio
+        value = bb.lower_bound  # a lower bound of min E - probe * D (the optimum unless the iteration cap hit)
+        if value >= -1e-9 * max(abs(energy), 1e-300):  # no path has a ratio below the probe
+            lower = probe
             break
-        lower = ratio + value / curve_length
         graph = graphs[bb.graph_index]
         candidate_credit = graph.credited_length(bb.path)
         candidate_energy = graph.path_energy(bb.path)  # the gains are 0 again: the energy alone
         if candidate_credit <= 0 or candidate_energy / candidate_credit >= ratio:
-            break  # the inner search stopped early (iteration cap): keep the bounds as they are
+            break  # the inner search stopped early (iteration cap): no certificate
         path, index, energy = bb.path, bb.graph_index, candidate_energy
         ratio = energy / candidate_credit
-        if lower * (1.0 + eps) >= ratio:
-            break
     runs = sum(g.runs for g in graphs)
     result_path = CyclicPath(path.vertices, path.layers, float(ratio))
     return BranchAndBoundResult(result_path, float(ratio), float(min(lower, ratio)), float(ratio), iterations, runs,

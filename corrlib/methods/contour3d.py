@@ -72,6 +72,27 @@ outline itself with the whole surface, as the paper does. Half features are the 
 at its mirror image, so the matched curve may pass on either side of the
 body, as a silhouette cannot tell them apart either.
 
+Side view (ours; ``view``, ``symmetry_weight``): an outline seen across the
+shape's plane of symmetry (an animal from the side, or a section through
+that plane) runs along the curve of symmetry except on the limbs, and goes
+once round the body keeping one half on the same side
+(:mod:`corrlib.descriptors.side_view`). The node cost of such a view gains
+``w · c̄ · q(j)``, ``q`` the distance of vertex j to its mirror image (divided
+by its mean, 0 on limbs: protrusions that the reflection exchanges), and
+every directed mesh edge walked with the near half on the wrong side costs
+``w · c̄`` times the negative part of ``(n × t) · ∇g`` (``g`` the lowest odd
+eigenfunction, normalised) times its length; ``c̄`` is the mean node cost.
+Which half is near is unknown, so every reading is searched with both signs
+of ``g``. Without the orientation cost the curve could run out and back
+along the back; without the distance cost it could circle a point on a
+flank. A view *within* the plane of symmetry (a person from the front, an
+animal from above) has an outline that is its own mirror image and that
+crosses the curve of symmetry, so it gets neither term: ``view="auto"``
+decides from the outline's mirror asymmetry
+(:func:`~corrlib.descriptors.side_view.mirror_asymmetry`). The orientation
+cost enters the first-order energies (``paper``, ``ratio``); the
+second-order graphs take the distance cost only.
+
 Part term (the thesis' automatic part features; ``parts="auto"``, not the
 default): the protrusions of the filled silhouette and of the mesh
 (:mod:`corrlib.geometry.segmentation`: heat-kernel persistence, the same
@@ -116,9 +137,11 @@ from dataclasses import dataclass
 
 import numba
 import numpy as np
+import scipy.sparse as sp
 
+from corrlib.descriptors.side_view import edge_orientation, mirror_asymmetry, paired_limbs, symmetry_curve_cost
 from corrlib.descriptors.spectral import hks, wks
-from corrlib.descriptors.symmetry import K_FINAL, even_spectrum, mesh_reflection
+from corrlib.descriptors.symmetry import K_FINAL, even_spectrum, mesh_reflection, odd_eigenfunction
 from corrlib.errors import ContourError, InputError, ParameterError
 from corrlib.geometry.cyclic_paths import ProductGraph, branch_and_bound_union, minimum_ratio_union
 from corrlib.geometry.elastic_paths import ElasticProductGraph
@@ -137,6 +160,10 @@ from corrlib.shapes import Contour2D, TriMesh
 MODELS = {"auto": ("whole", "half"), "half": ("half",), "whole": ("whole",), "flat": ("flat",)}
 #: eigenpairs of the mesh per even eigenpair asked for (about half of the eigenfunctions are even)
 HALF_EIGENPAIRS_PER_K = 3
+#: ``view="auto"``: an outline farther than this from its own mirror image is a side view (measured on the
+#: benchmark and retrieval queries: views within the plane of symmetry 0.001–0.025, side views and
+#: sections 0.032–0.12; see docs/decisions.md)
+SIDE_VIEW_ASYMMETRY = 0.03
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -186,6 +213,16 @@ class Contour3DParams:
     bending: float = param(1.0, label="Bending weight", low=0.0, high=1e3,
                            help="elastic energy: (1 − cos θ) per turn, in units of the mean node cost times the "
                                 "mean contour step.")
+    view: str = param("auto", label="View", choices=("auto", "side", "front"),
+                      help="side: the outline is seen across the shape's plane of symmetry (an animal from the side, "
+                           "or a section through that plane), so it runs along the curve of symmetry except on "
+                           "limbs and keeps one half of the shape on one side (the symmetry-curve weight applies); "
+                           "front: seen within that plane (a person from the front, an animal from above), no such "
+                           "term; auto: side unless the outline is its own mirror image in 2D.")
+    symmetry_weight: float = param(1.0, label="Symmetry-curve weight", low=0.0, high=1e3,
+                                   help="Side views: cost of a point's distance to its mirror image (off the limbs) "
+                                        "and of walking round the body the wrong way, in units of the mean node cost "
+                                        "(0: off).")
     parts: str = param("none", label="Part features", choices=("auto", "none"),
                        help="auto: the protrusions of the filled silhouette and of the mesh (heat-kernel persistence) "
                             "are matched by a small assignment and points of non-matching parts pay the part "
@@ -304,6 +341,9 @@ class PreparedQuery:
     parts : (m,) int or None
         Protrusions of the filled silhouette at the contour points (0: body;
         None unless ``parts="auto"``).
+    asymmetry : float
+        :func:`~corrlib.descriptors.side_view.mirror_asymmetry` of the outline
+        (0: its own mirror image, a view within the plane of symmetry).
     """
 
     points: np.ndarray
@@ -313,6 +353,13 @@ class PreparedQuery:
     axes: dict[str, list[IntrinsicAxis]]
     doubled_features: np.ndarray | None = None
     parts: np.ndarray | None = None
+    asymmetry: float = 0.0
+
+    def is_side_view(self, params: "Contour3DParams") -> bool:
+        """Whether the side-view terms apply (``view``, or for ``auto`` the outline's mirror asymmetry)."""
+        if params.symmetry_weight == 0.0 or params.view == "front":
+            return False
+        return params.view == "side" or self.asymmetry > SIDE_VIEW_ASYMMETRY
 
     def model_features(self, model: str) -> np.ndarray:
         """(m, d) float: the contour's features under a shape model (see the module docstring)."""
@@ -386,7 +433,8 @@ def prepare_query(contour: Contour2D, params: Contour3DParams) -> PreparedQuery:
     parts = None
     if params.parts == "auto":
         parts = protrusion_parts(evals, evecs, filled.adjacency, params.area_ratio).labels[:m]
-    return PreparedQuery(canonical.points, feats[:m], resampled.labels, resampled, axes, doubled, parts)
+    return PreparedQuery(canonical.points, feats[:m], resampled.labels, resampled, axes, doubled, parts,
+                         mirror_asymmetry(canonical.points))
 
 
 def _axes_at(axes: list[IntrinsicAxis], m: int) -> list[IntrinsicAxis]:
@@ -435,6 +483,45 @@ def prepare_mesh(mesh: TriMesh, params: Contour3DParams) -> PreparedMesh:
     return PreparedMesh(verts, features, axes, parts)
 
 
+@dataclass
+class SideViewTerms:
+    """A mesh's side-view terms (:mod:`corrlib.descriptors.side_view`).
+
+    Attributes
+    ----------
+    curve_cost : (n,) float
+        Distance to the mirror image divided by its mean, 0 on limbs.
+    orientation : (n, n) sparse
+        ``(n̂ × t) · ∇g / mean |∇g|`` of every directed edge (``g`` the lowest
+        odd eigenfunction): positive where the edge keeps ``g > 0`` on its left.
+    """
+
+    curve_cost: np.ndarray
+    orientation: sp.csr_matrix
+
+    def wrong_way(self, sign: float) -> sp.csr_matrix:
+        """(n, n) sparse ≥ 0: the part of ``sign · orientation`` below zero, per directed edge."""
+        out = self.orientation.copy()
+        out.data = np.maximum(0.0, -sign * out.data)
+        return out
+
+
+def side_view_terms(mesh: TriMesh, params: Contour3DParams) -> SideViewTerms | None:
+    """The side-view terms of a mesh, or None where it has no usable reflection (too coarse, no odd function)."""
+    k_mesh = max(HALF_EIGENPAIRS_PER_K * params.k, K_FINAL)
+    if mesh.n_vertices <= k_mesh:
+        return None
+    spectrum = mesh_spectrum(mesh, k_mesh)
+    mirror = mesh_reflection(mesh, spectrum)
+    try:
+        odd = odd_eigenfunction(spectrum, mirror)
+    except ParameterError:  # no eigenfunction is odd: no reflection to speak of
+        return None
+    limbs = paired_limbs(protrusion_parts(spectrum.evals, spectrum.evecs, mesh.adjacency, mesh.area).labels, mirror)
+    return SideViewTerms(symmetry_curve_cost(mesh.vertices, mirror, limbs),
+                         edge_orientation(mesh.vertices, mesh.faces, mesh.adjacency, odd))
+
+
 def axis_scales(query: PreparedQuery, mesh: PreparedMesh, model: str, mean_distance: float,
                 params: Contour3DParams) -> np.ndarray:
     """Factors ``w c_d d̄`` of the axis terms of one shape model ((axis_modes,) float; 0 turns a term off)."""
@@ -468,7 +555,7 @@ def part_cost(query: PreparedQuery, mesh: PreparedMesh, cost: np.ndarray, mean_d
 
 
 def product_graph(cost: np.ndarray, contour_points: np.ndarray, mesh_vertices: np.ndarray, adjacency,
-                  params: Contour3DParams, unit_cost: float) -> ProductGraph:
+                  params: Contour3DParams, unit_cost: float, edge_penalty=None) -> ProductGraph:
     """The product graph of the chosen energy.
 
     The elastic weights are unit-free: the stretching weight is in units of
@@ -476,9 +563,12 @@ def product_graph(cost: np.ndarray, contour_points: np.ndarray, mesh_vertices: n
     mismatch costs as much as a unit of length matched at the mean feature
     distance), the bending weight in units of ``unit_cost`` times the mean
     contour step. Both readings of the axis therefore get the same weights.
+    ``edge_penalty`` (directed, per unit length; the side view's wrong-way
+    cost) enters the first-order graphs; the second-order graphs of the
+    elastic energies do not take it.
     """
     if params.energy in ("paper", "ratio"):
-        return ProductGraph(cost, contour_points, mesh_vertices, adjacency)
+        return ProductGraph(cost, contour_points, mesh_vertices, adjacency, edge_penalty=edge_penalty)
     step = float(np.mean(np.linalg.norm(np.roll(contour_points, -1, axis=0) - contour_points, axis=1)))
     return ElasticProductGraph(cost, contour_points, mesh_vertices, adjacency, stretch=params.stretch * unit_cost,
                                bending=params.bending * unit_cost * step)
@@ -496,18 +586,27 @@ def match_prepared(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams,
         # one unit for every model, so that their energies compare: the mean distance of the first model
         unit_distance = float(next(iter(distances.values())).mean())
         scales = {model: axis_scales(query, target, model, unit_distance, params) for model in distances}
+        side = side_view_terms(mesh, params) if query.is_side_view(params) else None
     token.raise_if_cancelled()
-    # an axis has no direction, the model is chosen by energy: one branch-and-bound over every combination
-    readings = [(model, signs) for model in distances
+    # an axis has no direction, the model is chosen by energy, and which half of a side view is near is
+    # unknown (the sign of the orientation term): one branch-and-bound over every combination
+    readings = [(model, signs, near) for model in distances
                 for signs in itertools.product(*[(False, True) if scale > 0 else (False,)
-                                                 for scale in scales[model]])]
+                                                 for scale in scales[model]])
+                for near in ((1.0, -1.0) if side is not None else (0.0,))]
     unit_cost = float(np.mean(next(iter(distances.values())) + labels))
     graphs = []
-    for model, signs in readings:
+    for model, signs, near in readings:
         cost = distances[model] + labels + axis_cost(query, target, model, scales[model], signs)
         if not isinstance(labels, np.ndarray):  # user part labels on both shapes replace the automatic parts
             cost = cost + part_cost(query, target, cost, unit_distance, params)
-        graphs.append(product_graph(cost, query.points, target.vertices, mesh.adjacency, params, unit_cost))
+        penalty = None
+        if side is not None:
+            weight = params.symmetry_weight * unit_cost
+            cost = cost + weight * side.curve_cost[None, :]
+            penalty = weight * side.wrong_way(near)
+        graphs.append(product_graph(cost, query.points, target.vertices, mesh.adjacency, params, unit_cost,
+                                    edge_penalty=penalty))
     yield Progress("branch and bound", 0.1, f"{graphs[0].m} x {graphs[0].n} product graph, {len(graphs)} readings "
                                             "(shape model, direction of the axis)")
     with watch("search"):
@@ -515,16 +614,19 @@ def match_prepared(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams,
         bb = yield from search(graphs, eps=params.eps, token=token, max_iterations=params.max_iterations)
     path = bb.path
     matched = path.matched_vertices(graphs[bb.graph_index].m)
-    model, signs = readings[bb.graph_index]
+    model, signs, near = readings[bb.graph_index]
     extras = {"axis_reversed": bool(signs[0]) if signs else False, "axis_signs": [bool(s) for s in signs],
-              "model": model}
+              "model": model, "view": "side" if side is not None else "front", "asymmetry": query.asymmetry,
+              "near_half": int(near)}
     yield Progress("done", 1.0, f"energy {bb.energy:.6g} after {bb.iterations} iterations")
     per_length = " per contour length matched to a moving curve" if params.energy.endswith("ratio") else ""
     return MatchResult("contour3d", map_xy=matched, map_yx=None, energy=bb.energy, timings=watch.times,
                        path=ContourPath(query.contour.points, path.vertices, path.curve_index, path.layers),
                        search=SearchCertificate.of(bb), extras=extras,
                        energy_meaning=f"{params.energy} product-graph path energy{per_length} ({model} shape model, unit-area "
-                                      f"mesh, contour area {params.area_ratio:g}, axis weight {params.axis_weight:g})")
+                                      f"mesh, contour area {params.area_ratio:g}, axis weight {params.axis_weight:g}"
+                                      + (f", side view, symmetry-curve weight {params.symmetry_weight:g})"
+                                         if side is not None else ")"))
 
 
 def solve_contour3d(source: Contour2D, target: TriMesh, params: Contour3DParams, token):

@@ -1,0 +1,118 @@
+"""The side-view terms: mirror asymmetry of outlines, limbs, the symmetry-curve cost, edge orientation, the odd
+eigenfunction — against analytic cases."""
+
+import numpy as np
+import pytest
+import scipy.sparse as sp
+import trimesh
+from scipy.spatial import cKDTree
+
+from corrlib.descriptors.symmetry import odd_eigenfunction
+from corrlib.errors import InputError
+from corrlib.descriptors.side_view import edge_orientation, mirror_asymmetry, paired_limbs, symmetry_curve_cost
+from corrlib.geometry.spectrum import mesh_spectrum
+from corrlib.shapes import TriMesh
+
+
+def ellipse(n=300, a=2.0, b=1.0):
+    t = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    return np.column_stack([a * np.cos(t), b * np.sin(t)])
+
+
+def asymmetric_blob(n=300):
+    """A closed outline with no mirror symmetry: an L with arms of lengths 4 and 2.5, densely sampled."""
+    from corrlib.shapes import Contour2D
+
+    corners = np.array([[0, 0], [4, 0], [4, 1], [1, 1], [1, 2.5], [0, 2.5]], dtype=float)
+    return Contour2D(corners, validate=False).resample(n).points
+
+
+def test_mirror_asymmetry_of_symmetric_and_asymmetric_outlines():
+    assert mirror_asymmetry(ellipse()) < 2e-3
+    # a symmetric outline whose axis is not a coordinate axis: a rotated, shifted, scaled T shape
+    tee = np.array([[-3, 0], [3, 0], [3, 1], [0.6, 1], [0.6, 4], [-0.6, 4], [-0.6, 1], [-3, 1]], dtype=float)
+    angle = 0.7
+    rotation = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
+    from corrlib.shapes import Contour2D
+
+    dense_tee = Contour2D(tee, validate=False).resample(400).points
+    assert mirror_asymmetry(5.0 * dense_tee @ rotation.T + [7.0, -3.0]) < 5e-3
+    blob = asymmetric_blob()
+    value = mirror_asymmetry(blob)
+    assert value > 0.03
+    # invariant under similarity transforms, the reversed order and the mirror image
+    for variant in (3.3 * blob @ rotation.T + [1.0, 2.0], blob[::-1], blob * [-1.0, 1.0], np.roll(blob, 37, axis=0)):
+        assert mirror_asymmetry(variant) == pytest.approx(value, rel=0.05)
+    with pytest.raises(InputError, match="enclosing"):
+        mirror_asymmetry(np.zeros((5, 2)))
+
+
+def test_paired_limbs_are_the_protrusions_that_the_reflection_exchanges():
+    labels = np.array([0, 0, 1, 1, 2, 2, 3, 3])
+    mirror = np.array([1, 0, 4, 5, 2, 3, 7, 6])  # parts 1 and 2 swap, part 3 (a tail) maps onto itself
+    limbs = paired_limbs(labels, mirror)
+    assert limbs.tolist() == [False, False, True, True, True, True, False, False]
+    with pytest.raises(InputError, match="one entry per vertex"):
+        paired_limbs(labels, mirror[:-1])
+
+
+def test_symmetry_curve_cost_is_zero_on_the_curve_and_on_limbs():
+    vertices = np.array([[0.0, 0, 0], [0, 1, 0], [1, 0, 0], [-1, 0, 0], [2, 0, 0], [-2, 0, 0]])
+    mirror = np.array([0, 1, 3, 2, 5, 4])  # x -> -x
+    limbs = np.array([False, False, False, False, True, True])
+    cost = symmetry_curve_cost(vertices, mirror, limbs)
+    distance = np.array([0, 0, 2, 2, 4, 4]) / np.mean([0, 0, 2, 2, 4, 4])
+    assert np.allclose(cost, np.where(limbs, 0.0, distance))
+    with pytest.raises(InputError, match="no curve of symmetry"):
+        symmetry_curve_cost(vertices, np.arange(6), limbs)
+
+
+@pytest.fixture(scope="module")
+def sphere():
+    ico = trimesh.creation.icosphere(subdivisions=3)
+    return TriMesh(np.asarray(ico.vertices), np.asarray(ico.faces), name="sphere")
+
+
+def test_edge_orientation_against_the_analytic_gradient(sphere):
+    """g = x on the unit sphere (odd under x -> -x): ∇g = e_x − (e_x · n) n, so the orientation of an edge with
+    unit tangent t is (n × t) · e_x / mean |∇g|; antisymmetric in the direction of the edge."""
+    v, adjacency = sphere.vertices, sphere.adjacency
+    orientation = edge_orientation(v, sphere.faces, adjacency, v[:, 0])
+    assert orientation.shape == (len(v), len(v))
+    assert abs(orientation + orientation.T).max() < 1e-12
+    coo = orientation.tocoo()
+    tangent = v[coo.col] - v[coo.row]
+    tangent /= np.linalg.norm(tangent, axis=1, keepdims=True)
+    normal = v[coo.row] + v[coo.col]
+    normal /= np.linalg.norm(normal, axis=1, keepdims=True)
+    mean_gradient = np.mean(np.sqrt(1 - v[:, 0] ** 2))  # |e_x − (e_x · n) n| at a vertex n of the unit sphere
+    analytic = np.cross(normal, tangent)[:, 0] / mean_gradient
+    assert np.corrcoef(coo.data, analytic)[0, 1] > 0.995
+    assert np.max(np.abs(coo.data - analytic)) < 0.05
+    # a great circle x = 0 walked with the half x > 0 on its left is oriented positively all the way round
+    with pytest.raises(InputError, match="non-constant"):
+        edge_orientation(v, sphere.faces, adjacency, np.ones(len(v)))
+
+
+def test_odd_eigenfunction_changes_sign_under_the_reflection():
+    """On an ellipsoid with its longest axis along x the lowest eigenfunction is odd under x -> -x and close to x."""
+    ico = trimesh.creation.icosphere(subdivisions=3)
+    vertices = np.asarray(ico.vertices) * [1.6, 1.0, 0.7]
+    mesh = TriMesh(vertices, np.asarray(ico.faces), name="ellipsoid")
+    _, mirror = cKDTree(vertices).query(vertices * [-1.0, 1.0, 1.0])
+    assert np.allclose(vertices[mirror], vertices * [-1.0, 1.0, 1.0])
+    g = odd_eigenfunction(mesh_spectrum(mesh, 30, use_cache=False), mirror)
+    assert np.allclose(g[mirror], -g, atol=1e-8 * np.abs(g).max())
+    assert abs(np.corrcoef(g, vertices[:, 0])[0, 1]) > 0.97
+
+
+def test_orientation_of_a_mirrored_mesh_is_the_mirror_image(sphere):
+    """Mirroring the mesh (x -> -x, faces reversed to keep the normals outward) and the odd function with it
+    negates every edge orientation: the two signs searched by contour3d exchange."""
+    v = sphere.vertices * [1.0, 1.3, 0.8]
+    g = v[:, 1] + 0.3 * v[:, 1] ** 3  # odd under y -> -y
+    mirrored = v * [-1.0, 1.0, 1.0]
+    faces_reversed = sphere.faces[:, ::-1]
+    a = edge_orientation(v, sphere.faces, sphere.adjacency, g)
+    b = edge_orientation(mirrored, faces_reversed, sp.csr_matrix(sphere.adjacency), g)
+    assert abs(a + b).max() < 1e-10

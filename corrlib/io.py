@@ -693,8 +693,10 @@ def silhouette_mask(image: np.ndarray, threshold: float | None = None, *, name: 
 
     The threshold defaults to Otsu's. The foreground is the side of the
     threshold that touches the image border least (so both dark-on-light and
-    light-on-dark silhouettes work); transparent pixels of RGBA images are
-    background.
+    light-on-dark silhouettes work). The alpha channel of an RGBA image is
+    the silhouette when its transparent pixels are the background (most of
+    the border); an opaque picture with a few translucent pixels (an
+    anti-aliased corner) is read by its grey levels.
     """
     img = np.asarray(image)
     alpha = None
@@ -709,7 +711,9 @@ def silhouette_mask(image: np.ndarray, threshold: float | None = None, *, name: 
     if img.size == 0 or not np.all(np.isfinite(img)):
         raise FileFormatError(f"{name}: the image is empty or has invalid pixel values")
     if alpha is not None and alpha.min() < alpha.max():
-        return alpha > (alpha.min() + alpha.max()) / 2.0
+        opaque = alpha > (alpha.min() + alpha.max()) / 2.0
+        if _border(opaque).mean() < 0.5:  # a transparent background: the opaque pixels are the silhouette
+            return opaque
     if img.min() == img.max():
         raise ContourError(f"{name}: the image is uniform: no silhouette to extract")
     if threshold is None:
@@ -717,8 +721,12 @@ def silhouette_mask(image: np.ndarray, threshold: float | None = None, *, name: 
 
         threshold = float(threshold_otsu(img))
     bright = img > threshold
-    border = np.concatenate([bright[0], bright[-1], bright[:, 0], bright[:, -1]])
-    return ~bright if border.mean() > 0.5 else bright
+    return ~bright if _border(bright).mean() > 0.5 else bright
+
+
+def _border(mask: np.ndarray) -> np.ndarray:
+    """The pixels of a 2D mask along the image border (1-D)."""
+    return np.concatenate([mask[0], mask[-1], mask[:, 0], mask[:, -1]])
 
 
 #: largest silhouette image read (pixels): 6,000 x 6,000 holds far more outline detail than a match uses

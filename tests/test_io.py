@@ -153,6 +153,27 @@ def test_real_silhouettes():
     for path in sorted((SILHOUETTES / "mpeg7").glob("*.gif")) + [SILHOUETTES / "horse.png"]:
         c = load_contour(path, n_points=300)
         assert c.n_points == 300 and c.is_ccw and c.area > 1000, path
+        # the shape, not the picture's frame: horse.png is opaque with a few translucent corner pixels
+        with Image.open(path) as im:
+            width, height = im.size
+        assert c.area < 0.8 * width * height, path
+
+
+def test_silhouette_from_the_alpha_channel_only_when_the_background_is_transparent(tmp_path):
+    yy, xx = np.mgrid[:200, :300]
+    disk = (xx - 150) ** 2 + (yy - 100) ** 2 <= 60 ** 2
+    rgba = np.zeros((200, 300, 4), np.uint8)
+    # an opaque picture (black disk on white) with a few translucent pixels in a corner: read by grey levels
+    rgba[..., :3] = np.where(disk, 0, 255)[..., None]
+    rgba[..., 3] = 255
+    rgba[:3, :3, 3] = 110
+    Image.fromarray(rgba, "RGBA").save(tmp_path / "opaque.png")
+    assert load_contour(tmp_path / "opaque.png").area == pytest.approx(np.pi * 60 ** 2, rel=0.02)
+    # a white disk on a transparent background: the alpha channel is the silhouette
+    rgba[..., :3] = 255
+    rgba[..., 3] = np.where(disk, 255, 0)
+    Image.fromarray(rgba, "RGBA").save(tmp_path / "transparent.png")
+    assert load_contour(tmp_path / "transparent.png").area == pytest.approx(np.pi * 60 ** 2, rel=0.02)
 
 
 def test_bad_images(tmp_path):

@@ -5,10 +5,11 @@ from __future__ import annotations
 import numpy as np
 from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QVBoxLayout, QWidget
 
-from app.views.camera import FramedView, ShapeDisplay
+from app.views.camera import FramedView, ShapeDisplay, viewport_aspect
 from app.views.scene import LABEL_FONT_SIZE, PLAIN_COLOR, LazyPlotter, hue_colors, polydata, polyline
 
 CURVE_WIDTH = 4  # line width of the query contour
+CONTOUR_MARGIN = 1.05  # the query contour fills its viewport up to this margin
 CURVE_TUBE_RADIUS = 0.004  # radius of the matched curve's tube, relative to the mesh's bounding-box diagonal
 
 
@@ -67,8 +68,6 @@ class ProductView(QWidget, FramedView):
         line["position"] = np.arange(m) / m
         p.add_mesh(line, scalars=hue_colors(np.arange(m) / m), rgb=True, line_width=CURVE_WIDTH)
         p.add_text("query contour", font_size=LABEL_FONT_SIZE)
-        p.view_xy()
-        p.reset_camera()
         p.subplot(0, 1)
         self.mesh_points = ShapeDisplay.of(mesh.vertices, self.up).points(mesh.vertices)
         p.add_mesh(polydata(self.mesh_points, mesh.faces), color=PLAIN_COLOR, smooth_shading=True)
@@ -79,9 +78,32 @@ class ProductView(QWidget, FramedView):
         p.add_text(f"{mesh.name}: matched curve (energy {energy:.4g})", font_size=LABEL_FONT_SIZE)
         self.fit_preset()
         p.subplot(0, 0)
-        p.reset_camera()
+        self._contour_display = np.asarray(line.points)
+        self._fit_contour(self._contour_display)
         p.render()
         self.info.setText(f"{m} contour points matched along a closed curve of {len(path_vertices)} steps.")
+
+    def _on_resized(self) -> None:
+        """Refit the mesh (while at its preset) and the contour to their new viewports."""
+        super()._on_resized()
+        if self._match is not None and getattr(self, "_contour_display", None) is not None:
+            self.plotter.subplot(0, 0)
+            self._fit_contour(self._contour_display)
+            self.plotter.render()
+
+    def _fit_contour(self, points: np.ndarray) -> None:
+        """The contour seen from +z and fitted to the width of its viewport too: the bounding-sphere reset
+        fits the height only, so a wide outline in a narrow viewport was cut at the sides."""
+        p = self.plotter
+        p.view_xy()
+        p.reset_camera()
+        camera = p.renderers[0].camera
+        half_width, half_height = np.ptp(points[:, :2], axis=0) / 2
+        # the reset shows a half-height of radius / cos(view angle / 2) at the focal point
+        shown = float(np.hypot(half_width, half_height)) / np.cos(np.radians(camera.view_angle) / 2)
+        needed = CONTOUR_MARGIN * max(half_width / viewport_aspect(p, p.renderers[0]), half_height)
+        if needed > shown:
+            camera.zoom(shown / needed)
 
     def show_contour_pair(self, result) -> None:
         """Two contours: the product torus (3D) and the flat square, with the correspondence curve."""

@@ -479,3 +479,20 @@ def test_elastic_energy_does_not_collapse_where_the_paper_energy_does():
         assert result.search.optimal and "per contour length" in result.energy_meaning
         gt = query.ground_truth(result.path.contour_points, lion.vertices)
         assert score_curve(result.map_xy, result.path.vertices, gt, lion, query.length_3d)["coverage"] > 0.9
+
+
+def test_side_view_without_a_usable_reflection_goes_on_without_the_terms(monkeypatch, wolf_pair):
+    """A mesh whose reflection gives no odd eigenfunction (or fixes every vertex) cannot carry the side-view
+    terms: the match goes on without them and says so instead of failing."""
+    import corrlib.methods.contour3d as c3
+
+    def no_odd_function(spectrum, mirror):
+        raise ParameterError("only 0 of 75 eigenfunctions are odd")
+
+    monkeypatch.setattr(c3, "odd_eigenfunction", no_odd_function)
+    wolf0, _ = wolf_pair
+    from corrlib.contour_bench import cut_query
+
+    result = solve("contour3d", cut_query(wolf0, "main").contour, wolf0, n_contour=40, view="side")
+    assert result.extras["view"] == "front" and np.isfinite(result.energy)
+    assert "side view" not in result.energy_meaning

@@ -507,7 +507,9 @@ class SideViewTerms:
 
 
 def side_view_terms(mesh: TriMesh, params: Contour3DParams) -> SideViewTerms | None:
-    """The side-view terms of a mesh, or None where it has no usable reflection (too coarse, no odd function)."""
+    """The side-view terms of a mesh, or None where it has no usable reflection (too coarse for the
+    eigenpairs, no odd eigenfunction, a reflection that fixes every vertex); the match then goes on without
+    them and says so (``extras["view"] == "front"``)."""
     k_mesh = max(HALF_EIGENPAIRS_PER_K * params.k, K_FINAL)
     if mesh.n_vertices <= k_mesh:
         return None
@@ -515,11 +517,12 @@ def side_view_terms(mesh: TriMesh, params: Contour3DParams) -> SideViewTerms | N
     mirror = mesh_reflection(mesh, spectrum)
     try:
         odd = odd_eigenfunction(spectrum, mirror)
-    except ParameterError:  # no eigenfunction is odd: no reflection to speak of
+        limbs = paired_limbs(protrusion_parts(spectrum.evals, spectrum.evecs, mesh.adjacency, mesh.area).labels,
+                             mirror)
+        return SideViewTerms(symmetry_curve_cost(mesh.vertices, mirror, limbs),
+                             edge_orientation(mesh.vertices, mesh.faces, mesh.adjacency, odd))
+    except (ParameterError, InputError):  # no reflection to speak of
         return None
-    limbs = paired_limbs(protrusion_parts(spectrum.evals, spectrum.evecs, mesh.adjacency, mesh.area).labels, mirror)
-    return SideViewTerms(symmetry_curve_cost(mesh.vertices, mirror, limbs),
-                         edge_orientation(mesh.vertices, mesh.faces, mesh.adjacency, odd))
 
 
 def axis_scales(query: PreparedQuery, mesh: PreparedMesh, model: str, mean_distance: float,

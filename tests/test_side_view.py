@@ -89,7 +89,6 @@ def test_edge_orientation_against_the_analytic_gradient(sphere):
     analytic = np.cross(normal, tangent)[:, 0] / mean_gradient
     assert np.corrcoef(coo.data, analytic)[0, 1] > 0.995
     assert np.max(np.abs(coo.data - analytic)) < 0.05
-    # a great circle x = 0 walked with the half x > 0 on its left is oriented positively all the way round
     with pytest.raises(InputError, match="non-constant"):
         edge_orientation(v, sphere.faces, adjacency, np.ones(len(v)))
 

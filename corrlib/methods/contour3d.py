@@ -164,6 +164,8 @@ HALF_EIGENPAIRS_PER_K = 3
 #: benchmark and retrieval queries: views within the plane of symmetry 0.001–0.025, side views and
 #: sections 0.032–0.12; see docs/decisions.md)
 SIDE_VIEW_ASYMMETRY = 0.03
+#: the energies on the first-order product graph (the only ones that take directed edge costs)
+FIRST_ORDER_ENERGIES = ("paper", "ratio")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -525,6 +527,15 @@ def side_view_terms(mesh: TriMesh, params: Contour3DParams) -> SideViewTerms | N
         return None
 
 
+def _near_halves(side: SideViewTerms | None, params: Contour3DParams) -> tuple[float, ...]:
+    """Signs of the odd function searched: both halves where the orientation cost enters the graph, one
+    where only the distance cost does (the elastic energies: both signs would give the same graph), none
+    (0) without side-view terms."""
+    if side is None:
+        return (0.0,)
+    return (1.0, -1.0) if params.energy in FIRST_ORDER_ENERGIES else (1.0,)
+
+
 def axis_scales(query: PreparedQuery, mesh: PreparedMesh, model: str, mean_distance: float,
                 params: Contour3DParams) -> np.ndarray:
     """Factors ``w c_d d̄`` of the axis terms of one shape model ((axis_modes,) float; 0 turns a term off)."""
@@ -570,7 +581,7 @@ def product_graph(cost: np.ndarray, contour_points: np.ndarray, mesh_vertices: n
     cost) enters the first-order graphs; the second-order graphs of the
     elastic energies do not take it.
     """
-    if params.energy in ("paper", "ratio"):
+    if params.energy in FIRST_ORDER_ENERGIES:
         return ProductGraph(cost, contour_points, mesh_vertices, adjacency, edge_penalty=edge_penalty)
     step = float(np.mean(np.linalg.norm(np.roll(contour_points, -1, axis=0) - contour_points, axis=1)))
     return ElasticProductGraph(cost, contour_points, mesh_vertices, adjacency, stretch=params.stretch * unit_cost,
@@ -596,7 +607,7 @@ def match_prepared(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams,
     readings = [(model, signs, near) for model in distances
                 for signs in itertools.product(*[(False, True) if scale > 0 else (False,)
                                                  for scale in scales[model]])
-                for near in ((1.0, -1.0) if side is not None else (0.0,))]
+                for near in _near_halves(side, params)]
     unit_cost = float(np.mean(next(iter(distances.values())) + labels))
     graphs = []
     for model, signs, near in readings:
@@ -607,7 +618,8 @@ def match_prepared(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams,
         if side is not None:
             weight = params.symmetry_weight * unit_cost
             cost = cost + weight * side.curve_cost[None, :]
-            penalty = weight * side.wrong_way(near)
+            if params.energy in FIRST_ORDER_ENERGIES:
+                penalty = weight * side.wrong_way(near)
         graphs.append(product_graph(cost, query.points, target.vertices, mesh.adjacency, params, unit_cost,
                                     edge_penalty=penalty))
     yield Progress("branch and bound", 0.1, f"{graphs[0].m} x {graphs[0].n} product graph, {len(graphs)} readings "

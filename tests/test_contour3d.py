@@ -1,5 +1,6 @@
 """2D-to-3D elastic matching: brute force on tiny graphs, path validity, real shapes, invariance, bad input."""
 
+import numba
 import numpy as np
 import pytest
 import scipy.sparse as sp
@@ -8,7 +9,7 @@ from scipy.sparse.csgraph import bellman_ford, dijkstra
 
 from _data import SUMNER, TOSCA
 from corrlib.errors import Cancelled, ContourError, InputError, ParameterError
-from corrlib.geometry.cyclic_paths import ProductGraph, branch_and_bound, minimum_ratio_union
+from corrlib.geometry.cyclic_paths import ProductGraph, Relaxation, branch_and_bound, minimum_ratio_union
 from corrlib.geometry.elastic_paths import ElasticProductGraph
 from corrlib.geometry.geodesics import GeodesicSolver
 from corrlib.geometry.sections import plane_section, project_for_silhouette, render_silhouette, rim_vertices
@@ -117,6 +118,98 @@ def directed_penalties(seed, adjacency) -> sp.csr_matrix:
     pattern = (pattern + pattern.T).tocoo()
     values = rng.random(pattern.nnz) * (rng.random(pattern.nnz) < 0.5)
     return sp.csr_matrix((values, (pattern.row, pattern.col)), shape=pattern.shape)
+
+
+def relaxed_family(seed, scales=(1.0, 1.0, 3.0, 3.0)):
+    """Graphs on one curve and graph (a union's readings): node costs scaled and perturbed per reading, pairs
+    of readings (0, 1), (2, 3) sharing node costs and differing by their directed penalties, as the two
+    halves of a side view do; and a tree of relaxations over them, one per pair below one for all."""
+    node_cost, curve, points, adjacency = tiny_instance(seed, 7, 1)
+    rng = np.random.default_rng(200 + seed)
+    graphs = []
+    for pair in range(len(scales) // 2):
+        cost = scales[2 * pair] * (node_cost + 0.3 * rng.random(node_cost.shape))
+        for half in range(2):
+            penalty = directed_penalties(seed + 10 * pair + half, adjacency)
+            graphs.append(ProductGraph(cost, curve, points, adjacency, edge_penalty=penalty))
+    pairs = [Relaxation(ProductGraph.relaxation(graphs[k:k + 2]), [k, k + 1]) for k in range(0, len(graphs), 2)]
+    return graphs, [Relaxation(ProductGraph.relaxation(graphs), pairs)]
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_a_tree_of_relaxations_finds_the_same_optimum_with_fewer_backward_searches(seed):
+    """Branch-and-bound over a union with relaxations: the optimum of the explicit product graphs, the same as
+    without them, certified; a relaxation's costs and heuristic are below each graph's; a pair of readings
+    that cannot win (costs 3x) is never searched."""
+    from corrlib.geometry.cyclic_paths import branch_and_bound_union
+
+    graphs, tree = relaxed_family(seed)
+    exact = [explicit_product_optimum(g) for g in graphs]
+    relaxed = tree[0].graph
+    for graph in graphs:
+        assert np.all(relaxed.cost <= graph.cost) and np.all(relaxed.extra == 0)
+        graph.compute_heuristic()
+    relaxed.compute_heuristic()
+    assert all(np.all(relaxed.heuristic <= g.heuristic + 1e-12) for g in graphs)
+    graphs, tree = relaxed_family(seed)
+    result = run(branch_and_bound_union(graphs, relaxations=tree))
+    assert result.energy == pytest.approx(min(exact), rel=1e-12)
+    assert result.lower_bound == pytest.approx(result.energy, rel=1e-12)
+    assert graphs[result.graph_index].path_energy(result.path) == pytest.approx(result.energy, rel=1e-12)
+    plain = run(branch_and_bound_union(relaxed_family(seed)[0]))
+    assert plain.energy == pytest.approx(result.energy, rel=1e-12)
+    assert result.graph_index in (0, 1)
+    assert graphs[2].runs == graphs[3].runs == 0, "a pair whose bound exceeds the optimum was searched"
+    threads = numba.get_num_threads()
+    try:  # one search at a time: another order of the backward searches, the same optimum
+        numba.set_num_threads(1)
+        graphs, tree = relaxed_family(seed)
+        assert run(branch_and_bound_union(graphs, relaxations=tree)).energy == pytest.approx(min(exact), rel=1e-12)
+    finally:
+        numba.set_num_threads(threads)
+    for eps in (0.05, 0.3):
+        graphs, tree = relaxed_family(seed)
+        approx = run(branch_and_bound_union(graphs, relaxations=tree, eps=eps))
+        assert min(exact) <= approx.energy <= (1 + eps) * min(exact) + 1e-12
+    graphs, tree = relaxed_family(seed)
+    ratio = run(minimum_ratio_union(graphs, relaxations=tree))
+    assert ratio.energy == pytest.approx(run(minimum_ratio_union(relaxed_family(seed)[0])).energy, rel=1e-9)
+
+
+@pytest.mark.parametrize("seed", range(4))
+def test_a_backward_search_bounded_by_a_relaxations_forward_distances_is_exact_where_it_matters(seed):
+    """Below an upper bound U, with a relaxation's forward distances f: every node's pruned heuristic equals
+    the complete one, except where no path through the node beats U (f + h >= U), where it is inf; and some
+    nodes are skipped."""
+    graphs, tree = relaxed_family(seed)
+    relaxed, graph = tree[0].graph, graphs[1]
+    graph.compute_heuristic()
+    complete = graph.heuristic.copy()
+    relaxed.compute_heuristic()
+    everything = np.ones(relaxed.n, dtype=bool)
+    optimum = explicit_product_optimum(graph)
+    upper = 1.05 * optimum
+    relaxed.shortest(everything, everything, upper)
+    forward = relaxed.dist.copy()
+    graph.compute_heuristic(upper=upper, cost_to_come=forward)
+    pruned = graph.heuristic
+    kept = np.isfinite(pruned)
+    assert np.allclose(pruned[kept], complete[kept], rtol=1e-12)
+    assert np.all(forward[~kept] + complete[~kept] >= upper - 1e-9)
+    assert 0 < kept.sum() < kept.size
+    assert float(np.min(pruned[0])) == pytest.approx(float(np.min(complete[0])), rel=1e-12)
+
+
+def test_relaxations_must_cover_each_graph_once_and_share_the_product():
+    from corrlib.geometry.cyclic_paths import branch_and_bound_union
+
+    graphs, tree = relaxed_family(0)
+    with pytest.raises(ParameterError, match="at most one relaxation"):
+        run(branch_and_bound_union(graphs, relaxations=tree + [Relaxation(tree[0].graph, [0])]))
+    with pytest.raises(ParameterError, match="at most one relaxation"):
+        run(branch_and_bound_union(graphs, relaxations=[Relaxation(tree[0].graph, [0, 7])]))
+    with pytest.raises(InputError, match="share the curve"):
+        ProductGraph.relaxation([graphs[0], tiny_graph(1, m=8)])
 
 
 @pytest.mark.parametrize("seed", range(4))

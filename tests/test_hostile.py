@@ -107,8 +107,11 @@ def test_full_disk_leaves_no_partial_result_set(tmp_path, kilobytes):
 def test_interrupted_morph_leaves_nothing(tmp_path, sig, status):
     """Interrupted while writing 2,000 frames: the staging folder goes, nothing is half-written."""
     out = tmp_path / "m"
+    # as a user's Ctrl-C would find it: a test run started in the background (no job control) ignores SIGINT, and
+    # its children inherit that
     proc = subprocess.Popen([sys.executable, "-m", "corrlib.cli", "morph", WOLF0, WOLF1, *FAST, "--frames", "2000",
-                             "-o", out], stderr=subprocess.PIPE, text=True)
+                             "-o", out], stderr=subprocess.PIPE, text=True,
+                            preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.time() + 120
     while not any(p.name.startswith(".partial-") for p in (out.iterdir() if out.exists() else [])):
         assert proc.poll() is None and time.time() < deadline, "the frames were never being written"

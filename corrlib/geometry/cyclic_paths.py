@@ -220,6 +220,7 @@ class ProductGraph:
         self.cyclic_starts = directed and self.closing_shift > 0
         # layer m duplicates layer 0: the path closes on the curve's first point
         self.cost = np.ascontiguousarray(np.vstack([cost, cost[:1]]))
+        self.curve_points = curve
         curve_closed = np.vstack([curve, curve[:1]])
         self.step2 = np.ascontiguousarray(np.sum(np.diff(curve_closed, axis=0) ** 2, axis=1))
         self.graph_points = np.ascontiguousarray(pts)
@@ -268,7 +269,8 @@ class ProductGraph:
             raise InputError("edge penalties must be finite and non-negative")
         return np.ascontiguousarray(values * self.edge_len)
 
-    def compute_heuristic(self, cancel: np.ndarray | None = None) -> None:
+    def compute_heuristic(self, cancel: np.ndarray | None = None, upper: float = np.inf,
+                          cost_to_come: np.ndarray | None = None) -> None:
         """Exact cost-to-go ignoring where the path must end: one backward layered Dijkstra.
 
         Edge costs are symmetric and the product structure is the same with
@@ -276,21 +278,39 @@ class ProductGraph:
         the forward kernel run on the reversed layers and transposed graph
         from every node of the last layer. The result
         is the tightest admissible A* heuristic for every later search.
+
+        Parameters
+        ----------
+        cancel : (1,) int8, optional
+        upper : float
+            Only paths cheaper than this matter (a closed path of this cost is known).
+        cost_to_come : (m + 1, n) float, optional
+            A lower bound of the cost of reaching every node from a start
+            (``inf``: not below ``upper``), e.g. the forward distances of a
+            relaxation of this graph. The backward search then skips the
+            nodes through which no path is cheaper than ``upper``: their
+            heuristic is ``inf`` (every later search, bounded by at most
+            ``upper``, prunes them), every other node's is exact, because the
+            forward distances obey the triangle inequality along the edges,
+            which cost at least as much here. Without it the search is complete.
         """
         flag = np.zeros(1, dtype=np.int8) if cancel is None else cancel
         everything = np.ones(self.n, dtype=np.bool_)
         start = time.perf_counter()
         indptr, indices, edge_len = self._reverse
+        if cost_to_come is None:
+            cost_to_come, upper = np.zeros((self.m + 1, self.n)), np.inf
         t, _ = _layered_dijkstra(np.ascontiguousarray(self.cost[::-1]), np.ascontiguousarray(self.step2[::-1]),
                                  self.graph_points, indptr, indices, edge_len, everything,
-                                 everything, np.inf, np.zeros((self.m + 1, self.n)), flag, self.dist, self.pred,
-                                 self.origin, self.stretch, self.gain, self._reverse_extra)
+                                 everything, float(upper), np.ascontiguousarray(cost_to_come[::-1]), flag,
+                                 self.dist, self.pred, self.origin, self.stretch, self.gain, self._reverse_extra)
         self.runs += 1
         self.run_seconds += time.perf_counter() - start
         if t == -2:
             raise Cancelled("the computation was cancelled")
         self.heuristic = np.ascontiguousarray(self.dist[::-1])
-        self.root_path = self._backward_path(int(np.argmin(self.heuristic[0, :self.n_starts])))
+        root = int(np.argmin(self.heuristic[0, :self.n_starts]))
+        self.root_path = self._backward_path(root) if np.isfinite(self.heuristic[0, root]) else None
 
     def _backward_path(self, start: int) -> CyclicPath:
         """The cheapest open path from ``(0, start)``, read off the backward search (before any other run).
@@ -424,17 +444,41 @@ class ProductGraph:
 
     def path_energy(self, path: CyclicPath) -> float:
         """Recompute the energy of a path edge by edge (independent check of the search)."""
-        total = 0.0
-        for a in range(len(path.vertices) - 1):
-            i0, j0, i1, j1 = path.layers[a], path.vertices[a], path.layers[a + 1], path.vertices[a + 1]
-            b2 = np.sum((self.graph_points[j1] - self.graph_points[j0]) ** 2)
-            a2 = self.step2[i0] if i1 == i0 + 1 else 0.0
-            total += 0.5 * (self.cost[i0, j0] + self.cost[i1, j1]) * np.sqrt(a2 + b2)
-            total += self.stretch * abs(np.sqrt(b2) - np.sqrt(a2))
-            if j1 != j0:
-                e = self.indptr[j0] + np.searchsorted(self.indices[self.indptr[j0]:self.indptr[j0 + 1]], j1)
-                total += self.extra[e]
+        layers, vertices = path.layers, path.vertices
+        j0, j1 = vertices[:-1], vertices[1:]
+        b2 = np.sum((self.graph_points[j1] - self.graph_points[j0]) ** 2, axis=1)
+        a2 = np.where(np.diff(layers) == 1, np.append(self.step2, 0.0)[layers[:-1]], 0.0)
+        total = np.sum(0.5 * (self.cost[layers[:-1], j0] + self.cost[layers[1:], j1]) * np.sqrt(a2 + b2))
+        total += self.stretch * np.sum(np.abs(np.sqrt(b2) - np.sqrt(a2)))
+        moves = j1 != j0
+        # CSR order is (row, column) ascending, so the key row * n + column finds a directed edge's slot
+        keys = np.repeat(np.arange(self.n, dtype=np.int64), np.diff(self.indptr)) * self.n + self.indices
+        slots = np.searchsorted(keys, j0[moves].astype(np.int64) * self.n + j1[moves])
+        total += np.sum(self.extra[slots])
         return float(total - self.gain * self.credited_length(path))
+
+    @classmethod
+    def relaxation(cls, members) -> ProductGraph:
+        """A graph whose every edge costs at most the same edge of each member: a lower bound for all of them.
+
+        Node costs are the members' element-wise minimum, without directed
+        edge penalties and with the least stretching weight; the curve, the
+        graph and the closing rule must be the members' own. Its backward
+        search bounds every member from below and its A* heuristic is
+        admissible for each, so one search stands in for several until the
+        bound says which members can still win.
+        """
+        first = members[0]
+        for other in members[1:]:
+            if (other.m, other.n, other.closing_shift, other.n_starts) != (first.m, first.n, first.closing_shift,
+                                                                           first.n_starts):
+                raise InputError("a relaxation's members must share the curve, the graph and the closing rule")
+        cost = members[0].cost[:-1].copy()
+        for other in members[1:]:
+            np.minimum(cost, other.cost[:-1], out=cost)
+        return cls(cost, first.curve_points, first.graph_points, first.adjacency, directed=True,
+                   closing_shift=first.closing_shift, n_starts=first.n_starts,
+                   stretch=min(g.stretch for g in members))
 
     def credited_length(self, path: CyclicPath) -> float:
         """The length of the curve a path matches to moving graph vertices: ``Σ min(a, b)`` over its edges.
@@ -488,31 +532,64 @@ def branch_and_bound(graph: ProductGraph, *, eps: float = 0.0, token: CancelToke
     return (yield from branch_and_bound_union([graph], eps=eps, token=token, max_iterations=max_iterations))
 
 
-def compute_heuristics(graphs, cancel: np.ndarray | None = None) -> None:
-    """The backward searches of several product graphs, on up to ``numba.get_num_threads()`` threads.
+def parallel_searches() -> int:
+    """How many backward searches :func:`compute_heuristics` runs at once.
 
-    The searches are independent and the kernel releases the GIL, so threads
-    run them in parallel. They do so only when called from the main thread
-    (the command line, a worker process of a pool, which limits numba to its
-    share of the cores); called from another thread (a job of the studio,
-    which may run beside others) they run one after the other.
+    ``numba.get_num_threads()`` when called from the main thread (the command
+    line, a worker process of a pool, which limits numba to its share of the
+    cores); 1 from another thread (a job of the studio, which may run beside
+    others).
     """
     import threading
 
-    workers = min(len(graphs), numba.get_num_threads())
-    if workers <= 1 or threading.current_thread() is not threading.main_thread():
+    return numba.get_num_threads() if threading.current_thread() is threading.main_thread() else 1
+
+
+def compute_heuristics(graphs, cancel: np.ndarray | None = None, upper: float = np.inf,
+                       cost_to_come: np.ndarray | None = None) -> None:
+    """The backward searches of several product graphs, :func:`parallel_searches` at a time.
+
+    The searches are independent and the kernel releases the GIL, so threads
+    run them in parallel. ``upper`` and ``cost_to_come`` as in
+    :meth:`ProductGraph.compute_heuristic`, for every graph.
+    """
+    workers = min(len(graphs), parallel_searches())
+    if workers <= 1:
         for graph in graphs:
-            graph.compute_heuristic(cancel)
+            graph.compute_heuristic(cancel, upper, cost_to_come)
         return
     from concurrent.futures import ThreadPoolExecutor
 
     with ThreadPoolExecutor(max_workers=workers) as pool:
-        for future in [pool.submit(graph.compute_heuristic, cancel) for graph in graphs]:
+        for future in [pool.submit(graph.compute_heuristic, cancel, upper, cost_to_come) for graph in graphs]:
             future.result()  # re-raises Cancelled
 
 
+@dataclass
+class Relaxation:
+    """A lower-bounding graph for a group of the graphs of a union (a node of a tree of relaxations).
+
+    Attributes
+    ----------
+    graph : ProductGraph
+        Costs at most those of every graph below it
+        (:meth:`ProductGraph.relaxation`).
+    children : list of int or Relaxation
+        Indices into the union's graphs, or finer relaxations.
+    """
+
+    graph: ProductGraph
+    children: list
+
+    @property
+    def leaves(self) -> list[int]:
+        """Indices of the union's graphs below this node."""
+        return [leaf for child in self.children
+                for leaf in (child.leaves if isinstance(child, Relaxation) else [child])]
+
+
 def branch_and_bound_union(graphs, *, eps: float = 0.0, token: CancelToken | None = None,
-                           max_iterations: int = 100_000):
+                           max_iterations: int = 100_000, relaxations=()):
     """The best closed path over several product graphs, by one best-first branch-and-bound (generator).
 
     A region is a set of start vertices of one graph; the open regions of all
@@ -524,11 +601,25 @@ def branch_and_bound_union(graphs, *, eps: float = 0.0, token: CancelToken | Non
     global optimum of ``min_g E_g`` (e.g. both readings of an ambiguous
     feature), at a cost close to that of the winning graph alone.
 
+    Relaxations save backward searches (a complete one costs as much as
+    tens of pruned forward ones). A graph below a relaxation is searched
+    backwards only when the relaxation's bound comes first in the queue, so
+    a group of graphs that cannot win costs one search. The first time, the
+    most promising items below it are searched completely and followed down
+    to a graph whose cheapest open path is closed, which gives a tight upper
+    bound early; every later backward search skips the nodes through which
+    no path beats it (the relaxation's forward distances bound the cost to
+    come, :meth:`ProductGraph.compute_heuristic`), and is then cheap. The
+    result is the same optimum (or ``1 + eps`` approximation).
+
     Parameters
     ----------
     graphs : sequence of ProductGraph
     eps, token, max_iterations
         As in :func:`branch_and_bound`.
+    relaxations : sequence of Relaxation
+        Roots of trees of relaxations; every graph is below at most one root
+        and appears once. Graphs below none are searched from the start.
 
     Returns
     -------
@@ -539,75 +630,191 @@ def branch_and_bound_union(graphs, *, eps: float = 0.0, token: CancelToken | Non
         raise ParameterError(f"eps must be in [0, 1), got {eps}")
     if len(graphs) == 0:
         raise ParameterError("branch and bound needs at least one product graph")
+    covered = [leaf for root in relaxations for leaf in root.leaves]
+    if len(set(covered)) != len(covered) or not all(0 <= leaf < len(graphs) for leaf in covered):
+        raise ParameterError("every graph must be below at most one relaxation, once")
     token = token or CancelToken()
-    cancel = token.flag
-    counter = itertools.count()
-    upper, best, best_index = np.inf, None, -1
-    heap = []
-    compute_heuristics(graphs, cancel)
-
-    def consider_closed(index, cost, path):
-        nonlocal upper, best, best_index
-        if path is not None and cost < upper:
-            upper, best, best_index = cost, path, index
-
-    def explore(index, region):
-        """Shortest path of a region: a closed one updates the bound, an open one is queued."""
-        graph = graphs[index]
-        cost, s, t = graph.shortest(*graph.endpoints(region), upper, cancel)
-        if s < 0:
-            return s  # nothing in this region beats the best closed path
-        if graph.is_closed(s, t):
-            consider_closed(index, cost, graph.backtrack(t))
-        elif cost * (1.0 + eps) < upper:
-            consider_closed(index, *graph.close_by_detour(graph.backtrack(t)))  # an upper bound for free
-            heapq.heappush(heap, (cost, next(counter), index, region, s, t))
-        return s
-
-    # every graph's whole region is queued unexplored, keyed by its lower bound from the backward search (the
-    # cheapest open path from any start): a graph whose bound is beaten by a closed path is never searched
-    for index, graph in enumerate(graphs):
-        root_bound = float(np.min(graph.heuristic[0, :graph.n_starts]))
-        if not np.isfinite(root_bound):
-            raise InputError("no path through the product graph (is the graph connected?)")
-        consider_closed(index, *graph.close_by_detour(graph.root_path))  # an upper bound before any search
-        heapq.heappush(heap, (root_bound, next(counter), index, np.ones(graph.n_starts, dtype=np.bool_), -1, -1))
+    search = _UnionSearch(graphs, eps, token.flag)
+    search.start(relaxations, [i for i in range(len(graphs)) if i not in set(covered)])
+    heap = search.heap
     lower_bound = np.inf  # stays inf if every region is resolved: then the optimum is `upper`
     iterations = 0
     while heap:
         token.raise_if_cancelled()
         lower, _, index, region, s, t = heapq.heappop(heap)
-        if lower * (1.0 + eps) >= upper or iterations >= max_iterations:
+        if lower * (1.0 + eps) >= search.upper or iterations >= max_iterations:
             lower_bound = lower  # every open region is at least this
             break
+        if isinstance(index, Relaxation):  # the graphs below it may still win
+            search.expand(index)
+            continue
         if s < 0:  # an unexplored whole graph: find its open path (queued again) or its closed optimum
-            explore(index, region)
+            search.explore(index, region)
             continue
         iterations += 1
         graph = graphs[index]
         # upper bound: close the region's best open path at its start
-        consider_closed(index, *graph.closed_from(s, upper, cancel))
-        if lower * (1.0 + eps) >= upper:
+        search.consider_closed(index, *graph.closed_from(s, search.upper, search.cancel))
+        if lower * (1.0 + eps) >= search.upper:
             lower_bound = lower
             break
         # split the region by graph distance to the open path's start and end
         for child in graph.split(region, s, t):
             if child.any():
-                explore(index, child)
-        bound = heap[0][0] if heap else upper
+                search.explore(index, child)
+        bound = heap[0][0] if heap else search.upper
         yield Progress("branch and bound", -1.0,
-                       f"iteration {iterations}: lower {min(bound, upper):.6g}, upper {upper:.6g}, "
+                       f"iteration {iterations}: lower {min(bound, search.upper):.6g}, upper {search.upper:.6g}, "
                        f"{len(heap)} open regions")
+    upper = search.upper
     lower_bound = min(lower_bound, upper)
-    if best is None:
+    if search.best is None:
         raise InputError("branch and bound found no closed path")
-    runs = sum(g.runs for g in graphs)
-    return BranchAndBoundResult(best, upper, lower_bound, upper, iterations, runs,
-                                sum(g.run_seconds for g in graphs) / max(runs, 1), best_index)
+    searched = list(graphs) + [node.graph for node in _tree_nodes(relaxations)]
+    runs = sum(g.runs for g in searched)
+    return BranchAndBoundResult(search.best, upper, lower_bound, upper, iterations, runs,
+                                sum(g.run_seconds for g in searched) / max(runs, 1), search.best_index)
+
+
+class _UnionSearch:
+    """The state of one :func:`branch_and_bound_union`: the queue, the best closed path, the relaxations' order.
+
+    The queue holds ``(lower bound, counter, item, region, s, t)``: a
+    relaxation (region None), a graph's whole unexplored region
+    (``s = t = -1``) or a region with its cheapest open path from ``s`` to ``t``.
+    """
+
+    def __init__(self, graphs, eps: float, cancel: np.ndarray):
+        self.graphs, self.eps, self.cancel = graphs, eps, cancel
+        self.counter = itertools.count()
+        self.heap: list = []
+        self.upper, self.best, self.best_index = np.inf, None, -1
+        self.promise: dict[int, float] = {}  # per graph: the cheapest relaxation path priced in it (orders searches)
+        self.expanded: set[int] = set()
+        self.dived = False  # a first closed path has been sought below a relaxation
+
+    def start(self, relaxations, uncovered: list[int]) -> None:
+        """The roots' backward searches (in parallel), queued: a graph whose bound is beaten by a closed path is
+        never searched forward; one below a relaxation whose bound is beaten is not even searched backward."""
+        roots = list(relaxations) + uncovered
+        compute_heuristics([self.graph_of(item) for item in roots], self.cancel)
+        for item in roots:
+            if not np.isfinite(self.settle(item)):
+                raise InputError("no path through the product graph (is the graph connected?)")
+
+    def graph_of(self, item) -> ProductGraph:
+        return item.graph if isinstance(item, Relaxation) else self.graphs[item]
+
+    def leaves_of(self, item) -> list[int]:
+        return item.leaves if isinstance(item, Relaxation) else [item]
+
+    def most_promising(self, item) -> float:
+        return min(self.promise.get(leaf, np.inf) for leaf in self.leaves_of(item))
+
+    def consider_closed(self, index: int, cost: float, path: CyclicPath | None) -> None:
+        if path is not None and cost < self.upper:
+            self.upper, self.best, self.best_index = cost, path, index
+
+    def explore(self, index: int, region: np.ndarray) -> None:
+        """Shortest path of a region: a closed one updates the bound, an open one is queued."""
+        graph = self.graphs[index]
+        cost, s, t = graph.shortest(*graph.endpoints(region), self.upper, self.cancel)
+        if s < 0:
+            return  # nothing in this region beats the best closed path
+        if graph.is_closed(s, t):
+            self.consider_closed(index, cost, graph.backtrack(t))
+        elif cost * (1.0 + self.eps) < self.upper:
+            self.consider_closed(index, *graph.close_by_detour(graph.backtrack(t)))  # an upper bound for free
+            heapq.heappush(self.heap, (cost, next(self.counter), index, region, s, t))
+
+    def settle(self, item) -> float:
+        """Queue an item whose backward search has run, by the lower bound that search gives for free (the
+        cheapest open path from any start); the closed detour of that path is an upper bound, priced in
+        every graph below a relaxation. Returns the bound (inf: nothing through it beats the best path)."""
+        graph = self.graph_of(item)
+        root_bound = float(np.min(graph.heuristic[0, :graph.n_starts]))
+        if not np.isfinite(root_bound):
+            return root_bound
+        _, closed = graph.close_by_detour(graph.root_path)
+        if closed is not None:
+            for leaf in self.leaves_of(item):
+                energy = self.graphs[leaf].path_energy(closed)
+                self.promise[leaf] = min(self.promise.get(leaf, np.inf), energy)
+                self.consider_closed(leaf, energy, closed)
+        region = None if isinstance(item, Relaxation) else np.ones(graph.n_starts, dtype=np.bool_)
+        heapq.heappush(self.heap, (root_bound, next(self.counter), item, region, -1, -1))
+        return root_bound
+
+    def search_below(self, parent: Relaxation, items) -> None:
+        """The backward searches of items below a relaxation (in parallel), skipping the nodes through which no
+        path beats the best closed one: the relaxation's forward distances under that bound bound their cost to
+        come."""
+        searched = [self.graph_of(item) for item in items]
+        if np.isfinite(self.upper):
+            relaxed = parent.graph
+            everything = np.ones(relaxed.n, dtype=np.bool_)
+            relaxed.shortest(everything, everything, self.upper, self.cancel)
+            compute_heuristics(searched, self.cancel, self.upper, relaxed.dist.copy())
+        else:
+            compute_heuristics(searched, self.cancel)
+        for item in items:
+            self.settle(item)
+
+    def expand(self, parent: Relaxation) -> None:
+        """The items below a relaxation whose bound came first in the queue (once).
+
+        Until a first closed path has been found below a relaxation, the most
+        promising items (one per thread) are searched backwards completely and
+        the best of them is followed down to a graph whose cheapest open path
+        is closed (:meth:`dive`); every other backward search skips all that
+        the best closed path beats.
+        """
+        if id(parent) in self.expanded:
+            return
+        self.expanded.add(id(parent))
+        ordered = sorted(parent.children, key=self.most_promising)
+        if self.dived:
+            self.search_below(parent, ordered)
+            return
+        first, others = ordered[:parallel_searches()], ordered[parallel_searches():]
+        compute_heuristics([self.graph_of(item) for item in first], self.cancel)
+        for item in first:
+            self.settle(item)
+        self.dive(min(first, key=self.most_promising))
+        if others:
+            self.search_below(parent, others)
+
+    def dive(self, item) -> None:
+        """A tight upper bound early: follow the most promising items below a searched one down to a graph and
+        close its cheapest open path (one search from every start, one from that path's start)."""
+        if not np.isfinite(np.min(self.graph_of(item).heuristic[0])):
+            return  # nothing through it beats the best closed path
+        if isinstance(item, Relaxation):
+            self.expand(item)  # which dives further down
+            return
+        self.dived = True
+        graph = self.graphs[item]
+        cost, start, end = graph.shortest(*graph.endpoints(np.ones(graph.n_starts, dtype=np.bool_)), self.upper,
+                                          self.cancel)
+        if start < 0:
+            return
+        if graph.is_closed(start, end):
+            self.consider_closed(item, cost, graph.backtrack(end))
+            return
+        self.consider_closed(item, *graph.close_by_detour(graph.backtrack(end)))
+        self.consider_closed(item, *graph.closed_from(start, self.upper, self.cancel))
+
+
+def _tree_nodes(relaxations) -> list[Relaxation]:
+    """Every relaxation of the trees, roots first."""
+    nodes = list(relaxations)
+    for node in nodes:  # grows while iterating: breadth first
+        nodes.extend(child for child in node.children if isinstance(child, Relaxation))
+    return nodes
 
 
 def minimum_ratio_union(graphs, *, eps: float = 0.0, token: CancelToken | None = None,
-                        max_iterations: int = 100_000, max_rounds: int = 100):
+                        max_iterations: int = 100_000, max_rounds: int = 100, relaxations=()):
     """The closed path of least energy per credited length over several product graphs (generator).
 
     Minimises the ratio ``R(P) = E(P) / D(P)`` of the path energy ``E`` to the
@@ -628,6 +835,16 @@ def minimum_ratio_union(graphs, *, eps: float = 0.0, token: CancelToken | None =
     instead of ``λ``: either it certifies that ``λ`` is within ``1 + eps`` of
     the optimum, or its path improves the ratio by at least that factor.
 
+    Parameters
+    ----------
+    graphs : sequence of ProductGraph
+    eps, token, max_iterations
+        As in :func:`branch_and_bound`.
+    max_rounds : int
+        Cap on Dinkelbach's rounds.
+    relaxations : sequence of Relaxation
+        As in :func:`branch_and_bound_union` (they get the same credit).
+
     Returns
     -------
     BranchAndBoundResult
@@ -640,15 +857,17 @@ def minimum_ratio_union(graphs, *, eps: float = 0.0, token: CancelToken | None =
         raise ParameterError("the ratio search needs at least one product graph")
     token = token or CancelToken()
     curve_length = max(g.curve_length for g in graphs)
+    everything = list(graphs) + [node.graph for node in _tree_nodes(relaxations)]
 
     def solve(gain):
         """The global optimum of ``E − gain · D`` over every graph (the gains are reset afterwards)."""
-        for graph in graphs:
+        for graph in everything:  # the same credit keeps a relaxation below its graphs
             graph.gain = gain
         try:
-            return (yield from branch_and_bound_union(graphs, token=token, max_iterations=max_iterations))
+            return (yield from branch_and_bound_union(graphs, token=token, max_iterations=max_iterations,
+                                                      relaxations=relaxations))
         finally:
-            for graph in graphs:
+            for graph in everything:
                 graph.gain = 0.0
 
     bb = yield from solve(0.0)

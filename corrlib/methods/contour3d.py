@@ -143,7 +143,8 @@ from corrlib.descriptors.side_view import edge_orientation, mirror_asymmetry, pa
 from corrlib.descriptors.spectral import hks, wks
 from corrlib.descriptors.symmetry import K_FINAL, even_spectrum, mesh_reflection, odd_eigenfunction
 from corrlib.errors import ContourError, InputError, ParameterError
-from corrlib.geometry.cyclic_paths import ProductGraph, branch_and_bound_union, minimum_ratio_union
+from corrlib.geometry.cyclic_paths import (ProductGraph, Relaxation, branch_and_bound_union, minimum_ratio_union,
+                                           parallel_searches)
 from corrlib.geometry.elastic_paths import ElasticProductGraph
 from corrlib.geometry.intrinsic_axis import IntrinsicAxis, axis_mismatch, spectral_axes
 from corrlib.geometry.laplacian import mesh_laplacian
@@ -588,6 +589,24 @@ def product_graph(cost: np.ndarray, contour_points: np.ndarray, mesh_vertices: n
                                bending=params.bending * unit_cost * step)
 
 
+def relaxation_tree(graphs: list[ProductGraph], readings: list[tuple]) -> list[Relaxation]:
+    """Lower-bounding graphs for the search: one per shape model over all its readings.
+
+    The readings of one model share the feature distances and differ by the
+    axis and side-view terms, so their element-wise cheapest costs (without
+    the directed penalties) bound them all; a model that cannot win then
+    costs one backward search instead of one per reading, and the others'
+    searches skip what the first closed path beats
+    (:func:`~corrlib.geometry.cyclic_paths.branch_and_bound_union`).
+    """
+    roots = []
+    for model in dict.fromkeys(reading[0] for reading in readings):
+        members = [index for index, reading in enumerate(readings) if reading[0] == model]
+        if len(members) > 1:
+            roots.append(Relaxation(ProductGraph.relaxation([graphs[i] for i in members]), members))
+    return roots
+
+
 def match_prepared(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams, token):
     """Solver generator for a prepared query against one mesh (see :func:`solve_contour3d`)."""
     watch = Stopwatch()
@@ -626,7 +645,11 @@ def match_prepared(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams,
                                             "(shape model, direction of the axis)")
     with watch("search"):
         search = minimum_ratio_union if params.energy.endswith("ratio") else branch_and_bound_union
-        bb = yield from search(graphs, eps=params.eps, token=token, max_iterations=params.max_iterations)
+        # graphs that fit in one parallel round of backward searches gain nothing from relaxations
+        relaxed = params.energy in FIRST_ORDER_ENERGIES and len(graphs) > parallel_searches()
+        relaxations = relaxation_tree(graphs, readings) if relaxed else []
+        bb = yield from search(graphs, eps=params.eps, token=token, max_iterations=params.max_iterations,
+                               relaxations=relaxations)
     path = bb.path
     matched = path.matched_vertices(graphs[bb.graph_index].m)
     model, signs, near = readings[bb.graph_index]

@@ -448,7 +448,10 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
         Folder of meshes, classes named the same way (``horse0.off``).
     out : path
         Writes ``retrieval.csv`` (query, class, AP, rank of the first relevant
-        mesh, top hits), ``retrieval_summary.json`` and ``retrieval_summary.md``.
+        mesh, top hits), ``retrieval_ranking.csv`` (every query's whole
+        ranking: rank, mesh, its class, matching energy, seconds, why a mesh
+        failed; the margins between classes are read there),
+        ``retrieval_summary.json`` and ``retrieval_summary.md``.
     params : Contour3DParams, optional
     jobs, scheduler
         Local processes or a Dask scheduler (see :func:`corrlib.parallel.job_executor`).
@@ -468,12 +471,14 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
     meshes = mesh_files(collection)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    rows = []
+    rows, ranking = [], []
     for number, q in enumerate(query_paths, 1):
         row = {"query": q.name, "class": class_of(q), "ap": float("nan"), "first_relevant": "", "top": "",
                "error": ""}
         try:
             hits = run(retrieve(load_contour(q), meshes, params, jobs=jobs, scheduler=scheduler))
+            ranking += [{"query": q.name, "rank": rank, "mesh": h.path.name, "class": h.label, "energy": h.energy,
+                         "seconds": h.seconds, "error": h.error} for rank, h in enumerate(hits, 1)]
             labels = [h.label for h in hits]
             row["ap"] = average_precision(labels, row["class"])
             row["first_relevant"] = labels.index(row["class"]) + 1 if row["class"] in labels else ""
@@ -487,6 +492,10 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
         fh.write("query,class,ap,first_relevant,top,error\n")
         for r in rows:
             fh.write(",".join(csv_cell(r[c]) for c in ("query", "class", "ap", "first_relevant", "top", "error")) + "\n")
+    columns = ("query", "rank", "mesh", "class", "energy", "seconds", "error")
+    with atomic_write(out / "retrieval_ranking.csv") as fh:
+        fh.write(",".join(columns) + "\n")
+        fh.writelines(",".join(csv_cell(r[c]) for c in columns) + "\n" for r in ranking)
     ok = [r for r in rows if not r["error"]]
     per_class = {}
     for r in ok:

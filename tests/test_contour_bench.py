@@ -245,10 +245,12 @@ def test_silhouette_queries_end_to_end(tmp_path):
 @pytest.mark.slow
 @pytest.mark.parametrize("plane, half_below", [("silhouette", 0.09), ("main", 0.25)])
 def test_half_shape_model_beats_the_whole_surface_on_the_other_pose_of_the_cat(plane, half_below):
-    """cat0's queries matched to cat1 (remeshed independently, .vts ground truth), one axis. Measured:
+    """cat0's queries matched to cat1 (remeshed independently, .vts ground truth), one axis, the paper's
+    Euclidean product metric (with the max metric both models reach 0.06-0.08 on the section). Measured:
     silhouette 0.070 (half) against 0.098 (whole), main-plane section 0.195 against 0.304."""
     gt_rows = (load_vts(TOSCA / "cat0.vts"), load_vts(TOSCA / "cat1.vts"))
-    errors = {model: match_cut_query(TOSCA / "cat0.off", TOSCA / "cat1.off", plane, {"model": model, "axis_modes": 1},
+    errors = {model: match_cut_query(TOSCA / "cat0.off", TOSCA / "cat1.off", plane, {"model": model, "axis_modes": 1,
+                                                                                  "metric": "euclidean"},
                                      gt_rows=gt_rows)["mean_error"] for model in ("half", "whole")}
     assert errors["half"] < half_below and errors["half"] < errors["whole"], errors
 

@@ -11,7 +11,14 @@ path from ``(0, s)`` to ``(m, s)``. Edges (directed, layer never decreases):
 
 The cost of an edge is the mean of its two node costs times its length in the
 stacked coordinates ``(curve point, graph vertex)`` (thesis Eq. 7.1
-discretised with the trapezoidal rule). Nothing of size ``m n × m n`` is ever
+discretised with the trapezoidal rule). The length of an edge that advances
+``a`` along the curve and ``b`` in the graph is ``sqrt(a² + b²)`` (the
+paper's Euclidean product metric) or ``max(a, b)`` (``metric="max"``). Under
+the Euclidean metric a step whose graph vertex stays (``b = 0``) is cheaper
+than one that keeps pace (``b = a``: ``√2 a``), so a matching that shortens
+the graph curve, down to a few vertices, is rewarded for it at every step;
+under the max metric both cost ``a`` and only stretching (``b > a``) costs
+more: the curve's length is no longer traded against its fit. Nothing of size ``m n × m n`` is ever
 built: :func:`_layered_dijkstra` computes edge costs on the fly from the
 graph's CSR adjacency, one Dijkstra per layer (O(m n log n) in total).
 
@@ -44,7 +51,7 @@ from corrlib.progress import CancelToken, Progress
 
 @numba.njit(cache=True, nogil=True)
 def _layered_dijkstra(cost, step2, graph_points, indptr, indices, edge_len, source_mask, target_mask,
-                      upper, heuristic, cancel, dist, pred, origin, stretch, gain, extra):
+                      upper, heuristic, cancel, dist, pred, origin, stretch, gain, extra, max_metric):
     """Multi-source shortest paths through all layers; returns (best end vertex, its cost).
 
     ``stretch`` adds ``stretch * |b - a|`` to every edge, ``a`` and ``b`` its
@@ -56,7 +63,8 @@ def _layered_dijkstra(cost, step2, graph_points, indptr, indices, edge_len, sour
     the parametric problem of the ratio energy). Edges within a layer never
     get a credit, so they stay non-negative and every layer's Dijkstra is exact
     whatever the distances it starts from. ``extra`` (one entry per CSR edge)
-    is added to every move along that directed graph edge.
+    is added to every move along that directed graph edge. ``max_metric``:
+    an edge advancing on both is ``max(a, b)`` long instead of ``sqrt(a² + b²)``.
 
     ``dist``/``pred``/``origin`` (L, n) are overwritten: distance, predecessor
     (``j`` within the layer, ``n + j`` from vertex j of the previous layer,
@@ -102,7 +110,8 @@ def _layered_dijkstra(cost, step2, graph_points, indptr, indices, edge_len, sour
                     o[j] = oprev[j]
                 for e in range(indptr[j], indptr[j + 1]):
                     k = indices[e]
-                    nd = (dj + 0.5 * (cj + cost[i, k]) * np.sqrt(s2 + edge_len[e] * edge_len[e])
+                    length = max(step, edge_len[e]) if max_metric else np.sqrt(s2 + edge_len[e] * edge_len[e])
+                    nd = (dj + 0.5 * (cj + cost[i, k]) * length
                           + stretch * abs(edge_len[e] - step) - gain * min(edge_len[e], step) + extra[e])
                     if nd < d[k] and nd + h[k] < upper:
                         d[k] = nd
@@ -191,10 +200,15 @@ class ProductGraph:
         side of the surface on its left). Entries outside the adjacency are
         ignored. The backward search of the heuristic walks every edge with
         the penalty of its forward direction, so it stays exact.
+    metric : {"euclidean", "max"}
+        Length of an edge that advances ``a`` along the curve and ``b`` in the
+        graph: ``sqrt(a² + b²)`` (the paper) or ``max(a, b)`` (see the module
+        docstring).
     """
 
     def __init__(self, node_cost, curve_points, graph_points, adjacency, *, directed: bool = False,
-                 closing_shift: int = 0, n_starts: int | None = None, stretch: float = 0.0, edge_penalty=None):
+                 closing_shift: int = 0, n_starts: int | None = None, stretch: float = 0.0, edge_penalty=None,
+                 metric: str = "euclidean"):
         cost = np.asarray(node_cost, dtype=np.float64)
         curve = np.asarray(curve_points, dtype=np.float64)
         pts = np.asarray(graph_points, dtype=np.float64)
@@ -211,6 +225,9 @@ class ProductGraph:
         if not (np.isfinite(stretch) and stretch >= 0):
             raise ParameterError(f"stretch must be finite and non-negative, got {stretch}")
         self.stretch = float(stretch)
+        if metric not in ("euclidean", "max"):
+            raise ParameterError(f"metric must be 'euclidean' or 'max', got {metric!r}")
+        self.metric = metric
         #: Dinkelbach parameter of the ratio energy: every edge advancing along curve and graph gets
         #: ``-gain * min(a, b)`` (0: no credit; set by :func:`minimum_ratio_union`)
         self.gain = 0.0
@@ -303,7 +320,8 @@ class ProductGraph:
         t, _ = _layered_dijkstra(np.ascontiguousarray(self.cost[::-1]), np.ascontiguousarray(self.step2[::-1]),
                                  self.graph_points, indptr, indices, edge_len, everything,
                                  everything, float(upper), np.ascontiguousarray(cost_to_come[::-1]), flag,
-                                 self.dist, self.pred, self.origin, self.stretch, self.gain, self._reverse_extra)
+                                 self.dist, self.pred, self.origin, self.stretch, self.gain, self._reverse_extra,
+                                 self.metric == "max")
         self.runs += 1
         self.run_seconds += time.perf_counter() - start
         if t == -2:
@@ -361,7 +379,8 @@ class ProductGraph:
         start = time.perf_counter()
         t, c = _layered_dijkstra(self.cost, self.step2, self.graph_points, self.indptr, self.indices,
                                  self.edge_len, sources, targets, float(upper), self.heuristic, flag,
-                                 self.dist, self.pred, self.origin, self.stretch, self.gain, self.extra)
+                                 self.dist, self.pred, self.origin, self.stretch, self.gain, self.extra,
+                                 self.metric == "max")
         self.runs += 1
         self.run_seconds += time.perf_counter() - start
         if t == -2:
@@ -448,7 +467,8 @@ class ProductGraph:
         j0, j1 = vertices[:-1], vertices[1:]
         b2 = np.sum((self.graph_points[j1] - self.graph_points[j0]) ** 2, axis=1)
         a2 = np.where(np.diff(layers) == 1, np.append(self.step2, 0.0)[layers[:-1]], 0.0)
-        total = np.sum(0.5 * (self.cost[layers[:-1], j0] + self.cost[layers[1:], j1]) * np.sqrt(a2 + b2))
+        length = np.maximum(np.sqrt(a2), np.sqrt(b2)) if self.metric == "max" else np.sqrt(a2 + b2)
+        total = np.sum(0.5 * (self.cost[layers[:-1], j0] + self.cost[layers[1:], j1]) * length)
         total += self.stretch * np.sum(np.abs(np.sqrt(b2) - np.sqrt(a2)))
         moves = j1 != j0
         # CSR order is (row, column) ascending, so the key row * n + column finds a directed edge's slot
@@ -470,15 +490,16 @@ class ProductGraph:
         """
         first = members[0]
         for other in members[1:]:
-            if (other.m, other.n, other.closing_shift, other.n_starts) != (first.m, first.n, first.closing_shift,
-                                                                           first.n_starts):
-                raise InputError("a relaxation's members must share the curve, the graph and the closing rule")
+            if (other.m, other.n, other.closing_shift, other.n_starts, other.metric) != (
+                    first.m, first.n, first.closing_shift, first.n_starts, first.metric):
+                raise InputError("a relaxation's members must share the curve, the graph, the closing rule and the "
+                                 "metric")
         cost = members[0].cost[:-1].copy()
         for other in members[1:]:
             np.minimum(cost, other.cost[:-1], out=cost)
         return cls(cost, first.curve_points, first.graph_points, first.adjacency, directed=True,
                    closing_shift=first.closing_shift, n_starts=first.n_starts,
-                   stretch=min(g.stretch for g in members))
+                   stretch=min(g.stretch for g in members), metric=first.metric)
 
     def credited_length(self, path: CyclicPath) -> float:
         """The length of the curve a path matches to moving graph vertices: ``Σ min(a, b)`` over its edges.

@@ -113,8 +113,18 @@ not depend on the units, position or orientation of either input, and
 energies are comparable across meshes (retrieval ranks by them). The half
 shape has half the surface's area, the same as the contour's.
 
+Product metric (``metric``): the paper measures a step of the matching that
+advances ``a`` along the contour and ``b`` on the mesh by ``sqrt(a² + b²)``,
+so a step whose mesh vertex stays costs ``a`` and one that keeps pace ``√2 a``:
+every step rewards a shorter curve on the mesh, and where the features do
+not tell the true curve from a short one (a section's features rarely do)
+the optimum shrinks onto a few vertices. ``metric="max"`` (default) measures
+it by ``max(a, b)``: keeping pace costs what standing still costs, and only
+stretching beyond the contour's step costs more
+(:mod:`corrlib.geometry.cyclic_paths`).
+
 Energies (``energy``): ``paper`` is the CVPR 2016 energy on the first-order
-product graph; ``elastic`` adds stretching, bending and the rule against
+product graph (with ``metric="euclidean"``); ``elastic`` adds stretching, bending and the rule against
 immediate reversals on the second-order graph of
 :mod:`corrlib.geometry.elastic_paths` (Roetzer, Lähner, Bernard, CVPR 2023),
 whose optimum does not collapse onto a few vertices; ``ratio`` divides the
@@ -233,6 +243,11 @@ class Contour3DParams:
     part_weight: float = param(1.0, label="Part weight", low=0.0, high=1e3,
                                help="Cost of matching points of different parts, in units of the mean feature "
                                     "distance.")
+    metric: str = param("max", label="Product metric", choices=("max", "euclidean"),
+                        help="Length of a step of the matching on the product graph that advances a along the "
+                             "contour and b on the mesh: max(a, b) (a matched curve gains nothing by being shorter "
+                             "than the contour) or sqrt(a² + b²) as in the paper (energy=paper with "
+                             "metric=euclidean is the CVPR 2016 energy). First-order energies (paper, ratio).")
     max_iterations: int = param(10000, label="Max iterations", low=1, high=10_000_000,
                                 help="Cap on branch-and-bound iterations (the bounds are reported).")
 
@@ -583,7 +598,8 @@ def product_graph(cost: np.ndarray, contour_points: np.ndarray, mesh_vertices: n
     elastic energies do not take it.
     """
     if params.energy in FIRST_ORDER_ENERGIES:
-        return ProductGraph(cost, contour_points, mesh_vertices, adjacency, edge_penalty=edge_penalty)
+        return ProductGraph(cost, contour_points, mesh_vertices, adjacency, edge_penalty=edge_penalty,
+                            metric=params.metric)
     step = float(np.mean(np.linalg.norm(np.roll(contour_points, -1, axis=0) - contour_points, axis=1)))
     return ElasticProductGraph(cost, contour_points, mesh_vertices, adjacency, stretch=params.stretch * unit_cost,
                                bending=params.bending * unit_cost * step)
@@ -658,10 +674,11 @@ def match_prepared(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams,
               "near_half": int(near)}
     yield Progress("done", 1.0, f"energy {bb.energy:.6g} after {bb.iterations} iterations")
     per_length = " per contour length matched to a moving curve" if params.energy.endswith("ratio") else ""
+    metric = f"{params.metric} product metric, " if params.energy in FIRST_ORDER_ENERGIES else ""
     return MatchResult("contour3d", map_xy=matched, map_yx=None, energy=bb.energy, timings=watch.times,
                        path=ContourPath(query.contour.points, path.vertices, path.curve_index, path.layers),
                        search=SearchCertificate.of(bb), extras=extras,
-                       energy_meaning=f"{params.energy} product-graph path energy{per_length} ({model} shape model, unit-area "
+                       energy_meaning=f"{params.energy} product-graph path energy{per_length} ({metric}{model} shape model, unit-area "
                                       f"mesh, contour area {params.area_ratio:g}, axis weight {params.axis_weight:g}"
                                       + (f", side view, symmetry-curve weight {params.symmetry_weight:g})"
                                          if side is not None else ")"))

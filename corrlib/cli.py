@@ -19,6 +19,9 @@ import numpy as np
 from corrlib.errors import CorrError, FileFormatError
 
 EXIT_BAD_INPUT = 2
+#: help of the retrieval commands' --n-contour (the value is corrlib.retrieval.RETRIEVAL_N_CONTOUR; not imported
+#: here, so that `corr --help` does not load the method)
+RETRIEVAL_N_CONTOUR_HELP = "contour resampling (default 100, the retrieval default of the studio and the CLI)"
 
 
 # ----------------------------------------------------------------------------- info
@@ -355,11 +358,8 @@ def cmd_bench(args) -> int:
 
 def cmd_bench_retrieval(args) -> int:
     from corrlib.bench import retrieval_benchmark
-    from corrlib.methods import get_method, make_params
 
-    overrides = _parse_overrides(args.param or [])
-    overrides.update(eps=args.eps, n_contour=args.n_contour)
-    params = make_params(get_method("contour3d").params, **overrides)  # named errors before any work
+    params = _contour3d_params(args, retrieval=True)  # named errors before any work
 
     def progress(done, total, row):
         if not args.quiet:
@@ -478,14 +478,20 @@ def _query_contour(path: str, labels: str | None = None):
     return contour
 
 
-def _contour3d_params(args):
-    from corrlib.methods.base import make_params
-    from corrlib.methods.contour3d import Contour3DParams
-
-    overrides = _parse_overrides(args.param)
+def _contour3d_params(args, *, retrieval: bool = False):
+    """``contour3d`` parameters from ``--param`` and the options ``--eps``, ``--k``, ``--n-contour``: the
+    method's defaults, or a retrieval's (:func:`corrlib.retrieval.retrieval_params`) if ``retrieval``."""
+    overrides = _parse_overrides(args.param or [])
     for key in ("eps", "k", "n_contour"):
         if getattr(args, key, None) is not None:
             overrides[key] = getattr(args, key)
+    if retrieval:
+        from corrlib.retrieval import retrieval_params
+
+        return retrieval_params(**overrides)
+    from corrlib.methods.base import make_params
+    from corrlib.methods.contour3d import Contour3DParams
+
     return make_params(Contour3DParams, **overrides)
 
 
@@ -528,7 +534,7 @@ def cmd_retrieve(args) -> int:
 
         check_output_file(args.output, "-o")
     contour = _query_contour(args.query)
-    params = _contour3d_params(args)
+    params = _contour3d_params(args, retrieval=True)
     files = mesh_files(args.folder)
     hits = run(retrieve(contour, files, params, jobs=args.jobs, scheduler=args.scheduler),
                callback=_progress_printer(args.quiet))
@@ -663,8 +669,7 @@ def _add_retrieve_parser(sub) -> None:
     p.add_argument("--eps", type=float, default=0.0,
                    help="approximation factor (default 0: rank by the exact optima)")
     p.add_argument("--k", type=int)
-    p.add_argument("--n-contour", dest="n_contour", type=int, default=100,
-                   help="contour resampling (default 100 for retrieval)")
+    p.add_argument("--n-contour", dest="n_contour", type=int, help=RETRIEVAL_N_CONTOUR_HELP)
     p.add_argument("--param", action="append", metavar="NAME=VALUE")
     _add_output(p, None, "write the full ranking as TSV")
 
@@ -696,7 +701,7 @@ def _add_bench_parsers(sub) -> None:
     _add_scale_out(p)
     p.add_argument("--eps", type=float, default=0.0,
                    help="approximation factor (default 0: rank by the exact optima)")
-    p.add_argument("--n-contour", dest="n_contour", type=int, default=100, help="contour resampling (default 100)")
+    p.add_argument("--n-contour", dest="n_contour", type=int, help=RETRIEVAL_N_CONTOUR_HELP)
     p.add_argument("--param", action="append", metavar="KEY=VALUE", help="another contour3d parameter (repeatable)")
     _add_output(p, "retrieval_output", "output folder")
 

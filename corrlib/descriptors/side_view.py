@@ -30,7 +30,13 @@ for 2D-to-3D matching (:mod:`corrlib.methods.contour3d`):
 A view *within* the plane of symmetry (a person from the front, an animal
 from above) shows an outline that is its own mirror image in 2D and crosses
 ``C`` instead of following it. :func:`mirror_asymmetry` tells the two kinds
-of view apart from the 2D outline alone.
+of view apart from the 2D outline alone. A front view of a *posed* shape (a
+person with one arm raised) is not its own mirror image, but it stays
+intrinsically symmetric: the pose bends the outline without stretching it,
+so some reflection of the outline onto itself still carries every point to
+one with the same intrinsic features (:func:`intrinsic_asymmetry`). A side
+view has neither symmetry (head and tail differ), so a view is taken for a
+side view only when the outline is asymmetric in both senses.
 """
 
 from __future__ import annotations
@@ -83,6 +89,56 @@ def mirror_asymmetry(points: np.ndarray) -> float:
         reflected[:, axis] *= -1.0
         best = min(best, float(tree.query(reflected)[0].mean()))
     return best
+
+
+def intrinsic_asymmetry(features: np.ndarray) -> float:
+    """How far a closed outline is from an intrinsic mirror symmetry (0: symmetric).
+
+    A reflection of a closed curve onto itself reverses its direction and
+    keeps arc length, so on an outline resampled evenly by arc length it maps
+    point ``i`` to point ``(s − i) mod m`` for one shift ``s`` (the axis passes
+    through point ``s/2``, or between two points for odd ``s``). The outline is
+    intrinsically symmetric if, for some ``s``, every point has the features of
+    its image:
+
+    .. math::
+
+        \\min_s \\frac{1}{m} \\sum_i \\lVert f_i - f_{(s-i) \\bmod m} \\rVert_1
+        \\Big/ \\frac{1}{m^2} \\sum_{i,j} \\lVert f_i - f_j \\rVert_1 .
+
+    The denominator (two points chosen at random) makes it unit-free: 0 for a
+    perfect symmetry, about 1 when the best reflection pairs points no better
+    than chance. With intrinsic features (spectral descriptors of the filled
+    outline) it does not change under bendings of the outline's parts.
+
+    Parameters
+    ----------
+    features : (m, d) float
+        Descriptors of the outline's points, in order along the outline,
+        evenly spaced by arc length.
+
+    Returns
+    -------
+    float
+    """
+    features = np.asarray(features, dtype=np.float64)
+    if features.ndim != 2 or features.shape[0] < 3 or not np.all(np.isfinite(features)):
+        raise InputError(f"intrinsic_asymmetry needs (m, d) finite features of m >= 3 points, got shape "
+                         f"{features.shape}")
+    m = features.shape[0]
+    pairwise = np.abs(features[:, None, :] - features[None, :, :]).sum(axis=2) if m <= 400 else \
+        _pairwise_l1(features)
+    scale = pairwise.mean()
+    if scale <= 0.0:
+        return 0.0  # every point alike: any reflection keeps the features
+    points = np.arange(m)
+    images = (points[:, None] - points[None, :]) % m  # [s, i] -> the image of point i under the reflection s
+    return float(pairwise[points[None, :], images].mean(axis=1).min() / scale)
+
+
+def _pairwise_l1(features: np.ndarray) -> np.ndarray:
+    """(m, m) L1 distances, row by row (for long outlines, without an (m, m, d) array)."""
+    return np.stack([np.abs(features - row).sum(axis=1) for row in features])
 
 
 def paired_limbs(labels: np.ndarray, mirror: np.ndarray) -> np.ndarray:

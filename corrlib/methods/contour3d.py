@@ -88,8 +88,10 @@ along the back; without the distance cost it could circle a point on a
 flank. A view *within* the plane of symmetry (a person from the front, an
 animal from above) has an outline that is its own mirror image and that
 crosses the curve of symmetry, so it gets neither term: ``view="auto"``
-decides from the outline's mirror asymmetry
-(:func:`~corrlib.descriptors.side_view.mirror_asymmetry`). The orientation
+takes an outline for a side view only if it is neither its own mirror image
+(:func:`~corrlib.descriptors.side_view.mirror_asymmetry`) nor intrinsically
+symmetric (:func:`~corrlib.descriptors.side_view.intrinsic_asymmetry`: a
+front view of a posed person is bent, not stretched). The orientation
 cost enters the first-order energies (``paper``, ``ratio``); the
 second-order graphs take the distance cost only.
 
@@ -149,7 +151,8 @@ import numba
 import numpy as np
 import scipy.sparse as sp
 
-from corrlib.descriptors.side_view import edge_orientation, mirror_asymmetry, paired_limbs, symmetry_curve_cost
+from corrlib.descriptors.side_view import (edge_orientation, intrinsic_asymmetry, mirror_asymmetry, paired_limbs,
+                                           symmetry_curve_cost)
 from corrlib.descriptors.spectral import hks, wks
 from corrlib.descriptors.symmetry import K_FINAL, even_spectrum, mesh_reflection, odd_eigenfunction
 from corrlib.errors import ContourError, InputError, ParameterError
@@ -175,6 +178,10 @@ HALF_EIGENPAIRS_PER_K = 3
 #: benchmark and retrieval queries: views within the plane of symmetry 0.001–0.025, side views and
 #: sections 0.032–0.12; see docs/decisions.md)
 SIDE_VIEW_ASYMMETRY = 0.03
+#: ``view="auto"``: and farther than this from an intrinsic mirror symmetry (the best reflection of the outline
+#: pairs points whose WKS differ by more than a third of what two random points' do; measured: views within the
+#: plane of symmetry 0.04–0.28, posed ones included, side views and sections through that plane 0.41–0.81)
+SIDE_VIEW_INTRINSIC_ASYMMETRY = 1 / 3
 #: the energies on the first-order product graph (the only ones that take directed edge costs)
 FIRST_ORDER_ENERGIES = ("paper", "ratio")
 
@@ -231,7 +238,8 @@ class Contour3DParams:
                            "or a section through that plane), so it runs along the curve of symmetry except on "
                            "limbs and keeps one half of the shape on one side (the symmetry-curve weight applies); "
                            "front: seen within that plane (a person from the front, an animal from above), no such "
-                           "term; auto: side unless the outline is its own mirror image in 2D.")
+                           "term; auto: side unless the outline is its own mirror image in 2D or intrinsically "
+                           "symmetric (a posed front view).")
     symmetry_weight: float = param(1.0, label="Symmetry-curve weight", low=0.0, high=1e3,
                                    help="Side views: cost of a point's distance to its mirror image (off the limbs) "
                                         "and of walking round the body the wrong way, in units of the mean node cost "
@@ -362,6 +370,10 @@ class PreparedQuery:
     asymmetry : float
         :func:`~corrlib.descriptors.side_view.mirror_asymmetry` of the outline
         (0: its own mirror image, a view within the plane of symmetry).
+    intrinsic_asymmetry : float
+        :func:`~corrlib.descriptors.side_view.intrinsic_asymmetry` of the
+        outline's WKS (0: intrinsically symmetric, e.g. a posed person from
+        the front).
     """
 
     points: np.ndarray
@@ -372,12 +384,15 @@ class PreparedQuery:
     doubled_features: np.ndarray | None = None
     parts: np.ndarray | None = None
     asymmetry: float = 0.0
+    intrinsic_asymmetry: float = 0.0
 
     def is_side_view(self, params: "Contour3DParams") -> bool:
-        """Whether the side-view terms apply (``view``, or for ``auto`` the outline's mirror asymmetry)."""
+        """Whether the side-view terms apply: ``view``, or for ``auto`` an outline that is neither its own
+        mirror image nor intrinsically symmetric (see :mod:`corrlib.descriptors.side_view`)."""
         if params.symmetry_weight == 0.0 or params.view == "front":
             return False
-        return params.view == "side" or self.asymmetry > SIDE_VIEW_ASYMMETRY
+        return params.view == "side" or (self.asymmetry > SIDE_VIEW_ASYMMETRY
+                                         and self.intrinsic_asymmetry > SIDE_VIEW_INTRINSIC_ASYMMETRY)
 
     def model_features(self, model: str) -> np.ndarray:
         """(m, d) float: the contour's features under a shape model (see the module docstring)."""
@@ -451,8 +466,10 @@ def prepare_query(contour: Contour2D, params: Contour3DParams) -> PreparedQuery:
     parts = None
     if params.parts == "auto":
         parts = protrusion_parts(evals, evecs, filled.adjacency, params.area_ratio).labels[:m]
+    # the view is decided on the default WKS whatever the matching's features, so that its threshold holds
+    intrinsic = intrinsic_asymmetry(row_normalised_wks(evals, evecs)[:m])
     return PreparedQuery(canonical.points, feats[:m], resampled.labels, resampled, axes, doubled, parts,
-                         mirror_asymmetry(canonical.points))
+                         mirror_asymmetry(canonical.points), intrinsic)
 
 
 def _axes_at(axes: list[IntrinsicAxis], m: int) -> list[IntrinsicAxis]:
@@ -671,6 +688,7 @@ def match_prepared(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams,
     model, signs, near = readings[bb.graph_index]
     extras = {"axis_reversed": bool(signs[0]) if signs else False, "axis_signs": [bool(s) for s in signs],
               "model": model, "view": "side" if side is not None else "front", "asymmetry": query.asymmetry,
+              "intrinsic_asymmetry": query.intrinsic_asymmetry,
               "near_half": int(near)}
     yield Progress("done", 1.0, f"energy {bb.energy:.6g} after {bb.iterations} iterations")
     per_length = " per contour length matched to a moving curve" if params.energy.endswith("ratio") else ""

@@ -182,31 +182,39 @@ def _preload_plotting():
     return thread
 
 
-def _write_match_outputs(result, source, target, out: Path, *, quiet: bool = False) -> None:
-    """The result files of a match beside the stem ``out``, all or none of them."""
+def _write_match_outputs(result, source, target, out: Path, *, quiet: bool = False, pictures: bool = False) -> None:
+    """The result files of a match beside the stem ``out``, all or none of them (the pictures if asked)."""
     from corrlib.io import staged_output
 
     with staged_output(out.parent) as stage:
-        written = [out.parent / p.name for p in _stage_match_outputs(result, source, target, stage / out.name)]
+        written = [out.parent / p.name for p in _stage_match_outputs(result, source, target, stage / out.name,
+                                                                     pictures)]
     if not quiet:
         for path in written:
             print(f"wrote {path}")
 
 
-def _stage_match_outputs(result, source, target, out: Path) -> list[Path]:
+def _stage_match_outputs(result, source, target, out: Path, pictures: bool) -> list[Path]:
     from corrlib.io import save_map
 
     npz, js = result.save(out)
     written = [npz, js]
     if result.map_xy is not None:
         written.append(save_map(out.with_name(out.name + ".map_xy.txt"), result.map_xy))
+    if result.map_yx is not None:
+        written.append(save_map(out.with_name(out.name + ".map_yx.txt"), result.map_yx))
+    if pictures:
+        written += _stage_match_pictures(result, source, target, out)
+    return [Path(p) for p in written]
+
+
+def _stage_match_pictures(result, source, target, out: Path) -> list:
+    written = []
     if result.energy_trace is not None:
         from corrlib.plotting import save_energy_trace
 
         written.append(save_energy_trace(out.with_name(out.name + ".energy.png"), result.energy_trace,
                                          result.extras.get("tau_trace")))
-    if result.map_yx is not None:
-        written.append(save_map(out.with_name(out.name + ".map_yx.txt"), result.map_yx))
     from corrlib.shapes import Contour2D, TriMesh
 
     if result.map_yx is not None and isinstance(source, TriMesh) and isinstance(target, TriMesh):
@@ -218,7 +226,7 @@ def _stage_match_outputs(result, source, target, out: Path) -> list[Path]:
         from corrlib.plotting import save_torus_pictures
 
         written.append(save_torus_pictures(out.with_name(out.name + ".png"), result))
-    return [Path(p) for p in written]
+    return written
 
 
 def _check_output_stem(args) -> Path:
@@ -292,14 +300,15 @@ def cmd_match(args) -> int:
             raise CorrError(f"method {spec.name!r} does not take an initial map (--init)")
     if args.times:
         overrides["times"] = args.times
-    plotting = _preload_plotting()
+    plotting = _preload_plotting() if args.pictures else None
     result = solve(spec, source, target, callback=_progress_printer(args.quiet), initial=initial, **overrides)
-    plotting.join()
+    if plotting is not None:
+        plotting.join()
     print(f"method {result.method}: energy {result.energy}, {result.timings.get('total', 0):.2f} s")
     if result.energy_trace is not None:
         trace = result.energy_trace
         print(f"energy trace ({trace.size} assignments): " + ", ".join(f"{e:.5g}" for e in trace))
-    _write_match_outputs(result, source, target, Path(args.output), quiet=args.quiet)
+    _write_match_outputs(result, source, target, Path(args.output), quiet=args.quiet, pictures=args.pictures)
     return 0
 
 
@@ -313,12 +322,13 @@ def cmd_refine(args) -> int:
         raise CorrError(f"method {spec.name!r} does not refine a map (methods that do: "
                         f"{', '.join(m.name for m in _refining_methods())})")
     initial = _initial_match(args.init, source, target)
-    plotting = _preload_plotting()
+    plotting = _preload_plotting() if args.pictures else None
     result = solve(spec, source, target, callback=_progress_printer(args.quiet), initial=initial,
                    **_parse_overrides(args.param))
-    plotting.join()
+    if plotting is not None:
+        plotting.join()
     print(f"method {result.method}: {result.timings.get('total', 0):.2f} s")
-    _write_match_outputs(result, source, target, Path(args.output), quiet=args.quiet)
+    _write_match_outputs(result, source, target, Path(args.output), quiet=args.quiet, pictures=args.pictures)
     return 0
 
 
@@ -418,7 +428,7 @@ def cmd_morph(args) -> int:
     times = np.linspace(0.0, args.t_max, args.frames)
     frames = frame_positions(result, source, target, times)
     with staged_output(out) as stage:  # the result and every frame, or nothing
-        _stage_match_outputs(result, source, target, stage / "result")
+        _stage_match_outputs(result, source, target, stage / "result", pictures=True)
         written = export_sequence(stage, frames, source.faces, times, fmt=args.format, closed=source.is_closed)
     written["animation"] = written["animation"] and out / Path(written["animation"]).name
     kind = "divergence-free flow" if has_deformation(result) else "linear interpolation through the map"
@@ -452,7 +462,7 @@ def cmd_demo(args) -> int:
     for key, value in report.summary().items():
         print(f"  {key:>14}: {value:.4f}")
     out = Path(args.output) / "demo"
-    _write_match_outputs(result, source, target, out, quiet=args.quiet)
+    _write_match_outputs(result, source, target, out, quiet=args.quiet, pictures=True)
     return 0
 
 
@@ -626,6 +636,12 @@ def _add_eval_parser(sub) -> None:
     p.add_argument("--json", action="store_true")
 
 
+def _add_pictures_flag(p) -> None:
+    p.add_argument("--pictures", action="store_true",
+                   help="also write the pictures (colour transfer onto the target, the energy trace, the contours "
+                        "on their torus); they take about a second")
+
+
 def _add_match_parsers(sub) -> None:
     """``match``, ``match-contour`` and ``match-contours``."""
     p = _command(sub, "match", "match two shapes with a registered method", func=cmd_match)
@@ -637,6 +653,7 @@ def _add_match_parsers(sub) -> None:
                                   "per source vertex) | a landmarks file (source target per line), for methods "
                                   "that refine")
     p.add_argument("--times", help="comma-separated diffusion times relative to the area (kernel matching)")
+    _add_pictures_flag(p)
     _add_output(p, "result")
 
     p = _command(sub, "match-contour", "match a closed 2D contour to a mesh (2D-to-3D)",
@@ -728,6 +745,7 @@ def _add_refine_parser(sub) -> None:
                    help="map file (one target index per source vertex) or landmarks (two columns: source target)")
     p.add_argument("--method", default="product-manifold", help="a refining method (default product-manifold)")
     p.add_argument("--param", action="append", metavar="NAME=VALUE", help="method parameter (repeatable)")
+    _add_pictures_flag(p)
     _add_output(p, "refined")
 
 

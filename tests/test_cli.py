@@ -64,7 +64,12 @@ def test_match_writes_outputs(tmp_path, capsys):
     assert main(["match", str(TOSCA / "wolf0.off"), str(TOSCA / "wolf1.off"), "--method", "descriptor-nn",
                  "-o", str(out), "-q"]) == 0
     mp = np.loadtxt(tmp_path / "res.map_xy.txt", dtype=int)
-    assert mp.shape == (4344,) and (tmp_path / "res.png").exists() and (tmp_path / "res.json").exists()
+    assert mp.shape == (4344,) and (tmp_path / "res.json").exists() and (tmp_path / "res.map_yx.txt").exists()
+    assert not list(tmp_path.glob("*.png"))  # pictures only when asked
+    assert main(["match", str(TOSCA / "wolf0.off"), str(TOSCA / "wolf1.off"), "--method", "descriptor-nn",
+                 "--pictures", "-o", str(tmp_path / "pic"), "-q"]) == 0
+    assert (tmp_path / "pic.png").stat().st_size > 10_000
+    assert np.array_equal(np.loadtxt(tmp_path / "pic.map_xy.txt", dtype=int), mp)
 
 
 def test_methods_listing(capsys):
@@ -135,7 +140,7 @@ def test_match_kernel_with_init_file(tmp_path, capsys):
     out = tmp_path / "km"
     args = ["match", str(TOSCA / "wolf0.off"), str(TOSCA / "wolf1.off"), "--method", "kernel-matching",
             "--init", str(tmp_path / "init.txt"), "--param", "n_eigs=100", "--param", "n_seeds=600",
-            "--times", "0.01,0.003,0.001", "-o", str(out), "-q"]
+            "--times", "0.01,0.003,0.001", "--pictures", "-o", str(out), "-q"]
     assert main(args) == 0
     text = capsys.readouterr().out
     assert "energy trace" in text

@@ -132,7 +132,10 @@ class RetrievalView(QWidget):
 
     def set_query(self, contour) -> None:
         self.query = contour
-        self.query_label.setText(f"query: {contour.name} ({contour.n_points} points)")
+        from corrlib.retrieval import RETRIEVAL_N_CONTOUR
+
+        self.query_label.setText(f"query: {contour.name} ({contour.n_points} points, matched at "
+                                 f"{RETRIEVAL_N_CONTOUR})")
 
     def set_folder(self, folder: str) -> None:
         self.folder = folder

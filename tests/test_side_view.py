@@ -183,3 +183,20 @@ def test_orientation_of_a_mirrored_mesh_is_the_mirror_image(sphere):
     a = edge_orientation(v, sphere.faces, sphere.adjacency, g)
     b = edge_orientation(mirrored, faces_reversed, sp.csr_matrix(sphere.adjacency), g)
     assert abs(a + b).max() < 1e-10
+
+
+def test_the_view_does_not_depend_on_the_matching_settings_or_the_pose_of_the_outline():
+    """The intrinsic asymmetry is measured on the input outline at one resolution: the same for every
+    n_contour, k, features and fill density, and (up to the resampling's start point) for a moved, scaled,
+    reversed copy."""
+    from corrlib.methods.contour3d import Contour3DParams, prepare_query
+    from corrlib.shapes import Contour2D
+
+    outline = Contour2D(asymmetric_blob(), validate=False, name="L")
+    values = {prepare_query(outline, Contour3DParams(n_contour=n, k=k, features=f, fill_density=d)).intrinsic_asymmetry
+              for n, k, f, d in ((40, 25, "wks", 1.0), (200, 25, "wks", 1.0), (120, 40, "paper", 2.0))}
+    assert len(values) == 1
+    rotation = np.array([[0.6, -0.8], [0.8, 0.6]])
+    moved = Contour2D(3.7 * asymmetric_blob()[::-1] @ rotation.T + 5.0, validate=False, name="moved L")
+    assert prepare_query(moved, Contour3DParams(n_contour=40)).intrinsic_asymmetry == pytest.approx(values.pop(),
+                                                                                                   abs=0.02)

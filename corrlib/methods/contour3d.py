@@ -179,9 +179,12 @@ HALF_EIGENPAIRS_PER_K = 3
 #: sections 0.032–0.12; see docs/decisions.md)
 SIDE_VIEW_ASYMMETRY = 0.03
 #: ``view="auto"``: and farther than this from an intrinsic mirror symmetry (the best reflection of the outline
-#: pairs points whose WKS differ by more than a third of what two random points' do; measured: views within the
-#: plane of symmetry 0.04–0.28, posed ones included, side views and sections through that plane 0.41–0.81)
+#: pairs points whose WKS differ by more than a third of what two random points' do; measured on the outlines
+#: that are not their own mirror images: posed people from the front 0.13–0.17, side views and sections through
+#: the plane of symmetry 0.42–0.81; see docs/decisions.md)
 SIDE_VIEW_INTRINSIC_ASYMMETRY = 1 / 3
+#: boundary points and eigenpairs at which the intrinsic asymmetry of an outline is measured
+VIEW_POINTS, VIEW_K = 200, 25
 #: the energies on the first-order product graph (the only ones that take directed edge costs)
 FIRST_ORDER_ENERGIES = ("paper", "ratio")
 
@@ -466,10 +469,25 @@ def prepare_query(contour: Contour2D, params: Contour3DParams) -> PreparedQuery:
     parts = None
     if params.parts == "auto":
         parts = protrusion_parts(evals, evecs, filled.adjacency, params.area_ratio).labels[:m]
-    # the view is decided on the default WKS whatever the matching's features, so that its threshold holds
-    intrinsic = intrinsic_asymmetry(row_normalised_wks(evals, evecs)[:m])
+    intrinsic = outline_intrinsic_asymmetry(contour.ccw())  # the input outline, whatever the matching's settings
     return PreparedQuery(canonical.points, feats[:m], resampled.labels, resampled, axes, doubled, parts,
                          mirror_asymmetry(canonical.points), intrinsic)
+
+
+def outline_intrinsic_asymmetry(contour: Contour2D) -> float:
+    """:func:`~corrlib.descriptors.side_view.intrinsic_asymmetry` of a closed outline, from the default WKS
+    of its filled interior at :data:`VIEW_POINTS` boundary points and :data:`VIEW_K` eigenpairs.
+
+    The view is a property of the outline, so it is measured at one resolution with one descriptor whatever
+    the matching's ``n_contour``, ``k``, ``features`` and ``fill_density`` (coarser outlines have a higher
+    floor: a symmetric outline reads 0.05 at 200 points and up to 0.2 at 100). The WKS and the eigenfunctions'
+    shapes do not depend on the outline's position, orientation or scale.
+    """
+    outline = contour.resample(VIEW_POINTS)
+    filled = fill_contour(outline)
+    stiffness, mass = mesh_laplacian(filled)
+    evals, evecs = eigenpairs(stiffness, mass, VIEW_K, name=contour.name)
+    return intrinsic_asymmetry(row_normalised_wks(evals, evecs)[:VIEW_POINTS])
 
 
 def _axes_at(axes: list[IntrinsicAxis], m: int) -> list[IntrinsicAxis]:

@@ -669,7 +669,7 @@ def _add_match_parsers(sub) -> None:
     _add_output(p, "contour_match")
 
     p = _command(sub, "match-contours", "match two closed contours on their product torus",
-                 func=cmd_match, method="contour2d", init=None, times=None)
+                 func=cmd_match, method="contour2d", init=None, times=None, pictures=True)
     p.add_argument("source")
     p.add_argument("target")
     p.add_argument("--param", action="append", metavar="NAME=VALUE", help="method parameter (repeatable)")

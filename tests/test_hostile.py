@@ -94,7 +94,8 @@ def _limit_file_size(kilobytes):
 def test_full_disk_leaves_no_partial_result_set(tmp_path, kilobytes):
     """``ulimit -f``: the first file (20 kB) or the picture after the maps (75 kB) cannot be written."""
     out = tmp_path / "out"
-    done = subprocess.run([sys.executable, "-m", "corrlib.cli", "match", WOLF0, WOLF1, *FAST, "-o", out / "res"],
+    done = subprocess.run([sys.executable, "-m", "corrlib.cli", "match", WOLF0, WOLF1, *FAST, "--pictures",
+                           "-o", out / "res"],
                           capture_output=True, text=True, timeout=300, preexec_fn=_limit_file_size(kilobytes),
                           env={**os.environ, "MPLBACKEND": "Agg"})
     assert done.returncode == 2, done.stderr

@@ -92,6 +92,11 @@ class JobPanel(QWidget):
         self.log = QPlainTextEdit()
         self.log.setReadOnly(True)
         self.log.setMaximumBlockCount(LOG_MAX_LINES)
+        # the log follows its last line unless the reader scrolled up, also when a dock resize grows its range
+        self._follow_log = True
+        bar = self.log.verticalScrollBar()
+        bar.valueChanged.connect(lambda value: setattr(self, "_follow_log", value >= bar.maximum() - 2))
+        bar.rangeChanged.connect(lambda low, high: bar.setValue(high) if self._follow_log else None)
         layout = QVBoxLayout(self)
         for w in (self.bar, self.stage, self.elapsed, self.cancel):
             layout.addWidget(w)
@@ -782,6 +787,7 @@ class MainWindow(QMainWindow):
             path = result.path
             self.product_view.show_contour_match(path.contour_points, self.target, path.vertices,
                                                  path.contour_index, result.energy)
+            self.job_panel.write(contour_reading(result))
         else:
             self.tabs.setCurrentWidget(self.pair_view)
             self.pair_view.set_result(result, None if outcome.errors is None else outcome.errors.per_vertex,
@@ -1037,3 +1043,15 @@ class MainWindow(QMainWindow):
             view.close_plotters()
         self._collector.release(self)
         super().closeEvent(event)
+
+
+def contour_reading(result) -> str:
+    """One log line on how a 2D-to-3D match read its query: the energy's meaning and, for ``contour3d``, the
+    view it took with the two measures that decided it (so that a wrong view can be forced)."""
+    line = f"{result.method}: {result.energy_meaning or 'energy'} {result.energy:.6g}"
+    extras = result.extras or {}
+    if "view" in extras:
+        line += (f"; read as a {extras['view']} view (mirror asymmetry {extras.get('asymmetry', float('nan')):.3f}, "
+                 f"intrinsic asymmetry {extras.get('intrinsic_asymmetry', float('nan')):.3f}; the parameter "
+                 f"view=side or view=front forces one)")
+    return line

@@ -83,6 +83,15 @@ def test_contour_to_mesh_draws_the_curve(qtbot, window):
     curve = window.product_view.curve
     assert curve is not None and curve.n_points == len(result.path.vertices)
     assert window.tabs.currentWidget() is window.product_view
+    # the job log says how the query was read (a dog from the side: a side view) and how to force the other view
+    log = window.job_panel.log.toPlainText()
+    assert f"read as a {result.extras['view']} view" in log and "view=side or view=front" in log
+    assert result.extras["view"] == "side" and f"{result.extras['intrinsic_asymmetry']:.3f}" in log
+    bar = window.job_panel.log.verticalScrollBar()
+    assert bar.value() == bar.maximum()  # the log shows its last line
+    bar.setValue(0)  # a reader who scrolled up is not moved by new lines
+    window.job_panel.write("one more line")
+    assert bar.value() == 0
 
 
 def test_sketch_becomes_a_query(qtbot, window):

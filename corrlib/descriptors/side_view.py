@@ -44,6 +44,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 from scipy.spatial import cKDTree
+from scipy.spatial.distance import cdist
 
 from corrlib.descriptors.orientation import face_gradients
 from corrlib.errors import InputError
@@ -109,7 +110,11 @@ def intrinsic_asymmetry(features: np.ndarray) -> float:
     The denominator (two points chosen at random) makes it unit-free: 0 for a
     perfect symmetry, about 1 when the best reflection pairs points no better
     than chance. With intrinsic features (spectral descriptors of the filled
-    outline) it does not change under bendings of the outline's parts.
+    outline) it does not change under bendings of the outline's parts. It is
+    ill-conditioned on round outlines, whose points all look alike (a regular
+    decagon reads 0.65: the denominator is tiny); those are their own mirror
+    images, which :func:`mirror_asymmetry` sees, and a view is a side view
+    only if both measures say so.
 
     Parameters
     ----------
@@ -126,19 +131,13 @@ def intrinsic_asymmetry(features: np.ndarray) -> float:
         raise InputError(f"intrinsic_asymmetry needs (m, d) finite features of m >= 3 points, got shape "
                          f"{features.shape}")
     m = features.shape[0]
-    pairwise = np.abs(features[:, None, :] - features[None, :, :]).sum(axis=2) if m <= 400 else \
-        _pairwise_l1(features)
+    pairwise = cdist(features, features, "cityblock")
     scale = pairwise.mean()
     if scale <= 0.0:
         return 0.0  # every point alike: any reflection keeps the features
     points = np.arange(m)
     images = (points[:, None] - points[None, :]) % m  # [s, i] -> the image of point i under the reflection s
     return float(pairwise[points[None, :], images].mean(axis=1).min() / scale)
-
-
-def _pairwise_l1(features: np.ndarray) -> np.ndarray:
-    """(m, m) L1 distances, row by row (for long outlines, without an (m, m, d) array)."""
-    return np.stack([np.abs(features - row).sum(axis=1) for row in features])
 
 
 def paired_limbs(labels: np.ndarray, mirror: np.ndarray) -> np.ndarray:

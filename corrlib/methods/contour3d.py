@@ -180,7 +180,7 @@ HALF_EIGENPAIRS_PER_K = 3
 SIDE_VIEW_ASYMMETRY = 0.03
 #: ``view="auto"``: and farther than this from an intrinsic mirror symmetry (the best reflection of the outline
 #: pairs points whose WKS differ by more than a third of what two random points' do; measured on the outlines
-#: that are not their own mirror images: posed people from the front 0.13–0.17, side views and sections through
+#: that are not their own mirror images: posed people from the front 0.12–0.17, side views and sections through
 #: the plane of symmetry 0.42–0.81; see docs/decisions.md)
 SIDE_VIEW_INTRINSIC_ASYMMETRY = 1 / 3
 #: boundary points and eigenpairs at which the intrinsic asymmetry of an outline is measured
@@ -440,16 +440,7 @@ def prepare_query(contour: Contour2D, params: Contour3DParams) -> PreparedQuery:
         raise InputError(f"the query must be a Contour2D, got {type(contour).__name__}")
     if contour.n_points < 10:
         raise ContourError(f"{contour.name}: the contour has {contour.n_points} points; at least 10 are needed")
-    resampled = contour.ccw().resample(params.n_contour)
-    # canonical pose and scale (centred, principal axes, area `area_ratio`): the triangulation, hence the
-    # features, then do not depend on the input's position, orientation or units
-    pts = resampled.points - resampled.points.mean(axis=0)
-    pts = pts * np.sqrt(params.area_ratio / resampled.area)
-    _, _, vt = np.linalg.svd(pts, full_matrices=False)
-    rotated = pts @ vt.T
-    # fix the axis signs by third moments (a reflection keeps every length and the intrinsic geometry)
-    rotated *= np.where(np.sum(rotated ** 3, axis=0) < 0, -1.0, 1.0)
-    canonical = Contour2D(rotated, name=contour.name, validate=False, labels=resampled.labels)
+    resampled, canonical = canonical_outline(contour, params.n_contour, params.area_ratio)
     filled = fill_contour(canonical, density=params.fill_density)
     stiffness, mass = mesh_laplacian(filled)
     if filled.n_vertices <= params.k:
@@ -469,21 +460,39 @@ def prepare_query(contour: Contour2D, params: Contour3DParams) -> PreparedQuery:
     parts = None
     if params.parts == "auto":
         parts = protrusion_parts(evals, evecs, filled.adjacency, params.area_ratio).labels[:m]
-    intrinsic = outline_intrinsic_asymmetry(contour.ccw())  # the input outline, whatever the matching's settings
+    if (m, params.k, params.fill_density) == (VIEW_POINTS, VIEW_K, 1.0):  # the view's own setting: reuse
+        intrinsic = intrinsic_asymmetry(row_normalised_wks(evals, evecs)[:m])
+    else:
+        intrinsic = outline_intrinsic_asymmetry(contour, params.area_ratio)
     return PreparedQuery(canonical.points, feats[:m], resampled.labels, resampled, axes, doubled, parts,
                          mirror_asymmetry(canonical.points), intrinsic)
 
 
-def outline_intrinsic_asymmetry(contour: Contour2D) -> float:
+def canonical_outline(contour: Contour2D, n_points: int, area_ratio: float) -> tuple[Contour2D, Contour2D]:
+    """The contour counter-clockwise, resampled by arc length to ``n_points``, and the same in canonical pose
+    and scale (centred, principal axes, enclosing ``area_ratio``; axis signs fixed by third moments, a
+    reflection that keeps every length and the intrinsic geometry): the triangulation of the canonical
+    outline, hence its features, do not depend on the input's position, orientation or units."""
+    resampled = contour.ccw().resample(n_points)
+    pts = resampled.points - resampled.points.mean(axis=0)
+    pts = pts * np.sqrt(area_ratio / resampled.area)
+    _, _, vt = np.linalg.svd(pts, full_matrices=False)
+    rotated = pts @ vt.T
+    rotated *= np.where(np.sum(rotated ** 3, axis=0) < 0, -1.0, 1.0)
+    return resampled, Contour2D(rotated, name=contour.name, validate=False, labels=resampled.labels)
+
+
+def outline_intrinsic_asymmetry(contour: Contour2D, area_ratio: float = 0.5) -> float:
     """:func:`~corrlib.descriptors.side_view.intrinsic_asymmetry` of a closed outline, from the default WKS
     of its filled interior at :data:`VIEW_POINTS` boundary points and :data:`VIEW_K` eigenpairs.
 
     The view is a property of the outline, so it is measured at one resolution with one descriptor whatever
     the matching's ``n_contour``, ``k``, ``features`` and ``fill_density`` (coarser outlines have a higher
-    floor: a symmetric outline reads 0.05 at 200 points and up to 0.2 at 100). The WKS and the eigenfunctions'
-    shapes do not depend on the outline's position, orientation or scale.
+    floor: a symmetric outline reads 0.05 at 200 points and up to 0.2 at 100), on the canonical outline
+    (:func:`canonical_outline`), so that its triangulation does not depend on the input's pose or units.
+    :func:`prepare_query` at those settings computes the same eigenpairs and reuses them.
     """
-    outline = contour.resample(VIEW_POINTS)
+    _, outline = canonical_outline(contour, VIEW_POINTS, area_ratio)
     filled = fill_contour(outline)
     stiffness, mass = mesh_laplacian(filled)
     evals, evecs = eigenpairs(stiffness, mass, VIEW_K, name=contour.name)

@@ -7,6 +7,7 @@ import scipy.linalg as sl
 
 from corrlib.errors import InputError, ParameterError
 from corrlib.geometry import product as pm
+from _data import TOSCA
 
 
 def ellipse(n, a=1.0, b=1.0, jitter=0.0, seed=0):
@@ -276,11 +277,66 @@ def test_contours_of_very_different_sizes_and_samplings(warped_silhouette):
     assert steps.sum() == 300  # winds once around B
 
 
+def test_the_kernel_width_is_where_a_diffused_match_falls_to_one_over_e():
+    """A match diffused on the product of two circles: along the target its density is the heat kernel
+    ``exp(-d² / 4t)`` (the circle's length 10, far above the width), 1/e of its peak at :func:`kernel_width`."""
+    from corrlib.methods.product_manifold import kernel_width
+
+    n = 400
+    circle = ellipse(n, 10 / (2 * np.pi), 10 / (2 * np.pi))
+    fx = fy = pm.curve_factor(circle, 201)
+    t = 6.25e-4  # relative to the squared length: a width of 0.05 of the circle
+    width = kernel_width(t, fy)
+    assert np.isclose(width, 0.5, rtol=1e-4)  # the inscribed polygon is a little shorter than the circle
+    density = pm.density_values(pm.diffuse(np.outer(fx.evecs[0], fy.evecs[0]), fx, fy, t), fx, fy, rows=[0])[0]
+    arc = np.linspace(0, 10, n, endpoint=False)
+    at_width = np.interp(width, arc, density)
+    assert np.isclose(at_width / density[0], np.exp(-1), rtol=0.01)
+    assert np.isclose(np.interp(2 * width, arc, density) / density[0], np.exp(-4), rtol=0.03)
+
+
+def test_matches_moved_by_less_than_the_kernel_width_keep_their_partner():
+    """Rows whose refined partner lies within the width of their single input partner get it back; rows
+    moved farther, rows with several input matches and rows without any keep the refined partner."""
+    from corrlib.methods.product_manifold import keep_resolved_matches
+
+    target = np.column_stack([np.arange(10.0), np.zeros(10)])
+    refined = np.array([0, 5, 9, 3, 4])
+    ix = np.array([0, 1, 2, 3, 3])  # row 3 has two input matches, row 4 none
+    iy = np.array([1, 1, 8, 0, 9])
+    kept = keep_resolved_matches(refined, ix, iy, target, width=1.5)
+    assert refined.tolist() == [1, 5, 8, 3, 4]
+    assert kept.tolist() == [True, False, True, False, False]
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("source, target", [("cat1", "cat0"), ("wolf0", "wolf1"), ("wolf1", "wolf0")])
+def test_refinement_lowers_the_error_of_the_baselines_maps(source, target):
+    """The functional-maps baseline's map and the descriptors' nearest neighbours, refined on the product
+    (the global stage): the mean error must go down. Measured (docs/decisions.md): cat1 -> cat0 from the
+    functional map 0.0321 -> 0.0315 (0.0336 before matches moved within the kernel width kept their
+    partner), the wolves 0.0018-0.0020 -> 0.0015-0.0017, from the nearest neighbours 0.21 -> 0.19 and
+    0.09 -> 0.014-0.017."""
+    from corrlib.evaluation import geodesic_errors
+    from corrlib.io import load_mesh
+    from corrlib.methods import solve
+    from corrlib.methods.base import InitialMatch
+
+    x, y = load_mesh(TOSCA / f"{source}.off"), load_mesh(TOSCA / f"{target}.off")
+    gx, gy = (np.loadtxt(TOSCA / f"{name}.vts", dtype=int) - 1 for name in (source, target))
+    for init in ("fmap-zoomout", "descriptor-nn"):
+        before = solve(init, x, y).map_xy
+        after = solve("product-manifold", x, y, initial=InitialMatch(map_xy=before)).map_xy
+        error_before, error_after = (geodesic_errors(m, y, gx, gy).summary()["mean"] for m in (before, after))
+        assert error_after < error_before, (init, error_before, error_after)
+
+
 def test_refinement_of_a_corrupted_dense_map_on_independently_remeshed_cats(cat_pair):
     """A dense ground-truth map with 30 % of its rows replaced by random vertices, refined between the
     independently remeshed TOSCA cats. The map is extracted with area capacities; a bijection between
     meshes of different vertex density has to slide vertices (measured: the ground truth projected onto the
-    nearest bijection has 68 % within 0.05). Measured: 0.150 -> 0.013 mean."""
+    nearest bijection has 68 % within 0.05). Measured: 0.145 -> 0.007 mean (0.013 before the matches that
+    the diffusion moves by less than its kernel's width kept their partner)."""
     from scipy.spatial import cKDTree
 
     from corrlib.evaluation import geodesic_errors
@@ -301,4 +357,4 @@ def test_refinement_of_a_corrupted_dense_map_on_independently_remeshed_cats(cat_
     before = geodesic_errors(corrupted, cat0, gx, gy).summary()["mean"]
     result = solve("product-manifold", cat1, cat0, initial=InitialMatch(map_xy=corrupted))
     after = geodesic_errors(result.map_xy, cat0, gx, gy).summary()
-    assert before > 0.1 and after["mean"] < 0.025 and after["within_0.05"] > 0.9, (before, after)
+    assert before > 0.1 and after["mean"] < 0.011 and after["within_0.05"] > 0.95, (before, after)

@@ -280,13 +280,13 @@ def test_contours_of_very_different_sizes_and_samplings(warped_silhouette):
 def test_the_kernel_width_is_where_a_diffused_match_falls_to_one_over_e():
     """A match diffused on the product of two circles: along the target its density is the heat kernel
     ``exp(-d² / 4t)`` (the circle's length 10, far above the width), 1/e of its peak at :func:`kernel_width`."""
-    from corrlib.methods.product_manifold import kernel_width
+    from corrlib.methods.resolution import kernel_width
 
     n = 400
     circle = ellipse(n, 10 / (2 * np.pi), 10 / (2 * np.pi))
     fx = fy = pm.curve_factor(circle, 201)
     t = 6.25e-4  # relative to the squared length: a width of 0.05 of the circle
-    width = kernel_width(t, fy)
+    width = kernel_width(t, fy.unit)
     assert np.isclose(width, 0.5, rtol=1e-4)  # the inscribed polygon is a little shorter than the circle
     density = pm.density_values(pm.diffuse(np.outer(fx.evecs[0], fy.evecs[0]), fx, fy, t), fx, fy, rows=[0])[0]
     arc = np.linspace(0, 10, n, endpoint=False)
@@ -298,7 +298,7 @@ def test_the_kernel_width_is_where_a_diffused_match_falls_to_one_over_e():
 def test_matches_moved_by_less_than_the_kernel_width_keep_their_partner():
     """Rows whose refined partner lies within the width of their single input partner get it back; rows
     moved farther, rows with several input matches and rows without any keep the refined partner."""
-    from corrlib.methods.product_manifold import keep_resolved_matches
+    from corrlib.methods.resolution import keep_resolved_matches
 
     target = np.column_stack([np.arange(10.0), np.zeros(10)])
     refined = np.array([0, 5, 9, 3, 4])
@@ -307,6 +307,9 @@ def test_matches_moved_by_less_than_the_kernel_width_keep_their_partner():
     kept = keep_resolved_matches(refined, ix, iy, target, width=1.5)
     assert refined.tolist() == [1, 5, 8, 3, 4]
     assert kept.tolist() == [True, False, True, False, False]
+    unmatched = np.array([-1, 5])  # a row the refinement left unmatched (slack) stays unmatched
+    assert keep_resolved_matches(unmatched, np.array([0, 1]), np.array([0, 5]), target, 1.5).tolist() == [False, True]
+    assert unmatched.tolist() == [-1, 5]
 
 
 @pytest.mark.slow

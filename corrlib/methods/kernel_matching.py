@@ -27,7 +27,10 @@ The stages, each a function below sharing one :class:`KernelState`:
    :func:`dc_step` (objective :func:`dc_objective`, score :func:`seed_score`);
    run over the decreasing time schedule (coarse, global alignment first).
 6. :func:`multiscale_refinement` — finer vertex samples solved in Voronoi
-   cells (§8.3.2).
+   cells (§8.3.2). When a dense map is refined (``initial``, or
+   ``init="fmap"``), rows moved by less than the smallest kernel's width keep
+   their input partner (:mod:`.resolution`: the kernel cannot tell such
+   partners apart).
 7. :func:`kernel_result` — final energy, optional pointwise smoothing, result.
 
 Design choices, in brief (the measurements behind them are in
@@ -99,6 +102,7 @@ from corrlib.geometry.sampling import (
 from corrlib.geometry.spectrum import Spectrum, mesh_spectrum
 from corrlib.methods.base import InitialMatch, MatchResult, param
 from corrlib.methods.registry import MethodSpec, register
+from corrlib.methods.resolution import keep_resolved_matches, kernel_width
 from corrlib.progress import Progress, Stopwatch, scaled_progress
 
 #: threads solving the cells of a refinement pass: the auction releases the GIL, so cells can overlap; two,
@@ -591,6 +595,7 @@ class KernelState:
     anchors_x: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     anchors_y: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     landmarks_only: bool = False
+    refined_map: tuple | None = None  # the dense map being refined, as (source, target) vertex pairs
     desc_x: np.ndarray | None = None  # standardised plain descriptors, once computed
     desc_y: np.ndarray | None = None
     confidence: np.ndarray | None = None  # (n_seed,) similarity of every initial descriptor match
@@ -692,6 +697,8 @@ def initial_seed_map(state: KernelState, initial: InitialMatch | None):
         if state.landmarks_only:
             state.anchors_x, state.anchors_y = ix, iy
         yield Progress("initial map", PROGRESS_DC[0], f"{ix.size} given matches")
+        if not state.landmarks_only:
+            state.refined_map = (ix, iy)
         partner_of = -np.ones(state.n_x, dtype=np.int64)
         partner_of[ix] = iy
         partner = partner_of[ix[_nearest_point(source.vertices[ix], state.seeds_x.points)]]
@@ -703,6 +710,7 @@ def initial_seed_map(state: KernelState, initial: InitialMatch | None):
         yield Progress("initial map", PROGRESS_INIT, "functional maps + ZoomOut")
         with state.watch("init"):
             fm = run(solve_fmap_zoomout(source, target, FmapZoomOutParams(), state.token))
+        state.refined_map = (np.arange(state.n_x), fm.map_xy)
         partner = fm.map_xy[state.seeds_x.nearest_corners(source)]
         state.seed_map = _nearest_point(state.seeds_y.points, target.vertices[partner])
     else:
@@ -956,7 +964,8 @@ def kernel_matching(source, target, params: KernelMatchingParams, token, initial
     """Solver generator (thesis ch. 8, see the module docstring); returns a :class:`MatchResult`.
 
     Prepare the spectra and seeds, assign the seeds initially, run the DC iterations of the first time from
-    one or two starts and keep the better, continue over the decreasing times, refine on finer scales.
+    one or two starts and keep the better, continue over the decreasing times, refine on finer scales; a
+    refined dense map keeps its partners within the smallest kernel's width (``extras["kept_matches"]``).
     """
     state = yield from prepare(source, target, params, token)
     yield from initial_seed_map(state, initial)
@@ -967,7 +976,14 @@ def kernel_matching(source, target, params: KernelMatchingParams, token, initial
         state.seed_map = run.seed_map
         state.trace.extend(run.entries)
     full_map_xy, full_map_yx = yield from multiscale_refinement(state)
-    return (yield from kernel_result(state, full_map_xy, full_map_yx))
+    kept = None
+    if state.refined_map is not None:  # below the smallest kernel's width the input map's partners stand
+        width = kernel_width(state.taus[-1], target.area)
+        kept = keep_resolved_matches(full_map_xy, *state.refined_map, target.vertices, width)
+    result = yield from kernel_result(state, full_map_xy, full_map_yx)
+    if kept is not None:
+        result.extras["kept_matches"] = kept
+    return result
 
 
 def orientation_agreement(source, target, map_xy: np.ndarray, spec_x: Spectrum, spec_y: Spectrum) -> float:

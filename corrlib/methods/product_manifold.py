@@ -17,7 +17,7 @@ baseline's map is refined). Output: a dense map.
    The density resolves a partner only to within the heat kernel's width
    ``2 √t``: a row whose extracted partner lies closer than that to its
    (single) input partner gets the input partner back
-   (:func:`keep_resolved_matches`), so the stage corrects the matches that
+   (:mod:`.resolution`), so the stage corrects the matches that
    disagree with their neighbours' and leaves the detail below its
    resolution to the input.
 2. Local stages: for every band fraction of ``bands`` (decreasing), the band
@@ -51,6 +51,7 @@ import numpy as np
 from corrlib.errors import InputError, ParameterError
 from corrlib.geometry import product as pm
 from corrlib.methods.base import MatchResult, param
+from corrlib.methods.resolution import keep_resolved_matches, kernel_width
 from corrlib.methods.registry import MethodSpec, register
 from corrlib.progress import Progress, Stopwatch
 
@@ -119,49 +120,6 @@ def _extract(coeffs, fx: pm.Factor, fy: pm.Factor, how: str, token=None) -> tupl
     return pm.ml_map(coeffs, fx, fy), pm.ml_map(coeffs.T, fy, fx)
 
 
-def kernel_width(t: float, factor: pm.Factor) -> float:
-    """Length at which the heat kernel of relative time ``t`` falls to ``1/e`` on a factor:
-    ``k_t(d) ∝ exp(-d² / 4t)`` in the factor's own units, so ``2 √(t · unit)``."""
-    return 2.0 * np.sqrt(t * factor.unit)
-
-
-def keep_resolved_matches(map_xy: np.ndarray, ix: np.ndarray, iy: np.ndarray, target_points: np.ndarray,
-                          width: float) -> np.ndarray:
-    """Give back their input partner to the rows that the diffusion moved by less than its kernel's width.
-
-    The diffused density resolves a partner only to within the width of the heat kernel: a partner moved by
-    less than that is a different choice among partners the density cannot tell apart (the extraction's
-    capacities spread rows of a many-to-one input over their neighbours), while a match that disagrees with its
-    neighbours' matches by more than that is an outlier the diffusion corrects. Rows with one input match only;
-    distances are Euclidean on the target (a lower bound of the geodesic one, so a partner across a narrow gap
-    may be kept).
-
-    Parameters
-    ----------
-    map_xy : (n_X,) int
-        The extracted map; changed in place.
-    ix, iy : (s,) int
-        The input matches.
-    target_points : (n_Y, d) float
-    width : float
-        :func:`kernel_width`, in the units of ``target_points``.
-
-    Returns
-    -------
-    (n_X,) bool
-        The rows that kept their input partner.
-    """
-    counts = np.bincount(ix, minlength=map_xy.size)
-    single = counts[ix] == 1
-    rows, partners = ix[single], iy[single]
-    moved_by = np.linalg.norm(target_points[map_xy[rows]] - target_points[partners], axis=1)
-    close = moved_by < width
-    map_xy[rows[close]] = partners[close]
-    kept = np.zeros(map_xy.size, dtype=bool)
-    kept[rows[close]] = True
-    return kept
-
-
 def refine(fx: pm.Factor, fy: pm.Factor, ix, iy, target_points: np.ndarray, params: ProductManifoldParams,
            token=None, watch: Stopwatch | None = None):
     """Dense map from matches on two factors (generator; returns ``(map_xy, map_yx, extras)``)."""
@@ -174,7 +132,7 @@ def refine(fx: pm.Factor, fy: pm.Factor, ix, iy, target_points: np.ndarray, para
     with watch("global"):
         coeffs = pm.diffuse(_match_density_coeffs(ix, iy, fx, fy), fx, fy, params.t_global)
         map_xy, map_yx = _extract(coeffs, fx, fy, params.extraction, token)
-        kept = keep_resolved_matches(map_xy, ix, iy, target_points, kernel_width(params.t_global, fy))
+        kept = keep_resolved_matches(map_xy, ix, iy, target_points, kernel_width(params.t_global, fy.unit))
     global_map_xy = map_xy.copy()
     band_sizes = []
     match_keys = ix * fy.n + iy

@@ -328,6 +328,10 @@ def cmd_refine(args) -> int:
     if plotting is not None:
         plotting.join()
     print(f"method {result.method}: {result.timings.get('total', 0):.2f} s")
+    kept = result.extras.get("kept_matches")
+    if kept is not None and not args.quiet:
+        print(f"{int(kept.sum())} of {kept.size} rows kept their input partner (the refinement moved them by less "
+              f"than its kernel's width); the others were corrected")
     _write_match_outputs(result, source, target, Path(args.output), quiet=args.quiet, pictures=args.pictures)
     return 0
 

@@ -175,7 +175,7 @@ def test_refinement_of_sparse_noisy_matches_on_the_wolf(wolf_pair):
         solve("product-manifold", wolf0, wolf1, initial=InitialMatch(landmarks_x=[], landmarks_y=[]))
 
 
-def test_cli_refine(tmp_path):
+def test_cli_refine(tmp_path, capsys):
     from _data import TOSCA
     from corrlib.cli import main
     from corrlib.io import load_map
@@ -190,6 +190,19 @@ def test_cli_refine(tmp_path):
     assert load_map(tmp_path / "refined.map_xy.txt").shape == (4344,)
     assert main(["refine", str(TOSCA / "wolf0.off"), str(TOSCA / "wolf1.off"), "--init",
                  str(tmp_path / "missing.txt"), "-o", str(out), "-q"]) == 2
+    # a dense map with 30 % of its rows random: the right rows stand, the random ones are corrected
+    rng = np.random.default_rng(1)
+    noisy = np.arange(4344)
+    bad = rng.random(4344) < 0.3
+    noisy[bad] = rng.integers(0, 4344, bad.sum())
+    np.savetxt(tmp_path / "noisy.txt", noisy, fmt="%d")
+    capsys.readouterr()
+    assert main(["refine", str(TOSCA / "wolf0.off"), str(TOSCA / "wolf1.off"), "--init", str(tmp_path / "noisy.txt"),
+                 "-o", str(tmp_path / "dense")]) == 0
+    line = next(ln for ln in capsys.readouterr().out.splitlines() if "kept their input partner" in ln)
+    kept = int(line.split()[0])
+    assert 0.6 * 4344 < kept < 0.75 * 4344, line
+    assert np.mean(load_map(tmp_path / "dense.map_xy.txt") == np.arange(4344)) > 0.9
 
 
 # ----------------------------------------------------------------------------- curves

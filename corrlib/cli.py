@@ -305,6 +305,7 @@ def cmd_match(args) -> int:
     if plotting is not None:
         plotting.join()
     print(f"method {result.method}: energy {result.energy}, {result.timings.get('total', 0):.2f} s")
+    _print_reversal_note(result)
     if result.energy_trace is not None:
         trace = result.energy_trace
         print(f"energy trace ({trace.size} assignments): " + ", ".join(f"{e:.5g}" for e in trace))
@@ -328,12 +329,22 @@ def cmd_refine(args) -> int:
     if plotting is not None:
         plotting.join()
     print(f"method {result.method}: {result.timings.get('total', 0):.2f} s")
+    _print_reversal_note(result)
     kept = result.extras.get("kept_matches")
     if kept is not None and not args.quiet:
         print(f"{int(kept.sum())} of {kept.size} rows kept their input partner (the refinement moved them by less "
               f"than its kernel's width); the others were corrected")
     _write_match_outputs(result, source, target, Path(args.output), quiet=args.quiet, pictures=args.pictures)
     return 0
+
+
+def _print_reversal_note(result) -> None:
+    """Warn (on stderr) when a mesh-to-mesh map reverses orientation on most of the shape."""
+    from corrlib.methods.kernel_matching import reversal_note
+
+    note = reversal_note(result.extras)
+    if note:
+        print(f"warning: {note}", file=sys.stderr)
 
 
 def _refining_methods():

@@ -336,6 +336,24 @@ def test_orientation_agreement_changes_sign_under_a_reflection(wolf_pair):
     assert orientation_agreement(wolf0, wolf0, -np.ones_like(identity), spec, spec) == 0.0
 
 
+def test_a_map_that_reverses_orientation_is_reported(wolf_pair, wolf_result, capsys):
+    """Every kernel-matching result carries its orientation agreement; a negative one (left matched to right,
+    which the kernel energy cannot see) gets a warning, in the CLI as in the studio's log."""
+    from corrlib.cli import _print_reversal_note
+    from corrlib.methods.kernel_matching import reversal_note
+
+    assert wolf_result.extras["orientation_agreement"] > 1.0  # wolf0 -> wolf1, the right orientation
+    assert reversal_note(wolf_result.extras) is None and reversal_note({}) is None
+    note = reversal_note({"orientation_agreement": -4.64})
+    assert "reverses orientation" in note and "-4.64" in note and "init=best" in note
+
+    class Flipped:
+        extras = {"orientation_agreement": -0.5}
+
+    _print_reversal_note(Flipped())
+    assert "warning: the map reverses orientation" in capsys.readouterr().err
+
+
 @pytest.mark.slow
 def test_best_of_both_starts_keeps_the_better_oriented_map():
     """init="best" on human3 -> mirror(human0): the descriptor start ends half flipped (measured 0.274 direct,
@@ -349,7 +367,7 @@ def test_best_of_both_starts_keeps_the_better_oriented_map():
     fractions = []
     result = run(solve_iter("kernel-matching", human3, mirror, init="best"),
                  callback=lambda report: fractions.append(report.fraction))
-    scores = result.extras["orientation_agreement"]
+    scores = result.extras["start_agreements"]
     assert result.extras["init"] == max(scores, key=scores.get)
     report = geodesic_errors(result.map_xy, mirror, np.arange(human3.n_vertices), partner).summary()
     assert report["mean"] <= 0.15, (report, scores)

@@ -946,6 +946,8 @@ def kernel_result(state: KernelState, full_map_xy: np.ndarray, full_map_yx: np.n
             full_map_xy, full_map_yx = _pointwise_from_basis(full_map_xy, full_map_yx, phi, psi,
                                                              min(params.smooth_k, k))
     extras = {
+        "orientation_agreement": orientation_agreement(state.source, state.target, full_map_xy, state.spec_x,
+                                                       state.spec_y),
         "changed_trace": np.array([e["changed"] for e in trace]),
         "tau_trace": np.array([e["tau"] for e in trace]),
         "monotone": monotone, "start": dc_start, "unmatched_x": int(np.sum(full_map_xy < 0)),
@@ -1001,6 +1003,18 @@ def orientation_agreement(source, target, map_xy: np.ndarray, spec_x: Spectrum, 
     return float(np.mean(np.sum(or_x[ok] * or_y[map_xy[ok]], axis=1)))
 
 
+def reversal_note(extras: dict) -> str | None:
+    """A warning when a map reverses orientation on most of the shape (its
+    :func:`orientation_agreement`, ``extras["orientation_agreement"]``, is negative: left matched to right), else
+    None. The kernel energy cannot see this (a reflection of a symmetric shape keeps every heat kernel), so it
+    is said with the result rather than left to the user's eye."""
+    agreement = extras.get("orientation_agreement") if extras else None
+    if agreement is None or not agreement < 0:
+        return None
+    return (f"the map reverses orientation on most of the shape (orientation agreement {agreement:.2f} < 0: left "
+            "matched to right); try init=best, landmarks (--init), or check the target is not a mirror image")
+
+
 def best_of_both_starts(source, target, params: KernelMatchingParams, token):
     """``init="best"``: kernel matching from the descriptor start and from the functional-maps baseline; the
     map with the higher :func:`orientation_agreement` is returned.
@@ -1009,7 +1023,7 @@ def best_of_both_starts(source, target, params: KernelMatchingParams, token):
     whole reflection or another symmetric turn from the functional map — and maps that differ by a
     symmetry have nearly the same kernel energy (on the people the reflected map's is even higher). The
     orientation-aware descriptors are odd under a reflection, so their agreement decides (see
-    ``docs/decisions.md``). ``extras["init"]`` names the start kept, ``extras["orientation_agreement"]``
+    ``docs/decisions.md``). ``extras["init"]`` names the start kept, ``extras["start_agreements"]``
     holds both scores; the timings are those of the map kept plus ``"other start"`` (the other run's sum).
     """
     results = {}
@@ -1022,7 +1036,7 @@ def best_of_both_starts(source, target, params: KernelMatchingParams, token):
     kept = max(scores, key=lambda init: scores[init])  # descriptors first: a tie keeps the default start
     other = "fmap" if kept == "descriptors" else "descriptors"
     result = results[kept]
-    result.extras.update({"init": kept, "orientation_agreement": scores})
+    result.extras.update({"init": kept, "start_agreements": scores})
     result.timings["other start"] = float(sum(results[other].timings.values()))
     return result
 

@@ -287,11 +287,15 @@ def _descriptors(source, target, spec_x, spec_y, kind: str):
     return _standardised(desc_x, desc_y)
 
 
-def _with_orientation(desc_x, desc_y, source, target, spec_x, spec_y, weight: float):
-    """The descriptors with the standardised orientation block appended (total variance ``weight`` × theirs)."""
+def _orientation_blocks(source, target, spec_x: Spectrum, spec_y: Spectrum) -> tuple[np.ndarray, np.ndarray]:
+    """The standardised orientation-aware descriptors of both shapes ((n_x, d), (n_y, d))."""
+    return _standardised(orientation_descriptors(source, spec_x), orientation_descriptors(target, spec_y))
+
+
+def _with_orientation(desc_x, desc_y, or_x, or_y, weight: float):
+    """The descriptors with the standardised orientation blocks appended (total variance ``weight`` × theirs)."""
     if weight <= 0:
         return desc_x, desc_y
-    or_x, or_y = _standardised(orientation_descriptors(source, spec_x), orientation_descriptors(target, spec_y))
     scale = weight * np.sqrt(desc_x.shape[1] / or_x.shape[1])
     return np.hstack([desc_x, scale * or_x]), np.hstack([desc_y, scale * or_y])
 
@@ -596,6 +600,7 @@ class KernelState:
     anchors_y: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     landmarks_only: bool = False
     refined_map: tuple | None = None  # the dense map being refined, as (source, target) vertex pairs
+    orientation: tuple | None = None  # standardised orientation-aware descriptors of both shapes, once computed
     desc_x: np.ndarray | None = None  # standardised plain descriptors, once computed
     desc_y: np.ndarray | None = None
     confidence: np.ndarray | None = None  # (n_seed,) similarity of every initial descriptor match
@@ -608,6 +613,12 @@ class KernelState:
     step: int = 0  # DC iterations counted for the progress bar
     seed_vertices_x: np.ndarray | None = None  # the seeds' matches snapped to vertices (reported)
     seed_vertices_y: np.ndarray | None = None
+
+    def orientation_blocks(self) -> tuple[np.ndarray, np.ndarray]:
+        """The standardised orientation-aware descriptors (computed once: initial assignment and result)."""
+        if self.orientation is None:
+            self.orientation = _orientation_blocks(self.source, self.target, self.spec_x, self.spec_y)
+        return self.orientation
 
     @property
     def n_x(self) -> int:
@@ -718,8 +729,8 @@ def initial_seed_map(state: KernelState, initial: InitialMatch | None):
         with state.watch("descriptors"):
             state.desc_x, state.desc_y = _descriptors(source, target, state.spec_x, state.spec_y,
                                                       params.descriptor)
-            init_x, init_y = _with_orientation(state.desc_x, state.desc_y, source, target, state.spec_x,
-                                               state.spec_y, params.orientation)
+            init_x, init_y = _with_orientation(state.desc_x, state.desc_y, *state.orientation_blocks(),
+                                               params.orientation)
         with state.watch("assignment"):
             sim = _descriptor_similarity(state.seeds_x.interpolate(source, init_x),
                                          state.seeds_y.interpolate(target, init_y))
@@ -946,8 +957,7 @@ def kernel_result(state: KernelState, full_map_xy: np.ndarray, full_map_yx: np.n
             full_map_xy, full_map_yx = _pointwise_from_basis(full_map_xy, full_map_yx, phi, psi,
                                                              min(params.smooth_k, k))
     extras = {
-        "orientation_agreement": orientation_agreement(state.source, state.target, full_map_xy, state.spec_x,
-                                                       state.spec_y),
+        "orientation_agreement": _agreement(*state.orientation_blocks(), full_map_xy),
         "changed_trace": np.array([e["changed"] for e in trace]),
         "tau_trace": np.array([e["tau"] for e in trace]),
         "monotone": monotone, "start": dc_start, "unmatched_x": int(np.sum(full_map_xy < 0)),
@@ -996,7 +1006,11 @@ def orientation_agreement(source, target, map_xy: np.ndarray, spec_x: Spectrum, 
     keeps left on left and negative for its mirror image — which the kernel energy cannot tell apart, since
     a reflection of a symmetric shape preserves the heat kernels. Unmatched vertices (-1) are left out.
     """
-    or_x, or_y = _standardised(orientation_descriptors(source, spec_x), orientation_descriptors(target, spec_y))
+    return _agreement(*_orientation_blocks(source, target, spec_x, spec_y), map_xy)
+
+
+def _agreement(or_x: np.ndarray, or_y: np.ndarray, map_xy: np.ndarray) -> float:
+    """:func:`orientation_agreement` from the standardised descriptors."""
     ok = map_xy >= 0
     if not np.any(ok):
         return 0.0
@@ -1031,8 +1045,7 @@ def best_of_both_starts(source, target, params: KernelMatchingParams, token):
         sub = replace(params, init=init)
         results[init] = yield from scaled_progress(kernel_matching(source, target, sub, token), index / 2,
                                                    (index + 1) / 2, f"start {index + 1}/2 ({init})")
-    spec_x, spec_y = mesh_spectrum(source, params.n_eigs), mesh_spectrum(target, params.n_eigs)
-    scores = {init: orientation_agreement(source, target, r.map_xy, spec_x, spec_y) for init, r in results.items()}
+    scores = {init: r.extras["orientation_agreement"] for init, r in results.items()}  # each run's own
     kept = max(scores, key=lambda init: scores[init])  # descriptors first: a tie keeps the default start
     other = "fmap" if kept == "descriptors" else "descriptors"
     result = results[kept]

@@ -794,11 +794,11 @@ class MainWindow(QMainWindow):
                                       function=outcome.function, n_unmatched=outcome.n_unmatched)
             if outcome.sequence is not None:
                 self.sequence_view.set_sequence(self.source, *outcome.sequence)
-            from corrlib.methods.kernel_matching import reversal_note  # loaded by the method that just ran
+            from corrlib.methods.kernel_matching import reversal_note, turn_note  # loaded by the method that ran
 
-            note = reversal_note(result.extras)
-            if note:
-                self.job_panel.write(f"{result.method}: {note}")
+            for note in (reversal_note(result.extras), turn_note(result.extras)):
+                if note:
+                    self.job_panel.write(f"{result.method}: {note}")
         self.result_ready.emit(result)
 
     def _log_outcome(self, outcome: MethodOutcome) -> None:

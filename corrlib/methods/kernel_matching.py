@@ -31,7 +31,9 @@ The stages, each a function below sharing one :class:`KernelState`:
    ``init="fmap"``), rows moved by less than the smallest kernel's width keep
    their input partner (:mod:`.resolution`: the kernel cannot tell such
    partners apart).
-7. :func:`kernel_result` — final energy, optional pointwise smoothing, result.
+7. :func:`kernel_result` — a map reversed on most of the shape turned by the
+   target's reflection (:mod:`.reorientation`), final energy, optional
+   pointwise smoothing, result.
 
 Design choices, in brief (the measurements behind them are in
 ``docs/decisions.md``, "Kernel matching: measured design choices"):
@@ -91,6 +93,7 @@ import numpy as np
 from corrlib.assignment import area_capacities, linear_assignment
 from corrlib.descriptors import DESCRIPTOR_KINDS, mesh_descriptors
 from corrlib.descriptors.orientation import orientation_descriptors
+from corrlib.descriptors.symmetry import mesh_reflection
 from corrlib.errors import ParameterError
 from corrlib.geometry.sampling import (
     SurfaceSample,
@@ -102,6 +105,7 @@ from corrlib.geometry.sampling import (
 from corrlib.geometry.spectrum import Spectrum, mesh_spectrum
 from corrlib.methods.base import InitialMatch, MatchResult, param
 from corrlib.methods.registry import MethodSpec, register
+from corrlib.methods.reorientation import turn_reversed_map
 from corrlib.methods.resolution import keep_resolved_matches, kernel_width
 from corrlib.progress import Progress, Stopwatch, scaled_progress
 
@@ -190,6 +194,10 @@ class KernelMatchingParams:
                           help="Finer scales: a target sample may take as many source samples as its area "
                                "holds (measure-preserving; for differently meshed shapes) or exactly one "
                                "(a bijection within each cell; better for two meshes of the same connectivity).")
+    reorient: bool = param(True, label="Turn a reversed map",
+                           help="A final map that sends left to right on most of the shape (negative orientation "
+                                "agreement) is composed with the target's intrinsic reflection when that turns it "
+                                "(the kernel energy cannot tell the two apart).")
     backend: str = param("auction", label="Assignment backend", choices=("auction", "scipy"),
                          help="ε-scaling auction (fast) or scipy's exact solver (slow, for checks).")
 
@@ -948,6 +956,14 @@ def kernel_result(state: KernelState, full_map_xy: np.ndarray, full_map_yx: np.n
     monotone, dc_start, n_seed = state.monotone, state.dc_start, state.n_seed
     seed_vertices_x, seed_vertices_y = state.seed_vertices_x, state.seed_vertices_y
     decay_y, decay_x = state.decays(state.taus[-1])
+    turned = None
+    if params.reorient and state.anchors_x.size == 0:  # landmarks fix the orientation themselves
+        with watch("orientation"):
+            turned = turn_reversed_map(full_map_xy, full_map_yx,
+                                       lambda: mesh_reflection(state.target, state.spec_y),
+                                       lambda m: _agreement(*state.orientation_blocks(), m))
+        if turned is not None:
+            full_map_xy, full_map_yx = turned.map_xy, turned.map_yx
     c = _alignment(psi[full_map_xy[full_map_xy >= 0]], phi[full_map_xy >= 0]) + anchor_c
     energy = kernel_energy(c, decay_y, decay_x)
     if params.smooth_k > 0:
@@ -958,6 +974,8 @@ def kernel_result(state: KernelState, full_map_xy: np.ndarray, full_map_yx: np.n
                                                              min(params.smooth_k, k))
     extras = {
         "orientation_agreement": _agreement(*state.orientation_blocks(), full_map_xy),
+        "turned": turned is not None,
+        "agreement_before_turn": None if turned is None else turned.agreement_before,
         "changed_trace": np.array([e["changed"] for e in trace]),
         "tau_trace": np.array([e["tau"] for e in trace]),
         "monotone": monotone, "start": dc_start, "unmatched_x": int(np.sum(full_map_xy < 0)),
@@ -1015,6 +1033,16 @@ def _agreement(or_x: np.ndarray, or_y: np.ndarray, map_xy: np.ndarray) -> float:
     if not np.any(ok):
         return 0.0
     return float(np.mean(np.sum(or_x[ok] * or_y[map_xy[ok]], axis=1)))
+
+
+def turn_note(extras: dict) -> str | None:
+    """What the user is told when the map was turned by the target's reflection (:mod:`.reorientation`),
+    else None."""
+    if not (extras and extras.get("turned")):
+        return None
+    return (f"the map sent left to right on most of the shape (orientation agreement "
+            f"{extras['agreement_before_turn']:.2f}); it was composed with the target's intrinsic reflection "
+            f"(agreement now {extras['orientation_agreement']:.2f}; reorient=false keeps the map as found)")
 
 
 def reversal_note(extras: dict) -> str | None:

@@ -31,9 +31,9 @@ The stages, each a function below sharing one :class:`KernelState`:
    ``init="fmap"``), rows moved by less than the smallest kernel's width keep
    their input partner (:mod:`.resolution`: the kernel cannot tell such
    partners apart).
-7. :func:`kernel_result` — a map reversed on most of the shape turned by the
-   target's reflection (:mod:`.reorientation`), final energy, optional
-   pointwise smoothing, result.
+7. :func:`kernel_result` — a map reversed on most of the shape, and limbs
+   matched to their mirror-image limbs, turned by the target's reflection
+   (:mod:`.reorientation`); final energy, optional pointwise smoothing, result.
 
 Design choices, in brief (the measurements behind them are in
 ``docs/decisions.md``, "Kernel matching: measured design choices"):
@@ -105,7 +105,7 @@ from corrlib.geometry.sampling import (
 from corrlib.geometry.spectrum import Spectrum, mesh_spectrum
 from corrlib.methods.base import InitialMatch, MatchResult, param
 from corrlib.methods.registry import MethodSpec, register
-from corrlib.methods.reorientation import turn_reversed_map
+from corrlib.methods.reorientation import ShapeParts, turn_reversed_map, turn_reversed_parts
 from corrlib.methods.resolution import keep_resolved_matches, kernel_width
 from corrlib.progress import Progress, Stopwatch, scaled_progress
 
@@ -196,8 +196,10 @@ class KernelMatchingParams:
                                "(a bijection within each cell; better for two meshes of the same connectivity).")
     reorient: bool = param(True, label="Turn a reversed map",
                            help="A final map that sends left to right on most of the shape (negative orientation "
-                                "agreement) is composed with the target's intrinsic reflection when that turns it "
-                                "(the kernel energy cannot tell the two apart).")
+                                "agreement) is composed with the target's intrinsic reflection when that turns it, "
+                                "and a limb matched to the mirror-image limb is turned when that fits its shoulder "
+                                "better (the kernel energy cannot tell either apart). Closed, complete shapes only: "
+                                "a cut changes the reflection and the distances.")
     backend: str = param("auction", label="Assignment backend", choices=("auction", "scipy"),
                          help="ε-scaling auction (fast) or scipy's exact solver (slow, for checks).")
 
@@ -948,6 +950,29 @@ def multiscale_refinement(state: KernelState):
     return full_map_xy, cell_map_yx
 
 
+def _reoriented(state: KernelState, map_xy: np.ndarray, map_yx: np.ndarray):
+    """The final map turned by the target's reflection where it reverses orientation (:mod:`.reorientation`):
+    the whole map if its orientation agreement is negative, then every protrusion of the source whose turned
+    image fits its shoulder better. The reflection is computed only when one of them is in question. Returns
+    the maps and the two decisions (None: not turned)."""
+    source, target = state.source, state.target
+    mirror = []
+
+    def mirror_y():
+        if not mirror:
+            mirror.append(mesh_reflection(target, state.spec_y))
+        return mirror[0]
+
+    turned = turn_reversed_map(map_xy, map_yx, mirror_y, lambda m: _agreement(*state.orientation_blocks(), m))
+    if turned is not None:
+        map_xy, map_yx = turned.map_xy, turned.map_yx
+    parts_x, parts_y = (ShapeParts.of(mesh, spec) for mesh, spec in ((source, state.spec_x), (target, state.spec_y)))
+    turned_parts = turn_reversed_parts(map_xy, map_yx, parts_x, parts_y, mirror_y)
+    if turned_parts is not None:
+        map_xy, map_yx = turned_parts.map_xy, turned_parts.map_yx
+    return map_xy, map_yx, turned, turned_parts
+
+
 def kernel_result(state: KernelState, full_map_xy: np.ndarray, full_map_yx: np.ndarray):
     """Stage 7: the kernel energy ``<Π, K_Y Π K_X>`` of the final map at the smallest time, the optional
     pointwise smoothing (:func:`_pointwise_from_basis`), the :class:`MatchResult`. A generator."""
@@ -956,14 +981,12 @@ def kernel_result(state: KernelState, full_map_xy: np.ndarray, full_map_yx: np.n
     monotone, dc_start, n_seed = state.monotone, state.dc_start, state.n_seed
     seed_vertices_x, seed_vertices_y = state.seed_vertices_x, state.seed_vertices_y
     decay_y, decay_x = state.decays(state.taus[-1])
-    turned = None
-    if params.reorient and state.anchors_x.size == 0:  # landmarks fix the orientation themselves
+    turned = turned_parts = None
+    # landmarks fix the orientation themselves; a cut changes a shape's reflection and biharmonic distances
+    if params.reorient and state.anchors_x.size == 0 and not params.partial and \
+            state.source.is_closed and state.target.is_closed:
         with watch("orientation"):
-            turned = turn_reversed_map(full_map_xy, full_map_yx,
-                                       lambda: mesh_reflection(state.target, state.spec_y),
-                                       lambda m: _agreement(*state.orientation_blocks(), m))
-        if turned is not None:
-            full_map_xy, full_map_yx = turned.map_xy, turned.map_yx
+            full_map_xy, full_map_yx, turned, turned_parts = _reoriented(state, full_map_xy, full_map_yx)
     c = _alignment(psi[full_map_xy[full_map_xy >= 0]], phi[full_map_xy >= 0]) + anchor_c
     energy = kernel_energy(c, decay_y, decay_x)
     if params.smooth_k > 0:
@@ -976,6 +999,7 @@ def kernel_result(state: KernelState, full_map_xy: np.ndarray, full_map_yx: np.n
         "orientation_agreement": _agreement(*state.orientation_blocks(), full_map_xy),
         "turned": turned is not None,
         "agreement_before_turn": None if turned is None else turned.agreement_before,
+        "turned_parts": 0 if turned_parts is None else len(turned_parts.parts),
         "changed_trace": np.array([e["changed"] for e in trace]),
         "tau_trace": np.array([e["tau"] for e in trace]),
         "monotone": monotone, "start": dc_start, "unmatched_x": int(np.sum(full_map_xy < 0)),
@@ -1036,13 +1060,22 @@ def _agreement(or_x: np.ndarray, or_y: np.ndarray, map_xy: np.ndarray) -> float:
 
 
 def turn_note(extras: dict) -> str | None:
-    """What the user is told when the map was turned by the target's reflection (:mod:`.reorientation`),
-    else None."""
-    if not (extras and extras.get("turned")):
+    """What the user is told when the map, or some of its limbs, was turned by the target's reflection
+    (:mod:`.reorientation`), else None."""
+    if not extras:
         return None
-    return (f"the map sent left to right on most of the shape (orientation agreement "
-            f"{extras['agreement_before_turn']:.2f}); it was composed with the target's intrinsic reflection "
-            f"(agreement now {extras['orientation_agreement']:.2f}; reorient=false keeps the map as found)")
+    said = []
+    if extras.get("turned"):
+        said.append(f"the map sent left to right on most of the shape (orientation agreement "
+                    f"{extras['agreement_before_turn']:.2f}); it was composed with the target's intrinsic "
+                    f"reflection (agreement now {extras['orientation_agreement']:.2f})")
+    if extras.get("turned_parts"):
+        count = extras["turned_parts"]
+        said.append(f"{count} protrusion{'s' if count > 1 else ''} (limbs) matched to the mirror-image limb "
+                    f"{'were' if count > 1 else 'was'} turned by the target's reflection")
+    if not said:
+        return None
+    return "; ".join(said) + " (reorient=false keeps the map as found)"
 
 
 def reversal_note(extras: dict) -> str | None:

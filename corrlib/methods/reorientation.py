@@ -28,8 +28,33 @@ different clean reflection: on a shape with two (left–right and front–back),
 the wrong one would turn a left–right flip into a half turn of the shape,
 which preserves orientation too. No threshold enters.
 
-A map reversed on one part only (an arm) keeps a positive agreement and is not
-changed here.
+**Parts.** A map can also send one limb, or a pair of limbs crossed, to the
+mirror-image limb while the body is right (measured on the cats with a single
+start: both front legs crossed, 0.065 √area instead of 0.029, a positive
+agreement). Such a map is continuous — it twists through the body between the
+legs — so no seam shows it, and the orientation descriptors, strong on a body
+and weak round a thin limb, hardly see it. What does is the metric:
+:func:`turn_reversed_parts` takes the protrusions of the source
+(:mod:`corrlib.geometry.segmentation`: legs, head, tail), gives each the body
+vertices nearer to it than to any other protrusion (its shoulder, found by one
+multi-source Dijkstra), and compares the distortion of the distances between
+the part and its shoulder,
+
+    D(v) = mean over x in P, a in A_P of | d_X(x, a) − d_Y(v(x), m(a)) |,
+
+for ``v = m`` and ``v = S_Y ∘ m`` on the part (the shoulder keeps ``m``). The
+part is turned when ``D(S_Y ∘ m) < D(m)``. The distances are biharmonic
+(Lipman, Rustamov, Funkhouser, *Biharmonic distance*, ToG 2010): intrinsic,
+smooth, and read off the eigenpairs the method already has. A crossed leg is
+nearer, on the target, to the wrong shoulder; a part on the plane of symmetry
+(head, tail) is its own mirror image, so its two distortions are close and the
+lower one is the right one within the part's own reflection error.
+
+Both decisions assume complete shapes: a cut (a partial scan, the front of an
+animal) changes the intrinsic reflection and the biharmonic distances near
+and far from it (measured: the front 60 % of a wolf against a whole wolf had
+three "parts" turned and fell from 64 % to 20 % within 0.1), so kernel
+matching applies them to closed meshes without partial matching only.
 """
 
 from __future__ import annotations
@@ -38,6 +63,9 @@ from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import dijkstra
+from scipy.spatial.distance import cdist
 
 
 @dataclass(frozen=True)
@@ -90,3 +118,167 @@ def turn_reversed_map(map_xy: np.ndarray, map_yx: np.ndarray | None, mirror_y: C
         return None
     turned_yx = None if map_yx is None else np.asarray(map_yx)[mirror]
     return Turned(turned_xy, turned_yx, before, after)
+
+
+#: the biharmonic sum keeps the eigenpairs whose weight ``λ_k⁻²`` is at least this fraction of the first one's
+BIHARMONIC_RTOL = 1e-4
+
+
+def biharmonic_embedding(evals: np.ndarray, evecs: np.ndarray) -> np.ndarray:
+    """Points whose Euclidean distances are the biharmonic distances of a shape.
+
+    ``d_B(x, y)² = Σ_{k ≥ 1} (φ_k(x) − φ_k(y))² / λ_k²`` (Lipman et al. 2010), so the embedding is
+    ``φ_k / λ_k`` without the constant eigenpair. The terms fall as ``λ_k⁻²``; those below
+    :data:`BIHARMONIC_RTOL` of the first are left out (``λ_k > 100 λ_1``).
+
+    Parameters
+    ----------
+    evals : (k,) float
+        Ascending, the first one zero (a connected shape).
+    evecs : (n, k) float
+        M-orthonormal eigenvectors.
+
+    Returns
+    -------
+    (n, k - 1) float
+    """
+    keep = np.flatnonzero((np.arange(evals.size) >= 1) & (evals <= evals[1] / np.sqrt(BIHARMONIC_RTOL)))
+    return evecs[:, keep] / evals[None, keep]
+
+
+def part_shoulders(labels: np.ndarray, adjacency: sp.spmatrix) -> np.ndarray:
+    """The protrusion nearest (along the edge graph) to every body vertex.
+
+    Parameters
+    ----------
+    labels : (n,) int
+        0 on the body, ``p ≥ 1`` on protrusion ``p``.
+    adjacency : (n, n) sparse
+        Edge lengths.
+
+    Returns
+    -------
+    (n,) int
+        ``p`` on the body vertices nearest to protrusion ``p`` (its shoulder), 0 on the protrusions
+        themselves and on body vertices no protrusion reaches.
+    """
+    sources = np.flatnonzero(labels > 0)
+    shoulders = np.zeros_like(labels)
+    if sources.size == 0:
+        return shoulders
+    dist, _, nearest = dijkstra(adjacency, directed=False, indices=sources, min_only=True,
+                                return_predecessors=True)
+    body = (labels == 0) & np.isfinite(dist) & (nearest >= 0)
+    shoulders[body] = labels[nearest[body]]
+    return shoulders
+
+
+@dataclass(frozen=True)
+class ShapeParts:
+    """A shape's protrusions, their shoulders and its biharmonic embedding (what the part decision reads).
+
+    Attributes
+    ----------
+    labels : (n,) int
+        0 on the body, ``p ≥ 1`` on protrusion ``p`` (:func:`~corrlib.geometry.segmentation.protrusion_parts`).
+    shoulders : (n,) int
+        :func:`part_shoulders` of ``labels``.
+    embedding : (n, d) float
+        :func:`biharmonic_embedding` divided by ``√area``, so that two shapes' distances compare.
+    """
+
+    labels: np.ndarray
+    shoulders: np.ndarray
+    embedding: np.ndarray
+
+    @classmethod
+    def of(cls, mesh, spectrum) -> "ShapeParts":
+        """From a mesh and its eigenpairs."""
+        from corrlib.geometry.segmentation import protrusion_parts
+
+        labels = protrusion_parts(spectrum.evals, spectrum.evecs, mesh.adjacency, mesh.area).labels
+        return cls(labels, part_shoulders(labels, mesh.adjacency),
+                   biharmonic_embedding(spectrum.evals, spectrum.evecs) / np.sqrt(mesh.area))
+
+
+@dataclass(frozen=True)
+class TurnedParts:
+    """The parts of a map turned by the target's reflection.
+
+    Attributes
+    ----------
+    map_xy : (n_X,) int
+    map_yx : (n_Y,) int or None
+        Target vertices whose mirror image's backward partner lies in a turned part take that partner.
+    parts : list of int
+        The labels of the turned parts.
+    """
+
+    map_xy: np.ndarray
+    map_yx: np.ndarray | None
+    parts: list
+
+
+def _majority(values: np.ndarray) -> int:
+    """The most frequent non-negative label (ties: the smaller)."""
+    return int(np.argmax(np.bincount(values))) if values.size else 0
+
+
+def turn_reversed_parts(map_xy: np.ndarray, map_yx: np.ndarray | None, parts_x: ShapeParts, parts_y: ShapeParts,
+                        mirror_y: Callable[[], np.ndarray]) -> TurnedParts | None:
+    """Turn every protrusion whose turned image fits its shoulder better (see the module docstring).
+
+    A part is in question only when its image and its shoulder's image lie at different protrusions of
+    the target (the image on one limb, the shoulder's image beside another): a part mapped with its
+    shoulder needs no reflection, so a consistent map costs no reflection. A part in question is turned if
+    the reflection sends its image to another protrusion of the target (a limb to its mirror limb; a part on
+    the plane of symmetry, or a self-map that is not the target's left–right reflection there, stays) and
+    the distortion of its distances to its shoulder drops.
+
+    Parameters
+    ----------
+    map_xy : (n_X,) int
+        -1 where unmatched.
+    map_yx : (n_Y,) int or None
+    parts_x, parts_y : ShapeParts
+        Of the source and of the target.
+    mirror_y : callable returning (n_Y,) int
+        The target's reflection; called only if a part is in question.
+
+    Returns
+    -------
+    TurnedParts or None
+        None when no part is turned.
+    """
+    labels, labels_y = parts_x.labels, parts_y.labels
+    turned_xy = np.array(map_xy, copy=True)
+    parts = []
+    for part in range(1, int(labels.max(initial=0)) + 1):
+        members = np.flatnonzero((labels == part) & (map_xy >= 0))
+        anchors = np.flatnonzero((parts_x.shoulders == part) & (map_xy >= 0))
+        if members.size == 0 or anchors.size == 0:
+            continue
+        image = map_xy[members]
+        target_part = _majority(labels_y[image])
+        if target_part == 0 or _majority(parts_y.shoulders[map_xy[anchors]]) == target_part:
+            continue
+        turned_image = mirror_y()[image]
+        if _majority(labels_y[turned_image]) in (0, target_part):
+            continue
+        embed_x, embed_y = parts_x.embedding, parts_y.embedding
+        d_x = cdist(embed_x[members], embed_x[anchors])
+        anchor_images = embed_y[map_xy[anchors]]
+        kept = np.mean(np.abs(d_x - cdist(embed_y[image], anchor_images)))
+        mirrored = np.mean(np.abs(d_x - cdist(embed_y[turned_image], anchor_images)))
+        if mirrored < kept:
+            turned_xy[members] = turned_image
+            parts.append(part)
+    if not parts:
+        return None
+    turned_yx = None
+    if map_yx is not None:
+        in_turned = np.isin(labels, parts)
+        partner_of_mirror = np.asarray(map_yx)[mirror_y()]
+        take = (partner_of_mirror >= 0) & in_turned[np.maximum(partner_of_mirror, 0)]
+        turned_yx = np.where(take, partner_of_mirror, map_yx)
+    return TurnedParts(turned_xy, turned_yx, parts)

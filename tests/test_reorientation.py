@@ -197,6 +197,13 @@ def test_kernel_matching_turns_crossed_front_legs(cat_pair):
     assert turned.extras["turned_parts"] == 2 and not turned.extras["turned"]
     assert mean(turned) <= 0.035
     assert geodesic_errors(turned.map_yx, cat0, gt["cat1"], gt["cat0"]).summary()["mean"] <= 0.05
+    # the mirror image of the target: the same legs turned, scored against the mirrored partners (0.030)
+    from corrlib.shapes import TriMesh
+
+    mirror = TriMesh(cat1.vertices * [-1.0, 1.0, 1.0], cat1.faces[:, ::-1], name="cat1-mirror")
+    mirrored = solve("kernel-matching", cat0, mirror, init_fraction=1.0)
+    assert mirrored.extras["turned_parts"] == 2
+    assert geodesic_errors(mirrored.map_xy, mirror, gt["cat0"], gt["cat1.sym"]).summary()["mean"] <= 0.035
 
 
 def test_turned_limbs_are_reported():

@@ -214,3 +214,18 @@ def test_turned_limbs_are_reported():
     assert "1 protrusion (limbs)" in turn_note({"turned_parts": 1})
     both = turn_note({"turned": True, "agreement_before_turn": -5.0, "orientation_agreement": 4.0, "turned_parts": 1})
     assert "-5.00" in both and "1 protrusion" in both
+
+
+def test_too_few_eigenpairs_for_a_reflection_leave_the_map_alone(wolf_pair, monkeypatch):
+    """The reflection needs 60 eigenpairs; with fewer, a reversed map is reported, not turned, and no error
+    is raised (the wolves' start reversed as in the cats' test)."""
+    import corrlib.methods.kernel_matching as km
+
+    wolf0, wolf1 = wolf_pair
+    with_orientation = km._with_orientation
+    monkeypatch.setattr(km, "_with_orientation",
+                        lambda dx, dy, ox, oy, w: with_orientation(dx, dy, ox, -100.0 * oy, w))
+    result = solve("kernel-matching", wolf0, wolf1, n_eigs=30, n_seeds=300, n_times=3)
+    assert result.extras["orientation_agreement"] < 0  # reversed (measured -3.1), yet not turned
+    assert not result.extras["turned"] and result.extras["turned_parts"] == 0
+    assert np.all(result.map_xy >= 0)

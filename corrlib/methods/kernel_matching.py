@@ -93,6 +93,7 @@ import numpy as np
 from corrlib.assignment import area_capacities, linear_assignment
 from corrlib.descriptors import DESCRIPTOR_KINDS, mesh_descriptors
 from corrlib.descriptors.orientation import orientation_descriptors
+from corrlib.descriptors.symmetry import K_FINAL as REFLECTION_EIGENPAIRS
 from corrlib.descriptors.symmetry import mesh_reflection
 from corrlib.errors import ParameterError
 from corrlib.geometry.sampling import (
@@ -199,7 +200,7 @@ class KernelMatchingParams:
                                 "agreement) is composed with the target's intrinsic reflection when that turns it, "
                                 "and a limb matched to the mirror-image limb is turned when that fits its shoulder "
                                 "better (the kernel energy cannot tell either apart). Closed, complete shapes only: "
-                                "a cut changes the reflection and the distances.")
+                                "a cut changes the reflection and the distances; at least 60 eigenpairs.")
     backend: str = param("auction", label="Assignment backend", choices=("auction", "scipy"),
                          help="ε-scaling auction (fast) or scipy's exact solver (slow, for checks).")
 
@@ -984,7 +985,7 @@ def kernel_result(state: KernelState, full_map_xy: np.ndarray, full_map_yx: np.n
     turned = turned_parts = None
     # landmarks fix the orientation themselves; a cut changes a shape's reflection and biharmonic distances
     if params.reorient and state.anchors_x.size == 0 and not params.partial and \
-            state.source.is_closed and state.target.is_closed:
+            state.source.is_closed and state.target.is_closed and state.spec_y.k >= REFLECTION_EIGENPAIRS:
         with watch("orientation"):
             full_map_xy, full_map_yx, turned, turned_parts = _reoriented(state, full_map_xy, full_map_yx)
     c = _alignment(psi[full_map_xy[full_map_xy >= 0]], phi[full_map_xy >= 0]) + anchor_c

@@ -136,15 +136,18 @@ def test_biharmonic_distances_equal_the_solution_of_the_poisson_problem():
 
 
 def test_part_shoulders_are_the_nearest_protrusion():
-    """A path of six vertices with a protrusion at each end: the body vertices go to the nearer end."""
-    import scipy.sparse as sp
-
+    """A strip of triangles six vertices long with a protrusion at each end: the body vertices go to the
+    nearer end."""
     from corrlib.methods.reorientation import part_shoulders
+    from corrlib.shapes import TriMesh
 
-    edges = np.array([[0, 1], [1, 2], [2, 3], [3, 4], [4, 5]])
-    adjacency = sp.coo_matrix((np.ones(10), (edges.ravel(), edges[:, ::-1].ravel())), shape=(6, 6)).tocsr()
-    np.testing.assert_array_equal(part_shoulders(np.array([1, 0, 0, 0, 0, 2]), adjacency), [0, 1, 1, 2, 2, 0])
-    np.testing.assert_array_equal(part_shoulders(np.zeros(6, dtype=int), adjacency), np.zeros(6))
+    vertices = np.array([[x, y, 0.0] for x in range(6) for y in (0, 1)])
+    faces = np.array([f for x in range(5) for f in ([2 * x, 2 * x + 2, 2 * x + 1], [2 * x + 1, 2 * x + 2, 2 * x + 3])])
+    strip = TriMesh(vertices, faces, name="strip")
+    column_labels = np.array([1, 0, 0, 0, 0, 2])
+    np.testing.assert_array_equal(part_shoulders(np.repeat(column_labels, 2), strip),
+                                  np.repeat([0, 1, 1, 2, 2, 0], 2))
+    np.testing.assert_array_equal(part_shoulders(np.zeros(12, dtype=int), strip), np.zeros(12))
 
 
 def test_crossed_legs_are_turned_back(wolf_pair):

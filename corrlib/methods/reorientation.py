@@ -63,8 +63,6 @@ from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import dijkstra
 from scipy.spatial.distance import cdist
 
 
@@ -146,31 +144,29 @@ def biharmonic_embedding(evals: np.ndarray, evecs: np.ndarray) -> np.ndarray:
     return evecs[:, keep] / evals[None, keep]
 
 
-def part_shoulders(labels: np.ndarray, adjacency: sp.spmatrix) -> np.ndarray:
+def part_shoulders(labels: np.ndarray, mesh) -> np.ndarray:
     """The protrusion nearest (along the edge graph) to every body vertex.
 
     Parameters
     ----------
     labels : (n,) int
         0 on the body, ``p ≥ 1`` on protrusion ``p``.
-    adjacency : (n, n) sparse
-        Edge lengths.
+    mesh : TriMesh
+        A connected mesh.
 
     Returns
     -------
     (n,) int
-        ``p`` on the body vertices nearest to protrusion ``p`` (its shoulder), 0 on the protrusions
-        themselves and on body vertices no protrusion reaches.
+        ``p`` on the body vertices nearest to protrusion ``p`` (its shoulder: the geodesic Voronoi cells of
+        the protrusions' vertices, :func:`~corrlib.geometry.sampling.voronoi_cells`), 0 on the protrusions.
     """
+    from corrlib.geometry.sampling import voronoi_cells
+
     sources = np.flatnonzero(labels > 0)
-    shoulders = np.zeros_like(labels)
     if sources.size == 0:
-        return shoulders
-    dist, _, nearest = dijkstra(adjacency, directed=False, indices=sources, min_only=True,
-                                return_predecessors=True)
-    body = (labels == 0) & np.isfinite(dist) & (nearest >= 0)
-    shoulders[body] = labels[nearest[body]]
-    return shoulders
+        return np.zeros_like(labels)
+    nearest, _ = voronoi_cells(mesh, sources)
+    return np.where(labels == 0, labels[sources[nearest]], 0)
 
 
 @dataclass(frozen=True)
@@ -197,7 +193,7 @@ class ShapeParts:
         from corrlib.geometry.segmentation import protrusion_parts
 
         labels = protrusion_parts(spectrum.evals, spectrum.evecs, mesh.adjacency, mesh.area).labels
-        return cls(labels, part_shoulders(labels, mesh.adjacency),
+        return cls(labels, part_shoulders(labels, mesh),
                    biharmonic_embedding(spectrum.evals, spectrum.evecs) / np.sqrt(mesh.area))
 
 
@@ -251,6 +247,7 @@ def turn_reversed_parts(map_xy: np.ndarray, map_yx: np.ndarray | None, parts_x: 
         None when no part is turned.
     """
     labels, labels_y = parts_x.labels, parts_y.labels
+    embed_x, embed_y = parts_x.embedding, parts_y.embedding
     turned_xy = np.array(map_xy, copy=True)
     parts = []
     for part in range(1, int(labels.max(initial=0)) + 1):
@@ -265,7 +262,6 @@ def turn_reversed_parts(map_xy: np.ndarray, map_yx: np.ndarray | None, parts_x: 
         turned_image = mirror_y()[image]
         if _majority(labels_y[turned_image]) in (0, target_part):
             continue
-        embed_x, embed_y = parts_x.embedding, parts_y.embedding
         d_x = cdist(embed_x[members], embed_x[anchors])
         anchor_images = embed_y[map_xy[anchors]]
         kept = np.mean(np.abs(d_x - cdist(embed_y[image], anchor_images)))

@@ -406,19 +406,26 @@ def cmd_bench_contour(args) -> int:
     params = _parse_overrides(args.param or [])
     if args.n_contour is not None:
         params["n_contour"] = args.n_contour
-    planes = [p.strip() for p in args.planes.split(",") if p.strip()]
+    planes = [p.strip() for p in args.planes.split(",") if p.strip() and p.strip() != "none"]
 
     def progress(done, total, row):
         if args.quiet or row["status"] == "skipped":
             return
-        what = (f"mean error {row['mean_error']:.3f}, coverage {row['coverage']:.2f}, {row['seconds']:.1f} s"
-                if row["status"] == "ok" else f"FAILED: {row['error']}")
+        if row["status"] != "ok":
+            what = f"FAILED: {row['error']}"
+        elif row["plane"] == "sketch":
+            what = (f"part agreement {row['part_agreement']:.2f} (mirror accepted {row['part_agreement_sym']:.2f}), "
+                    f"{row['seconds']:.1f} s")
+        else:
+            what = f"mean error {row['mean_error']:.3f}, coverage {row['coverage']:.2f}, {row['seconds']:.1f} s"
         print(f"  [{done}/{total}] {row['query']} -> {row['target']}: {what}", file=sys.stderr)
 
     summary = contour_benchmark(args.datasets, args.output, planes=planes, params=params, jobs=args.jobs,
-                                scheduler=args.scheduler, pictures=not args.no_pictures, callback=progress)
+                                scheduler=args.scheduler, pictures=not args.no_pictures, callback=progress,
+                                sketches=args.sketches or ())
     print((Path(args.output) / "contour_summary.md").read_text())
-    return 0 if summary["all"]["failed"] == 0 else 1
+    failed = summary["all"]["failed"] + summary.get("sketches", {}).get("failed", 0)
+    return 0 if failed == 0 else 1
 
 
 #: most frames ``corr morph`` writes (the glTF animation's weights grow with the square of the count: 2,000
@@ -747,7 +754,11 @@ def _add_bench_parsers(sub) -> None:
                                                 "is its name without a trailing number)")
     p.add_argument("--planes", default="main,symmetry,silhouette",
                    help="comma-separated queries: the sections main, symmetry, cross and the side-view "
-                        "silhouette (default: main,symmetry,silhouette)")
+                        "silhouette, or none (default: main,symmetry,silhouette)")
+    p.add_argument("--sketches", action="append", metavar="FOLDER",
+                   help="folder of labelled sketches (NAME_contour.txt, NAME.off, NAME_segmentation.txt), matched "
+                        "to every mesh with part labels (MESH_segmentation.txt) and scored by part agreement "
+                        "(repeatable)")
     p.add_argument("--n-contour", dest="n_contour", type=int, help="contour points (default: the method's 200)")
     p.add_argument("--param", action="append", metavar="KEY=VALUE", help="a contour3d parameter (repeatable)")
     p.add_argument("--no-pictures", action="store_true", help="do not write a picture per query")

@@ -33,6 +33,18 @@ one 0-based target vertex per line for every source vertex, named
 map is shipped); a name may be a shape or a class with a single shape. Such
 a pair is matched with that (possibly approximate) ground truth too.
 
+**Drawn sketches with part labels** (``sketches``: folders in the layout of
+the CVPR 2016 sketches, ``NAME_contour.txt`` — the outline — with
+``NAME.off``, the planar triangulated sketch, and ``NAME_segmentation.txt``,
+one part label per sketch vertex, 0 = unlabelled). Such a query has no
+point-wise ground truth on a mesh, only parts: it is matched to every mesh
+of the datasets that carries part labels in the same vocabulary
+(``<mesh>_segmentation.txt``, one label per vertex), and scored by the
+**part agreement**, the share of the contour points labelled on both sides
+whose matched vertex carries the point's label (mirror accepted where the
+target has a ``.sym.vts``: the label of the matched vertex's mirror
+partner). The labels are never given to the solver.
+
 The length of the ground-truth curve on another pose is the section's length
 scaled by the square root of the area ratio (the deformations are nearly
 isometric; a polygon through the transferred ground-truth vertices would
@@ -367,6 +379,135 @@ def match_cut_query(source_path, target_path, plane: str, params: dict, *, gt_ro
     return row
 
 
+SKETCH_CONTOUR_SUFFIX = "_contour.txt"
+PART_LABELS_SUFFIX = "_segmentation.txt"
+
+
+@dataclass
+class SketchQuery:
+    """A drawn outline with part labels (the layout of the CVPR 2016 sketches, see the module docstring).
+
+    Attributes
+    ----------
+    name : str
+    contour_path, mesh_path, labels_path : Path
+        The outline, the planar triangulated sketch and its labels (one per sketch vertex).
+    """
+
+    name: str
+    contour_path: Path
+    mesh_path: Path
+    labels_path: Path
+
+    def point_labels(self, points_2d: np.ndarray) -> np.ndarray:
+        """(m,) int: the part label of arbitrary outline points, that of the nearest sketch vertex."""
+        from corrlib.io import load_labels, load_mesh
+
+        sketch = load_mesh(self.mesh_path)
+        labels = load_labels(self.labels_path, sketch.n_vertices, "sketch part labels")
+        return labels[cKDTree(sketch.vertices[:, :2]).query(np.asarray(points_2d, dtype=np.float64))[1]]
+
+
+def sketch_queries(folder) -> list[SketchQuery]:
+    """The labelled sketches of a folder (every ``NAME_contour.txt``; its mesh and labels must exist)."""
+    from corrlib.errors import FileFormatError
+
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise InputError(f"{folder}: not a folder (expected sketches: NAME{SKETCH_CONTOUR_SUFFIX}, NAME.off, "
+                         f"NAME{PART_LABELS_SUFFIX})")
+    found = []
+    for contour in sorted(folder.glob(f"*{SKETCH_CONTOUR_SUFFIX}")):
+        name = contour.name[:-len(SKETCH_CONTOUR_SUFFIX)]
+        mesh, labels = folder / f"{name}.off", folder / f"{name}{PART_LABELS_SUFFIX}"
+        missing = [p.name for p in (mesh, labels) if not p.is_file()]
+        if missing:
+            raise FileFormatError(f"{contour}: the sketch's {' and '.join(missing)} are missing (a labelled "
+                                  "sketch is an outline, its triangulated sketch and one label per sketch vertex)")
+        found.append(SketchQuery(name, contour, mesh, labels))
+    if not found:
+        raise FileFormatError(f"{folder}: no sketches (NAME{SKETCH_CONTOUR_SUFFIX})")
+    return found
+
+
+def part_agreement(point_labels: np.ndarray, matched_labels: np.ndarray) -> tuple[float, int]:
+    """Share of the points labelled on both sides whose two labels agree.
+
+    Parameters
+    ----------
+    point_labels : (m,) int
+        Labels of the contour points (0: unlabelled).
+    matched_labels : (m,) int
+        Labels of their matched mesh vertices (0: unlabelled).
+
+    Returns
+    -------
+    agreement : float
+        NaN when no point is labelled on both sides.
+    scored : int
+        Points labelled on both sides.
+    """
+    point_labels, matched_labels = np.asarray(point_labels), np.asarray(matched_labels)
+    scored = (point_labels != 0) & (matched_labels != 0)
+    if not scored.any():
+        return float("nan"), 0
+    return float(np.mean(point_labels[scored] == matched_labels[scored])), int(scored.sum())
+
+
+def match_sketch_query(sketch: SketchQuery, target_path, labels_path, params: dict, *, mirror_rows=None,
+                       picture: str | None = None) -> dict:
+    """Match a labelled sketch to a labelled mesh and score the part agreement (one benchmark job).
+
+    Parameters
+    ----------
+    sketch : SketchQuery
+    target_path, labels_path : path
+        The mesh and its part labels (one per vertex).
+    params : dict
+        Parameters of the ``contour3d`` method (the labels are not passed to it).
+    mirror_rows : (rows_target, rows_target_mirrored), optional
+        The target's ``.vts`` and ``.sym.vts`` rows: the mirror-accepted agreement is reported too.
+    picture : path, optional
+
+    Returns
+    -------
+    dict
+        One row: ``part_agreement``, ``part_agreement_sym``, ``scored_points``, ``distinct_vertices``,
+        energy, gap, optimality and time; ``status`` ``"ok"`` or ``"failed"`` with ``error``.
+    """
+    from corrlib.io import load_contour, load_labels, load_mesh
+    from corrlib.methods import solve
+
+    row = {"query": sketch.name, "target": Path(target_path).stem, "plane": "sketch", "self": False,
+           "other_class": False, "status": "ok", "error": ""}
+    try:
+        target = load_mesh(target_path)
+        mesh_labels = load_labels(labels_path, target.n_vertices, "mesh part labels")
+        start = time.perf_counter()
+        result = solve("contour3d", load_contour(sketch.contour_path), target, **params)
+        seconds = time.perf_counter() - start
+        matched = result.path
+        labels = sketch.point_labels(matched.contour_points)
+        agreement, scored = part_agreement(labels, mesh_labels[result.map_xy])
+        row.update(part_agreement=agreement, part_agreement_sym=agreement, scored_points=scored)
+        if mirror_rows is not None:
+            mirrored = _vts_transfer(target.vertices, *mirror_rows)(np.asarray(result.map_xy))
+            row["part_agreement_sym"] = max(agreement, part_agreement(labels, mesh_labels[mirrored])[0])
+        path = np.asarray(matched.vertices)
+        row.update(n_points=int(len(result.map_xy)), distinct_vertices=int(len(np.unique(path))),
+                   energy=float(result.energy), gap=float(result.search.upper_bound - result.search.lower_bound),
+                   optimal=result.search.optimal, iterations=result.search.iterations, seconds=seconds)
+        if picture is not None:
+            from corrlib.plotting import save_contour_match
+
+            save_contour_match(picture, matched.contour_points, target, path, matched.contour_index,
+                               title=f"{sketch.name} -> {row['target']}: part agreement {agreement:.2f} "
+                                     f"(mirror accepted {row['part_agreement_sym']:.2f})")
+    except Exception as exc:  # a failing match is recorded (with its type if unexpected); the others go on
+        row.update(status="failed", error=str(exc) if isinstance(exc, CorrError) else f"{type(exc).__name__}: {exc}")
+    return row
+
+
 @dataclass
 class ContourJob:
     source: Path
@@ -442,6 +583,52 @@ def contour_jobs(datasets, planes=DEFAULT_PLANES) -> list[ContourJob]:
     return jobs
 
 
+@dataclass
+class SketchJob:
+    sketch: SketchQuery
+    target: Path
+    labels: Path
+    mirror_rows: tuple | None = None
+
+
+def sketch_jobs(datasets, sketch_folders) -> list[SketchJob]:
+    """Every labelled sketch of ``sketch_folders`` against every mesh of ``datasets`` with part labels."""
+    from corrlib.bench import load_dataset
+    from corrlib.io import load_vts
+
+    sketches = [q for folder in sketch_folders for q in sketch_queries(folder)]
+    if not sketches:
+        return []
+    jobs = []
+    for folder in datasets:
+        data = load_dataset(folder, require_pairs=False)
+        rows = {name: load_vts(path) for name, path in data.gt.items()}
+        mirror = {name: (rows[name], load_vts(path)) for name, path in data.gt_sym.items() if name in rows}
+        for name, path in data.shapes.items():
+            labels = path.with_name(f"{name}{PART_LABELS_SUFFIX}")
+            if labels.is_file():
+                jobs += [SketchJob(q, path, labels, mirror.get(name)) for q in sketches]
+    if not jobs:
+        raise InputError(f"no mesh of {', '.join(str(d) for d in datasets)} has part labels "
+                         f"(<mesh>{PART_LABELS_SUFFIX}, one label per vertex in the sketches' vocabulary) to score "
+                         "the sketches against")
+    return jobs
+
+
+def _sketch_summary(rows: list[dict]) -> dict:
+    ok = [r for r in rows if r["status"] == "ok"]
+    if not ok:
+        return {"queries": len(rows), "failed": len(rows)}
+    col = lambda key: np.array([r[key] for r in ok], dtype=np.float64)  # noqa: E731
+    return {"queries": len(rows), "failed": len(rows) - len(ok),
+            "part_agreement": float(np.nanmean(col("part_agreement"))),
+            "part_agreement_sym": float(np.nanmean(col("part_agreement_sym"))),
+            "worst_part_agreement_sym": float(np.nanmin(col("part_agreement_sym"))),
+            "min_distinct_vertices": int(col("distinct_vertices").min()),
+            "optimal": int(sum(r["optimal"] for r in ok)),
+            "median_seconds": float(np.median(col("seconds"))), "max_seconds": float(col("seconds").max())}
+
+
 def _summary(rows: list[dict]) -> dict:
     rows = [r for r in rows if r["status"] != "skipped"]
 
@@ -499,14 +686,37 @@ def _markdown(summary: dict, rows: list[dict]) -> str:
     return "\n".join(lines) + "\n"
 
 
+def _sketch_markdown(summary: dict, rows: list[dict]) -> str:
+    s = summary
+    lines = ["| sketches | n | failed | part agreement | mirror accepted | worst (mirror accepted) | "
+             "fewest distinct vertices | optimal | median s | max s |", "|---|---|---|---|---|---|---|---|---|---|"]
+    if "part_agreement" in s:
+        lines.append(f"| all | {s['queries']} | {s['failed']} | {s['part_agreement']:.3f} | "
+                     f"{s['part_agreement_sym']:.3f} | {s['worst_part_agreement_sym']:.3f} | "
+                     f"{s['min_distinct_vertices']} | {s['optimal']} | {s['median_seconds']:.2f} | "
+                     f"{s['max_seconds']:.2f} |")
+    else:
+        lines.append(f"| all | {s['queries']} | {s['failed']} | | | | | | | |")
+    lines += ["", "| sketch | target | part agreement | mirror accepted | scored points | distinct vertices | energy | "
+                  "gap | s | error |", "|---|---|---|---|---|---|---|---|---|---|"]
+    for r in rows:
+        if r["status"] != "ok":
+            lines.append(f"| {r['query']} | {r['target']} | | | | | | | | {r['error']} |")
+            continue
+        lines.append(f"| {r['query']} | {r['target']} | {r['part_agreement']:.3f} | {r['part_agreement_sym']:.3f} | "
+                     f"{r['scored_points']} | {r['distinct_vertices']} | {r['energy']:.4g} | {r['gap']:.2g} | "
+                     f"{r['seconds']:.2f} | |")
+    return "\n".join(lines) + "\n"
+
+
 COLUMNS = ("query", "target", "plane", "self", "other_class", "status", "n_points", "mean_error", "mean_error_sym",
            "median_error", "within_005",
            "within_01", "coverage", "distinct_vertices", "gt_distinct_vertices", "energy", "gap", "optimal",
-           "iterations", "seconds", "error")
+           "iterations", "seconds", "part_agreement", "part_agreement_sym", "scored_points", "error")
 
 
 def contour_benchmark(datasets, out, *, planes=DEFAULT_PLANES, params: dict | None = None, jobs: int | None = 1,
-                      scheduler: str | None = None, pictures: bool = True, callback=None) -> dict:
+                      scheduler: str | None = None, pictures: bool = True, callback=None, sketches=()) -> dict:
     """Run the plane-section benchmark; write ``contour_bench.csv``, ``contour_summary.{json,md}``, pictures.
 
     Parameters
@@ -515,6 +725,9 @@ def contour_benchmark(datasets, out, *, planes=DEFAULT_PLANES, params: dict | No
     out : path
         Output folder (created; checked for writing before any work).
     planes : sequence of str
+        Section and silhouette queries; may be empty when ``sketches`` are given.
+    sketches : sequence of path
+        Folders of labelled sketches, matched to the datasets' meshes with part labels (module docstring).
     params : dict, optional
         ``contour3d`` parameters (validated before any work).
     jobs, scheduler
@@ -526,7 +739,8 @@ def contour_benchmark(datasets, out, *, planes=DEFAULT_PLANES, params: dict | No
     Returns
     -------
     dict
-        The summary: ``{"all" | "same mesh" | "other pose" | "other class": {...}}``.
+        The summary: ``{"all" | "same mesh" | "other pose" | "other class": {...}}``, and ``"sketches"``
+        when sketches were given.
     """
     from corrlib.bench import csv_cell
     from corrlib.io import atomic_write, ensure_output_folder
@@ -536,6 +750,9 @@ def contour_benchmark(datasets, out, *, planes=DEFAULT_PLANES, params: dict | No
     params = dict(params or {})
     make_params(get_method("contour3d").params, **params)  # named errors before any work
     todo = contour_jobs(datasets, planes)
+    drawn = sketch_jobs(datasets, sketches)
+    if not todo and not drawn:
+        raise ParameterError("nothing to run: give section planes (--planes) or labelled sketches (--sketches)")
     executor = job_executor(jobs, scheduler)
     out = ensure_output_folder(out)
     if pictures:
@@ -550,17 +767,31 @@ def contour_benchmark(datasets, out, *, planes=DEFAULT_PLANES, params: dict | No
             futures.append(pool.submit(match_cut_query, str(job.source), str(job.target), job.plane, params,
                                        gt_rows=job.gt_rows, gt_map=job.gt_map, mirror_rows=job.mirror_rows,
                                        picture=picture))
+        for job in drawn:
+            picture = None
+            if pictures:
+                picture = str(out / "pictures" / f"{job.sketch.name}__{job.target.stem}.png")
+            futures.append(pool.submit(match_sketch_query, job.sketch, str(job.target), str(job.labels), params,
+                                       mirror_rows=job.mirror_rows, picture=picture))
         for number, future in enumerate(futures, 1):
             rows.append(future.result())
             if callback is not None:
                 callback(number, len(futures), rows[-1])
-    summary = _summary(rows)
+    sketch_rows = [r for r in rows if r["plane"] == "sketch"]
+    rows = [r for r in rows if r["plane"] != "sketch"]
+    summary = _summary(rows) if rows else {"all": {"queries": 0, "failed": 0}}
+    if sketch_rows:
+        summary["sketches"] = _sketch_summary(sketch_rows)
     with atomic_write(out / "contour_bench.csv") as fh:
         fh.write(",".join(COLUMNS) + "\n")
-        for r in rows:
+        for r in rows + sketch_rows:
             fh.write(",".join(csv_cell(r.get(c, "")) for c in COLUMNS) + "\n")
     with atomic_write(out / "contour_summary.json") as fh:
-        json.dump({"summary": summary, "params": params, "planes": list(planes), "rows": rows}, fh, indent=1)
+        json.dump({"summary": summary, "params": params, "planes": list(planes), "rows": rows,
+                   "sketch_rows": sketch_rows}, fh, indent=1)
     with atomic_write(out / "contour_summary.md") as fh:
-        fh.write(_markdown(summary, rows))
+        if rows:
+            fh.write(_markdown({k: v for k, v in summary.items() if k != "sketches"}, rows))
+        if sketch_rows:
+            fh.write(("\n" if rows else "") + _sketch_markdown(summary["sketches"], sketch_rows))
     return summary

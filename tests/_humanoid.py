@@ -8,8 +8,10 @@ linear blend skinning, so vertex i is the same point in every pose and the
 left–right mirror of vertex i is known from the rest pose.
 
 ``python tests/_humanoid.py OUT`` writes ``human{0,1,2}.off`` with
-``.vts`` (identity rows) and ``.sym.vts`` (mirrored rows), a dataset for
-``corr bench-contour``.
+``.vts`` (identity rows), ``.sym.vts`` (mirrored rows) and
+``_segmentation.txt`` (body parts in the vocabulary of the bundled human
+sketches, :func:`part_labels`), a dataset for ``corr bench-contour``
+(``--sketches resources/data/sketch2d`` scores the sketches against it).
 """
 
 from __future__ import annotations
@@ -101,6 +103,28 @@ def posed(vertices: np.ndarray, rotations: dict) -> np.ndarray:
     return sum(weights[:, i:i + 1] * (homogeneous @ transforms[name].T)[:, :3] for i, (name, *_) in enumerate(BONES))
 
 
+#: part labels of the bundled human sketches (resources/data/sketch2d): a leg, the other leg, chest, an arm,
+#: head, the other arm, belly and hips (0: unlabelled). The sketches face the viewer, so their "1" leg and "6"
+#: arm lie on the image's right: the person's left (+x here)
+SKETCH_PARTS = {"head": 5, "neck": 5, "lua": 6, "lfa": 6, "rua": 4, "rfa": 4, "lth": 1, "lsn": 1, "lft": 1,
+                "rth": 2, "rsn": 2, "rft": 2, "shoulders": 3, "hips": 7}
+
+
+def part_labels(vertices: np.ndarray) -> np.ndarray:
+    """(n,) int body part of rest-pose vertices ((n, 3) float) in the sketches' vocabulary.
+
+    Each vertex belongs to its nearest bone; the torso is chest (3) above its midpoint and belly (7) below,
+    with an unlabelled band of 6 cm between them, as the sketches leave one."""
+    distance = np.stack([_segment_distance(vertices, JOINTS[a], JOINTS[b]) - r for _, a, b, r, _ in BONES], axis=1)
+    bone = [BONES[i][0] for i in distance.argmin(axis=1)]
+    labels = np.array([SKETCH_PARTS.get(name, 0) for name in bone])
+    middle = 0.5 * (JOINTS["pelvis"][1] + JOINTS["chest"][1])
+    torso = np.array([name == "torso" for name in bone])
+    labels[torso & (vertices[:, 1] >= middle + 0.03)] = 3
+    labels[torso & (vertices[:, 1] < middle - 0.03)] = 7
+    return labels
+
+
 def humanoids(spacing: float = 0.025):
     """{name: (vertices, faces)} of the three poses and the mirror partner of every vertex ((n,) int)."""
     vertices, faces = rest_pose(spacing)
@@ -109,16 +133,18 @@ def humanoids(spacing: float = 0.025):
 
 
 def write_dataset(folder) -> Path:
-    """Write the three poses with .vts and .sym.vts ground truth (1-based rows) into ``folder``."""
+    """Write the three poses with .vts and .sym.vts ground truth (1-based rows) and part labels into ``folder``."""
     import trimesh
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
     shapes, mirror = humanoids()
+    labels = part_labels(shapes["human0"][0])  # the rest pose: vertex i is the same body point in every pose
     for name, (vertices, faces) in shapes.items():
         trimesh.Trimesh(vertices, faces, process=False).export(folder / f"{name}.off")
         np.savetxt(folder / f"{name}.vts", np.arange(len(vertices)) + 1, fmt="%d")
         np.savetxt(folder / f"{name}.sym.vts", mirror + 1, fmt="%d")
+        np.savetxt(folder / f"{name}_segmentation.txt", labels, fmt="%d")
     return folder
 
 

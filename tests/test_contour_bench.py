@@ -354,3 +354,102 @@ def test_the_view_is_read_off_the_outline():
     assert "side view" in side.energy_meaning
     forced = solve("contour3d", ellipse, wolf, n_contour=40, view="side")
     assert forced.extras["view"] == "side" and forced.energy > front.energy
+
+
+# ----------------------------------------------------------------------------- labelled sketches
+
+
+def _square_sketch(folder, name="square_sketch"):
+    """A unit square outline and its triangulation, left half labelled 1, right half 2, the middle 0."""
+    folder.mkdir(parents=True, exist_ok=True)
+    xs = np.linspace(0.0, 1.0, 11)
+    grid = np.array([(x, y, 0.0) for y in xs for x in xs])
+    faces = [(r * 11 + c, r * 11 + c + 1, (r + 1) * 11 + c + 1) for r in range(10) for c in range(10)]
+    faces += [(r * 11 + c, (r + 1) * 11 + c + 1, (r + 1) * 11 + c) for r in range(10) for c in range(10)]
+    trimesh.Trimesh(grid, faces, process=False).export(folder / f"{name}.off")
+    labels = np.where(grid[:, 0] < 0.45, 1, np.where(grid[:, 0] > 0.55, 2, 0))
+    np.savetxt(folder / f"{name}_segmentation.txt", labels, fmt="%d", header="part label per vertex")
+    np.savetxt(folder / f"{name}_contour.txt", [(0, 0), (1, 0), (1, 1), (0, 1)])
+    return folder
+
+
+def test_part_agreement_counts_the_points_labelled_on_both_sides():
+    from corrlib.contour_bench import part_agreement
+
+    assert part_agreement([1, 1, 2, 2, 0, 3], [1, 2, 2, 0, 5, 3]) == (0.75, 4)  # 0 on either side: not scored
+    agreement, scored = part_agreement([0, 0], [1, 2])
+    assert np.isnan(agreement) and scored == 0
+
+
+def test_sketch_points_take_the_label_of_the_nearest_sketch_vertex(tmp_path):
+    from corrlib.contour_bench import sketch_queries
+
+    (query,) = sketch_queries(_square_sketch(tmp_path / "sketches"))
+    assert query.name == "square_sketch"
+    assert list(query.point_labels([(0.0, 0.3), (1.0, 0.7), (0.5, 1.0), (0.31, 0.0)])) == [1, 2, 0, 1]
+
+
+def test_incomplete_sketches_and_unlabelled_meshes_are_named_errors(tmp_path):
+    from corrlib.contour_bench import sketch_jobs, sketch_queries
+    from corrlib.errors import FileFormatError
+
+    sketches = _square_sketch(tmp_path / "sketches")
+    (sketches / "square_sketch_segmentation.txt").unlink()
+    with pytest.raises(FileFormatError, match="square_sketch_contour.txt.*square_sketch_segmentation.txt"):
+        sketch_queries(sketches)
+    with pytest.raises(FileFormatError, match="no sketches"):
+        sketch_queries(tmp_path)
+    data = tmp_path / "wolves"
+    data.mkdir()
+    shutil.copy(TOSCA / "wolf0.off", data / "wolf0.off")
+    with pytest.raises(InputError, match="wolves.*part labels.*wolf0|part labels"):
+        sketch_jobs([data], [_square_sketch(tmp_path / "good")])
+    assert sketch_jobs([data], []) == []
+
+
+def test_the_people_carry_the_sketches_part_labels():
+    """Every part of the sketches' vocabulary is present, and the mirror image of a left limb is the right one."""
+    from _humanoid import humanoids, part_labels
+
+    shapes, mirror = humanoids()
+    labels = part_labels(shapes["human0"][0])
+    assert set(np.unique(labels)) == {0, 1, 2, 3, 4, 5, 6, 7}
+    swap = np.array([0, 2, 1, 3, 6, 5, 4, 7])  # legs 1 <-> 2, arms 4 <-> 6
+    limbs = np.isin(labels, [1, 2, 4, 6])
+    assert np.mean(labels[mirror][limbs] == swap[labels[limbs]]) > 0.99
+
+
+@pytest.mark.slow
+def test_the_papers_sketches_find_the_body_parts_of_a_person(tmp_path, capsys):
+    """The two human sketches of the CVPR 2016 paper (resources/data/sketch2d, part labels of their own)
+    matched to two poses of the synthetic person, whose labels follow the sketches' vocabulary; the labels
+    are only scored. Measured: 0.91-0.93 of the labelled points on the right part (mirror accepted: a front
+    view cannot tell left from right), the same with the sketch mirrored, reversed or scaled, and on the
+    person remeshed, shuffled, mirrored or with vertex noise (docs/decisions.md). Swapping the person's arm
+    and leg labels must show up as a low agreement."""
+    from _humanoid import write_dataset
+    from corrlib.resources import resource
+
+    data = write_dataset(tmp_path / "people")
+    (data / "human2.off").unlink()
+    out = tmp_path / "out"
+    assert main(["bench-contour", str(data), "--planes", "none", "--sketches", str(resource("data/sketch2d")),
+                 "--jobs", "1", "-q", "-o", str(out)]) == 0
+    assert "| sketches | n |" in capsys.readouterr().out
+    result = json.loads((out / "contour_summary.json").read_text())
+    rows = result["sketch_rows"]
+    assert len(rows) == 4 and all(r["status"] == "ok" and r["optimal"] for r in rows)
+    for row in rows:
+        assert row["part_agreement_sym"] >= 0.85 and row["distinct_vertices"] > 250, row
+    assert result["summary"]["sketches"]["worst_part_agreement_sym"] >= 0.85
+    assert len(list((out / "pictures").glob("human_sketch_*__human*.png"))) == 4
+    # the score can fail: the person's arms labelled as legs and the legs as arms
+    labels = np.loadtxt(data / "human1_segmentation.txt", dtype=int)
+    swapped = np.array([0, 4, 6, 3, 1, 5, 2, 7])[labels]
+    np.savetxt(data / "human1_segmentation.txt", swapped, fmt="%d")
+    from corrlib.contour_bench import match_sketch_query, sketch_queries
+
+    (sketch_a, _) = sketch_queries(resource("data/sketch2d"))
+    row = match_sketch_query(sketch_a, data / "human1.off", data / "human1_segmentation.txt", {},
+                             mirror_rows=(load_vts(data / "human1.vts"), load_vts(data / "human1.sym.vts")))
+    assert row["part_agreement_sym"] < 0.6, row

@@ -39,6 +39,17 @@ BONES = [("torso", "pelvis", "chest", 0.16, None), ("neck", "chest", "neck", 0.0
          ("shoulders", "lsh", "rsh", 0.07, "torso"), ("hips", "lhip", "rhip", 0.09, "torso")]
 
 
+#: a front for the capsule body (``front=True``): a nose, a chest and buttocks. Without them the upper body is
+#: front-back symmetric as well as left-right, so a half turn about the vertical axis is an orientation-preserving
+#: near-isometry of it, which no intrinsic method can tell from the right map (docs/decisions.md)
+FRONT_JOINTS = {k: np.array(v, dtype=float) for k, v in {
+    "nose0": (0, 1.71, 0.08), "nose1": (0, 1.69, 0.135), "chl": (0.07, 1.32, 0.05), "chr": (-0.07, 1.32, 0.05),
+    "bul": (0.07, 0.93, -0.05), "bur": (-0.07, 0.93, -0.05)}.items()}
+FRONT_BONES = [("nose", "nose0", "nose1", 0.03, "head"), ("chestfront", "chl", "chr", 0.12, "torso"),
+               ("buttocks", "bul", "bur", 0.1, "torso")]
+JOINTS.update(FRONT_JOINTS)
+
+
 def _rotation(axis, angle):
     axis = np.asarray(axis, dtype=float) / np.linalg.norm(axis)
     k = np.array([[0, -axis[2], axis[1]], [axis[2], 0, -axis[0]], [-axis[1], axis[0], 0]])
@@ -71,7 +82,7 @@ def _smooth_min(a, b, k=0.04):
     return b * (1 - h) + a * h - k * h * (1 - h)
 
 
-def rest_pose(spacing: float = 0.025):
+def rest_pose(spacing: float = 0.025, bones=BONES):
     """(vertices (n, 3), faces (f, 3)) of the rest pose, about 4,900 vertices at the default spacing."""
     import trimesh
     from skimage.measure import marching_cubes
@@ -79,7 +90,7 @@ def rest_pose(spacing: float = 0.025):
     lo, hi = np.array([-0.85, -0.05, -0.3]), np.array([0.85, 1.9, 0.35])
     grid = np.stack(np.meshgrid(*[np.arange(a, b, spacing) for a, b in zip(lo, hi)], indexing="ij"), -1)
     sdf = None
-    for _, a, b, radius, _ in BONES:
+    for _, a, b, radius, _ in bones:
         d = _segment_distance(grid, JOINTS[a], JOINTS[b]) - radius
         sdf = d if sdf is None else _smooth_min(sdf, d)
     vertices, faces, _, _ = marching_cubes(sdf, 0.0, spacing=(spacing,) * 3)
@@ -88,19 +99,19 @@ def rest_pose(spacing: float = 0.025):
     return np.asarray(mesh.vertices), np.asarray(mesh.faces)
 
 
-def posed(vertices: np.ndarray, rotations: dict) -> np.ndarray:
+def posed(vertices: np.ndarray, rotations: dict, bones=BONES) -> np.ndarray:
     """Linear blend skinning of rest-pose vertices ((n, 3) float) by joint rotations (forward kinematics)."""
     transforms = {}
-    for name, a, _, _, parent in BONES:
+    for name, a, _, _, parent in bones:
         rotation = rotations.get(name, np.eye(3))
         local = np.eye(4)
         local[:3, :3], local[:3, 3] = rotation, JOINTS[a] - rotation @ JOINTS[a]
         transforms[name] = (transforms[parent] if parent else np.eye(4)) @ local
-    distance = np.stack([_segment_distance(vertices, JOINTS[a], JOINTS[b]) - r for _, a, b, r, _ in BONES], axis=1)
+    distance = np.stack([_segment_distance(vertices, JOINTS[a], JOINTS[b]) - r for _, a, b, r, _ in bones], axis=1)
     weights = np.exp(-(distance - distance.min(axis=1, keepdims=True)) / 0.02)
     weights /= weights.sum(axis=1, keepdims=True)
     homogeneous = np.c_[vertices, np.ones(len(vertices))]
-    return sum(weights[:, i:i + 1] * (homogeneous @ transforms[name].T)[:, :3] for i, (name, *_) in enumerate(BONES))
+    return sum(weights[:, i:i + 1] * (homogeneous @ transforms[name].T)[:, :3] for i, (name, *_) in enumerate(bones))
 
 
 #: part labels of the bundled human sketches (resources/data/sketch2d): a leg, the other leg, chest, an arm,
@@ -125,11 +136,14 @@ def part_labels(vertices: np.ndarray) -> np.ndarray:
     return labels
 
 
-def humanoids(spacing: float = 0.025):
-    """{name: (vertices, faces)} of the three poses and the mirror partner of every vertex ((n,) int)."""
-    vertices, faces = rest_pose(spacing)
+def humanoids(spacing: float = 0.025, front: bool = False):
+    """{name: (vertices, faces)} of the three poses and the mirror partner of every vertex ((n,) int);
+    ``front``: with :data:`FRONT_BONES`, and :data:`RETRIEVAL_POSE` as a fourth pose ``human3``."""
+    bones = BONES + FRONT_BONES if front else BONES
+    vertices, faces = rest_pose(spacing, bones)
     _, mirror = cKDTree(vertices).query(vertices * [-1.0, 1.0, 1.0])
-    return {name: (posed(vertices, rotations), faces) for name, rotations in POSES.items()}, mirror
+    poses = {**POSES, "human3": RETRIEVAL_POSE} if front else POSES
+    return {name: (posed(vertices, rotations, bones), faces) for name, rotations in poses.items()}, mirror
 
 
 def write_dataset(folder) -> Path:

@@ -106,7 +106,8 @@ from corrlib.geometry.sampling import (
 from corrlib.geometry.spectrum import Spectrum, mesh_spectrum
 from corrlib.methods.base import InitialMatch, MatchResult, param
 from corrlib.methods.registry import MethodSpec, register
-from corrlib.methods.reorientation import ShapeParts, turn_reversed_map, turn_reversed_parts
+from corrlib.methods.reorientation import (ShapeParts, mirrored_map, turn_reversed_map, turn_reversed_parts,
+                                           turn_reversed_regions)
 from corrlib.methods.resolution import keep_resolved_matches, kernel_width
 from corrlib.progress import Progress, Stopwatch, scaled_progress
 
@@ -952,10 +953,12 @@ def multiscale_refinement(state: KernelState):
 
 
 def _reoriented(state: KernelState, map_xy: np.ndarray, map_yx: np.ndarray):
-    """The final map turned by the target's reflection where it reverses orientation (:mod:`.reorientation`):
-    the whole map if its orientation agreement is negative, then every protrusion of the source whose turned
-    image fits its shoulder better. The reflection is computed only when one of them is in question. Returns
-    the maps and the two decisions (None: not turned)."""
+    """The final map turned by a reflection where it reverses orientation (:mod:`.reorientation`): the whole
+    map by the target's if its orientation agreement is negative, then every region (a protrusion with its
+    shoulder) whose agreement is negative and turns positive by the better of the two shapes' reflections,
+    then every protrusion of the source whose image, turned by the target's, fits its shoulder better. A
+    reflection is computed only when one of them is in question. Returns the maps and the three decisions
+    (None: not turned)."""
     source, target = state.source, state.target
     mirror = []
 
@@ -968,10 +971,22 @@ def _reoriented(state: KernelState, map_xy: np.ndarray, map_yx: np.ndarray):
     if turned is not None:
         map_xy, map_yx = turned.map_xy, turned.map_yx
     parts_x, parts_y = (ShapeParts.of(mesh, spec) for mesh, spec in ((source, state.spec_x), (target, state.spec_y)))
+    mirror_x = []
+
+    def mirror_x_():
+        if not mirror_x:
+            mirror_x.append(mesh_reflection(source, state.spec_x))
+        return mirror_x[0]
+
+    turned_regions = turn_reversed_regions(map_xy, map_yx, parts_x,
+                                           lambda m: mirrored_map(m, mirror_x_(), mirror_y(), parts_x, parts_y),
+                                           mirror_x_, lambda m: _local_agreement(*state.orientation_blocks(), m))
+    if turned_regions is not None:
+        map_xy, map_yx = turned_regions.map_xy, turned_regions.map_yx
     turned_parts = turn_reversed_parts(map_xy, map_yx, parts_x, parts_y, mirror_y)
     if turned_parts is not None:
         map_xy, map_yx = turned_parts.map_xy, turned_parts.map_yx
-    return map_xy, map_yx, turned, turned_parts
+    return map_xy, map_yx, turned, turned_regions, turned_parts
 
 
 def kernel_result(state: KernelState, full_map_xy: np.ndarray, full_map_yx: np.ndarray):
@@ -982,12 +997,13 @@ def kernel_result(state: KernelState, full_map_xy: np.ndarray, full_map_yx: np.n
     monotone, dc_start, n_seed = state.monotone, state.dc_start, state.n_seed
     seed_vertices_x, seed_vertices_y = state.seed_vertices_x, state.seed_vertices_y
     decay_y, decay_x = state.decays(state.taus[-1])
-    turned = turned_parts = None
+    turned = turned_regions = turned_parts = None
     # landmarks fix the orientation themselves; a cut changes a shape's reflection and biharmonic distances
     if params.reorient and state.anchors_x.size == 0 and not params.partial and \
             state.source.is_closed and state.target.is_closed and state.spec_y.k >= REFLECTION_EIGENPAIRS:
         with watch("orientation"):
-            full_map_xy, full_map_yx, turned, turned_parts = _reoriented(state, full_map_xy, full_map_yx)
+            full_map_xy, full_map_yx, turned, turned_regions, turned_parts = _reoriented(state, full_map_xy,
+                                                                                         full_map_yx)
     c = _alignment(psi[full_map_xy[full_map_xy >= 0]], phi[full_map_xy >= 0]) + anchor_c
     energy = kernel_energy(c, decay_y, decay_x)
     if params.smooth_k > 0:
@@ -1000,6 +1016,7 @@ def kernel_result(state: KernelState, full_map_xy: np.ndarray, full_map_yx: np.n
         "orientation_agreement": _agreement(*state.orientation_blocks(), full_map_xy),
         "turned": turned is not None,
         "agreement_before_turn": None if turned is None else turned.agreement_before,
+        "turned_regions": 0 if turned_regions is None else len(turned_regions.parts),
         "turned_parts": 0 if turned_parts is None else len(turned_parts.parts),
         "changed_trace": np.array([e["changed"] for e in trace]),
         "tau_trace": np.array([e["tau"] for e in trace]),
@@ -1052,6 +1069,11 @@ def orientation_agreement(source, target, map_xy: np.ndarray, spec_x: Spectrum, 
     return _agreement(*_orientation_blocks(source, target, spec_x, spec_y), map_xy)
 
 
+def _local_agreement(or_x: np.ndarray, or_y: np.ndarray, map_xy: np.ndarray) -> np.ndarray:
+    """(n_X,) float: every source vertex's ``<O_X(x), O_Y(m(x))>`` (0 where unmatched)."""
+    return np.where(map_xy >= 0, np.sum(or_x * or_y[np.maximum(map_xy, 0)], axis=1), 0.0)
+
+
 def _agreement(or_x: np.ndarray, or_y: np.ndarray, map_xy: np.ndarray) -> float:
     """:func:`orientation_agreement` from the standardised descriptors."""
     ok = map_xy >= 0
@@ -1070,6 +1092,10 @@ def turn_note(extras: dict) -> str | None:
         said.append(f"the map sent left to right on most of the shape (orientation agreement "
                     f"{extras['agreement_before_turn']:.2f}); it was composed with the target's intrinsic "
                     f"reflection (agreement now {extras['orientation_agreement']:.2f})")
+    if extras.get("turned_regions"):
+        count = extras["turned_regions"]
+        said.append(f"{count} region{'s' if count > 1 else ''} (a protrusion with the body beside it) matched "
+                    f"mirror-inverted {'were' if count > 1 else 'was'} turned by the target's reflection")
     if extras.get("turned_parts"):
         count = extras["turned_parts"]
         said.append(f"{count} protrusion{'s' if count > 1 else ''} (limbs) matched to the mirror-image limb "

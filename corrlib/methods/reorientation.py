@@ -50,7 +50,32 @@ nearer, on the target, to the wrong shoulder; a part on the plane of symmetry
 (head, tail) is its own mirror image, so its two distortions are close and the
 lower one is the right one within the part's own reflection error.
 
-Both decisions assume complete shapes: a cut (a partial scan, the front of an
+**Regions.** A map can also be mirrored on one part of the shape and right
+on the rest — a person's upper body against the legs — so that the
+whole-map agreement is positive. The agreement is local: ``a_R(m)``, its
+mean over a region ``R`` of the source, has as clean a sign there.
+:func:`turn_reversed_regions` splits the source into its protrusions, each
+with its shoulder (a limb with the body beside it), and applies the
+whole-map rule to every region, ``a_R(m) < 0 < a_R(S ∘ m)``, while at least
+one region keeps its orientation (otherwise it is the whole map's case), and
+turns it together with its mirror region (``S_X(R)``, the other arm; the
+head is its own): a mirrored part of a bilaterally symmetric map is closed
+under the reflection, a single limb with a negative agreement is not (that
+is a crossed limb, the parts' case, or noise). A region that is its own
+mirror region (a head, a tail) is turned only with a pair: alone, a thin
+part on the plane of symmetry carries weak orientation descriptors, and a
+tail matched to the wrong place passes the sign test as often as not
+(measured on the lion → cat pair: a tail 0.59 √area off either way). The
+turn uses the better of the two shapes' reflections (:func:`mirrored_map`:
+``S_Y ∘ m`` or ``m ∘ S_X``, whichever reflection distorts the biharmonic
+distances less): a computed reflection of a posed person, whose limbs are
+posed unlike their mirror limbs, can be poor while the other shape's is
+exact. The distortion of a region's distances to the regions that keep their
+orientation, the parts' test, does not decide here: an arm is about as far
+from either leg, so turning a mirrored arm back changed it by less than the
+poses do, and in either direction.
+
+All these decisions assume complete shapes: a cut (a partial scan, the front of an
 animal) changes the intrinsic reflection and the biharmonic distances near
 and far from it (measured: the front 60 % of a wolf against a whole wolf had
 three "parts" turned and fell from 64 % to 20 % within 0.1), so kernel
@@ -199,7 +224,7 @@ class ShapeParts:
 
 @dataclass(frozen=True)
 class TurnedParts:
-    """The parts of a map turned by the target's reflection.
+    """The parts (or regions) of a map turned by a reflection.
 
     Attributes
     ----------
@@ -278,3 +303,108 @@ def turn_reversed_parts(map_xy: np.ndarray, map_yx: np.ndarray | None, parts_x: 
         take = (partner_of_mirror >= 0) & in_turned[np.maximum(partner_of_mirror, 0)]
         turned_yx = np.where(take, partner_of_mirror, map_yx)
     return TurnedParts(turned_xy, turned_yx, parts)
+
+
+def shoulder_regions(parts: ShapeParts) -> np.ndarray:
+    """(n,) int: every protrusion together with its shoulder, ``p ≥ 1`` (0 everywhere for a shape without
+    protrusions)."""
+    return np.where(parts.labels > 0, parts.labels, parts.shoulders)
+
+
+#: vertices (evenly strided) on which a reflection's distortion is measured
+REFLECTION_SAMPLES = 400
+
+
+def reflection_distortion(mirror: np.ndarray, embedding: np.ndarray) -> float:
+    """Mean ``|d(x, y) − d(S x, S y)|`` of the biharmonic distances over pairs of evenly strided vertices.
+
+    Zero for an exact intrinsic isometry; it measures how well a computed self-map ``S``
+    (:func:`~corrlib.descriptors.symmetry.reflection_map`) is one, without any ground truth.
+
+    Parameters
+    ----------
+    mirror : (n,) int
+    embedding : (n, d) float
+        :func:`biharmonic_embedding` of the shape (divided by √area to compare shapes).
+    """
+    sample = np.arange(0, mirror.size, max(1, mirror.size // REFLECTION_SAMPLES))
+    return float(np.mean(np.abs(cdist(embedding[sample], embedding[sample])
+                                - cdist(embedding[mirror[sample]], embedding[mirror[sample]]))))
+
+
+def mirrored_map(map_xy: np.ndarray, mirror_x: np.ndarray | None, mirror_y: np.ndarray | None,
+                 parts_x: ShapeParts, parts_y: ShapeParts) -> np.ndarray:
+    """The map turned by the better of the two shapes' reflections: ``S_Y ∘ m`` or ``m ∘ S_X``.
+
+    For a map that is an isometry both turn it alike (``S_Y ∘ m = m ∘ S_X``); a computed reflection can be
+    poor on one shape (a posed person whose limbs are posed unlike their mirror limbs) and good on the other,
+    so the one with the smaller :func:`reflection_distortion` is used. ``None`` for a reflection not given.
+    (n_X,) int, -1 where the map (or its composition) is unmatched.
+    """
+    candidates = []
+    if mirror_y is not None:
+        candidates.append((reflection_distortion(mirror_y, parts_y.embedding), "y"))
+    if mirror_x is not None:
+        candidates.append((reflection_distortion(mirror_x, parts_x.embedding), "x"))
+    _, side = min(candidates)
+    if side == "y":
+        return np.where(map_xy >= 0, mirror_y[np.maximum(map_xy, 0)], -1)
+    return np.asarray(map_xy)[mirror_x]
+
+
+def turn_reversed_regions(map_xy: np.ndarray, map_yx: np.ndarray | None, parts_x: ShapeParts,
+                          mirror: Callable[[np.ndarray], np.ndarray], mirror_x: Callable[[], np.ndarray],
+                          local_agreement: Callable[[np.ndarray], np.ndarray]) -> TurnedParts | None:
+    """Turn every region that the map reverses and the reflection rights (see the module docstring).
+
+    Parameters
+    ----------
+    map_xy : (n_X,) int
+        -1 where unmatched.
+    map_yx : (n_Y,) int or None
+    parts_x : ShapeParts
+        Of the source (its regions: :func:`shoulder_regions`).
+    mirror : callable
+        ``(n_X,) int map -> (n_X,) int``: the map turned by a reflection (:func:`mirrored_map`); called only if
+        a region's agreement is negative.
+    mirror_x : callable returning (n_X,) int
+        The source's reflection, which pairs every region with its mirror region.
+    local_agreement : callable
+        ``(n_X,) int map -> (n_X,) float``: every source vertex's agreement ``⟨O_X(x), O_Y(m(x))⟩`` (any
+        value where unmatched; those vertices are left out).
+
+    Returns
+    -------
+    TurnedParts or None
+        ``parts``: the turned regions (:func:`shoulder_regions` labels); None when no region is turned. A map reversed on every region is the whole-map rule's
+        (:func:`turn_reversed_map`) and is left to it.
+    """
+    regions = shoulder_regions(parts_x)
+    matched = map_xy >= 0
+    present = [r for r in range(1, int(regions.max(initial=0)) + 1) if np.any((regions == r) & matched)]
+
+    def means(values):
+        return {r: float(np.mean(values[(regions == r) & matched])) for r in present}
+
+    before = means(local_agreement(map_xy))
+    reversed_ = [r for r in present if before[r] < 0]
+    if not reversed_ or len(reversed_) == len(present):
+        return None
+    mirrored_xy = np.asarray(mirror(map_xy))
+    after = means(np.where(mirrored_xy >= 0, local_agreement(mirrored_xy), 0.0))
+    righted = [r for r in reversed_ if after[r] > 0]
+    partner = {r: _majority(regions[np.asarray(mirror_x())[regions == r]]) for r in righted}
+    turned = [r for r in righted if partner[r] in righted]
+    if all(partner[r] == r for r in turned):  # no pair of mirror regions among them
+        return None
+    turned_xy = np.array(map_xy, copy=True)
+    members = np.isin(regions, turned) & matched & (mirrored_xy >= 0)
+    turned_xy[members] = mirrored_xy[members]
+    if not turned:
+        return None
+    turned_yx = None
+    if map_yx is not None:  # a target vertex that a turned region now reaches takes a partner there
+        turned_yx = np.array(map_yx, copy=True)
+        in_turned = np.flatnonzero(np.isin(regions, turned) & (turned_xy >= 0))
+        turned_yx[turned_xy[in_turned]] = in_turned
+    return TurnedParts(turned_xy, turned_yx, turned)

@@ -333,3 +333,18 @@ def test_turned_regions_are_reported():
 
     note = turn_note({"turned_regions": 3})
     assert note.startswith("3 regions (a protrusion with the body beside it) matched mirror-inverted were turned")
+
+
+def test_the_whole_map_is_reversed_only_if_every_region_is():
+    """A map mirrored on one region and strongly so (the legs of a posed person, crossed) can have a
+    negative mean agreement while the rest is right; the whole-map rule then stays out."""
+    from corrlib.methods.reorientation import reversed_everywhere
+
+    parts = _toy_parts(np.array([1, 1, 2, 2, 3, 3]))
+    ident = np.arange(6)
+    assert reversed_everywhere(ident, parts, lambda m: -np.ones(6))
+    one_strong = lambda m: np.array([-30.0, -30.0, 5.0, 5.0, 5.0, 5.0])  # noqa: E731  (mean negative)
+    assert np.mean(one_strong(ident)) < 0 and not reversed_everywhere(ident, parts, one_strong)
+    assert not reversed_everywhere(ident, parts, lambda m: np.ones(6))
+    body = _toy_parts(np.zeros(6, dtype=int))  # no protrusions: the whole shape's mean decides
+    assert reversed_everywhere(ident, body, one_strong)

@@ -117,3 +117,29 @@ def wks(evals, evecs, n_scales: int = 100, *, variance: float = 6.0, normalize: 
     elif normalize != "none":
         raise ParameterError(f"unknown WKS normalisation {normalize!r}")
     return desc
+
+
+#: the biharmonic sum keeps the eigenpairs whose weight ``λ_k⁻²`` is at least this fraction of the first one's
+BIHARMONIC_RTOL = 1e-4
+
+
+def biharmonic_embedding(evals: np.ndarray, evecs: np.ndarray) -> np.ndarray:
+    """Points whose Euclidean distances are the biharmonic distances of a shape.
+
+    ``d_B(x, y)² = Σ_{k ≥ 1} (φ_k(x) − φ_k(y))² / λ_k²`` (Lipman et al. 2010), so the embedding is
+    ``φ_k / λ_k`` without the constant eigenpair. The terms fall as ``λ_k⁻²``; those below
+    :data:`BIHARMONIC_RTOL` of the first are left out (``λ_k > 100 λ_1``).
+
+    Parameters
+    ----------
+    evals : (k,) float
+        Ascending, the first one zero (a connected shape).
+    evecs : (n, k) float
+        M-orthonormal eigenvectors.
+
+    Returns
+    -------
+    (n, k - 1) float
+    """
+    keep = np.flatnonzero((np.arange(evals.size) >= 1) & (evals <= evals[1] / np.sqrt(BIHARMONIC_RTOL)))
+    return evecs[:, keep] / evals[None, keep]

@@ -106,8 +106,8 @@ from corrlib.geometry.sampling import (
 from corrlib.geometry.spectrum import Spectrum, mesh_spectrum
 from corrlib.methods.base import InitialMatch, MatchResult, param
 from corrlib.methods.registry import MethodSpec, register
-from corrlib.methods.reorientation import (ShapeParts, mirrored_map, turn_reversed_map, turn_reversed_parts,
-                                           turn_reversed_regions)
+from corrlib.methods.reorientation import (ShapeParts, mirrored_map, reversed_everywhere, turn_reversed_map,
+                                           turn_reversed_parts, turn_reversed_regions)
 from corrlib.methods.resolution import keep_resolved_matches, kernel_width
 from corrlib.progress import Progress, Stopwatch, scaled_progress
 
@@ -954,7 +954,7 @@ def multiscale_refinement(state: KernelState):
 
 def _reoriented(state: KernelState, map_xy: np.ndarray, map_yx: np.ndarray):
     """The final map turned by a reflection where it reverses orientation (:mod:`.reorientation`): the whole
-    map by the target's if its orientation agreement is negative, then every region (a protrusion with its
+    map by the target's if its orientation agreement is negative on every region, else every region (a protrusion with its
     shoulder) whose agreement is negative and turns positive by the better of the two shapes' reflections,
     then every protrusion of the source whose image, turned by the target's, fits its shoulder better. A
     reflection is computed only when one of them is in question. Returns the maps and the three decisions
@@ -967,10 +967,13 @@ def _reoriented(state: KernelState, map_xy: np.ndarray, map_yx: np.ndarray):
             mirror.append(mesh_reflection(target, state.spec_y))
         return mirror[0]
 
-    turned = turn_reversed_map(map_xy, map_yx, mirror_y, lambda m: _agreement(*state.orientation_blocks(), m))
+    parts_x, parts_y = (ShapeParts.of(mesh, spec) for mesh, spec in ((source, state.spec_x), (target, state.spec_y)))
+    local = lambda m: _local_agreement(*state.orientation_blocks(), m)  # noqa: E731
+    turned = None
+    if reversed_everywhere(map_xy, parts_x, local):
+        turned = turn_reversed_map(map_xy, map_yx, mirror_y, lambda m: _agreement(*state.orientation_blocks(), m))
     if turned is not None:
         map_xy, map_yx = turned.map_xy, turned.map_yx
-    parts_x, parts_y = (ShapeParts.of(mesh, spec) for mesh, spec in ((source, state.spec_x), (target, state.spec_y)))
     mirror_x = []
 
     def mirror_x_():
@@ -980,7 +983,7 @@ def _reoriented(state: KernelState, map_xy: np.ndarray, map_yx: np.ndarray):
 
     turned_regions = turn_reversed_regions(map_xy, map_yx, parts_x,
                                            lambda m: mirrored_map(m, mirror_x_(), mirror_y(), parts_x, parts_y),
-                                           mirror_x_, lambda m: _local_agreement(*state.orientation_blocks(), m))
+                                           mirror_x_, local)
     if turned_regions is not None:
         map_xy, map_yx = turned_regions.map_xy, turned_regions.map_yx
     turned_parts = turn_reversed_parts(map_xy, map_yx, parts_x, parts_y, mirror_y)

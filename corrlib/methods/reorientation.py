@@ -57,7 +57,9 @@ mean over a region ``R`` of the source, has as clean a sign there.
 :func:`turn_reversed_regions` splits the source into its protrusions, each
 with its shoulder (a limb with the body beside it), and applies the
 whole-map rule to every region, ``a_R(m) < 0 < a_R(S ∘ m)``, while at least
-one region keeps its orientation (otherwise it is the whole map's case), and
+one region keeps its orientation (otherwise it is the whole map's case, and
+the whole-map rule applies only then, :func:`reversed_everywhere`: one
+strongly mirrored region can make the mean negative), and
 turns it together with its mirror region (``S_X(R)``, the other arm; the
 head is its own): a mirrored part of a bilaterally symmetric map is closed
 under the reflection, a single limb with a negative agreement is not (that
@@ -89,6 +91,9 @@ from typing import Callable
 
 import numpy as np
 from scipy.spatial.distance import cdist
+
+from corrlib.descriptors.spectral import biharmonic_embedding
+from corrlib.descriptors.symmetry import reflection_distortion
 
 
 @dataclass(frozen=True)
@@ -141,32 +146,6 @@ def turn_reversed_map(map_xy: np.ndarray, map_yx: np.ndarray | None, mirror_y: C
         return None
     turned_yx = None if map_yx is None else np.asarray(map_yx)[mirror]
     return Turned(turned_xy, turned_yx, before, after)
-
-
-#: the biharmonic sum keeps the eigenpairs whose weight ``λ_k⁻²`` is at least this fraction of the first one's
-BIHARMONIC_RTOL = 1e-4
-
-
-def biharmonic_embedding(evals: np.ndarray, evecs: np.ndarray) -> np.ndarray:
-    """Points whose Euclidean distances are the biharmonic distances of a shape.
-
-    ``d_B(x, y)² = Σ_{k ≥ 1} (φ_k(x) − φ_k(y))² / λ_k²`` (Lipman et al. 2010), so the embedding is
-    ``φ_k / λ_k`` without the constant eigenpair. The terms fall as ``λ_k⁻²``; those below
-    :data:`BIHARMONIC_RTOL` of the first are left out (``λ_k > 100 λ_1``).
-
-    Parameters
-    ----------
-    evals : (k,) float
-        Ascending, the first one zero (a connected shape).
-    evecs : (n, k) float
-        M-orthonormal eigenvectors.
-
-    Returns
-    -------
-    (n, k - 1) float
-    """
-    keep = np.flatnonzero((np.arange(evals.size) >= 1) & (evals <= evals[1] / np.sqrt(BIHARMONIC_RTOL)))
-    return evecs[:, keep] / evals[None, keep]
 
 
 def part_shoulders(labels: np.ndarray, mesh) -> np.ndarray:
@@ -311,27 +290,6 @@ def shoulder_regions(parts: ShapeParts) -> np.ndarray:
     return np.where(parts.labels > 0, parts.labels, parts.shoulders)
 
 
-#: vertices (evenly strided) on which a reflection's distortion is measured
-REFLECTION_SAMPLES = 400
-
-
-def reflection_distortion(mirror: np.ndarray, embedding: np.ndarray) -> float:
-    """Mean ``|d(x, y) − d(S x, S y)|`` of the biharmonic distances over pairs of evenly strided vertices.
-
-    Zero for an exact intrinsic isometry; it measures how well a computed self-map ``S``
-    (:func:`~corrlib.descriptors.symmetry.reflection_map`) is one, without any ground truth.
-
-    Parameters
-    ----------
-    mirror : (n,) int
-    embedding : (n, d) float
-        :func:`biharmonic_embedding` of the shape (divided by √area to compare shapes).
-    """
-    sample = np.arange(0, mirror.size, max(1, mirror.size // REFLECTION_SAMPLES))
-    return float(np.mean(np.abs(cdist(embedding[sample], embedding[sample])
-                                - cdist(embedding[mirror[sample]], embedding[mirror[sample]]))))
-
-
 def mirrored_map(map_xy: np.ndarray, mirror_x: np.ndarray | None, mirror_y: np.ndarray | None,
                  parts_x: ShapeParts, parts_y: ShapeParts) -> np.ndarray:
     """The map turned by the better of the two shapes' reflections: ``S_Y ∘ m`` or ``m ∘ S_X``.
@@ -350,6 +308,20 @@ def mirrored_map(map_xy: np.ndarray, mirror_x: np.ndarray | None, mirror_y: np.n
     if side == "y":
         return np.where(map_xy >= 0, mirror_y[np.maximum(map_xy, 0)], -1)
     return np.asarray(map_xy)[mirror_x]
+
+
+def reversed_everywhere(map_xy: np.ndarray, parts_x: ShapeParts,
+                        local_agreement: Callable[[np.ndarray], np.ndarray]) -> bool:
+    """Whether the map's agreement is negative on every region of the source (:func:`shoulder_regions`; on
+    the whole shape if it has no protrusions): the whole-map rule's case (:func:`turn_reversed_map`). A map
+    mirrored on some regions only is :func:`turn_reversed_regions`' case, however negative its mean."""
+    regions = shoulder_regions(parts_x)
+    matched = map_xy >= 0
+    values = local_agreement(map_xy)
+    present = [r for r in np.unique(regions[matched]) if r > 0]
+    if not present:
+        return bool(np.mean(values[matched]) < 0) if matched.any() else False
+    return all(np.mean(values[(regions == r) & matched]) < 0 for r in present)
 
 
 def turn_reversed_regions(map_xy: np.ndarray, map_yx: np.ndarray | None, parts_x: ShapeParts,

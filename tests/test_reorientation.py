@@ -256,7 +256,7 @@ def test_a_region_turns_with_its_mirror_region_only():
     mirror_x = np.array([2, 3, 0, 1, 5, 4])  # exchanges the two sides, keeps region 3
     parts = _toy_parts(regions)
     agreement = lambda m: np.where(side[m] == side, 1.0, -1.0)  # noqa: E731
-    turn = lambda m: np.asarray(m)[mirror_x]  # noqa: E731  (m ∘ S_X)
+    turn = lambda m, m_yx: (np.asarray(m)[mirror_x], None if m_yx is None else mirror_x[m_yx])  # noqa: E731
     ident = np.arange(6)
     half = ident.copy()
     half[:4] = mirror_x[:4]
@@ -269,13 +269,14 @@ def test_a_region_turns_with_its_mirror_region_only():
     assert turn_reversed_regions(one, None, parts, turn, lambda: mirror_x, agreement) is None
     everywhere = lambda m: -np.ones(6)  # noqa: E731  (reversed on every region)
     assert turn_reversed_regions(half, None, parts, turn, lambda: mirror_x, everywhere) is None
-    assert turn_reversed_regions(half, None, parts, lambda m: m, lambda: mirror_x, agreement) is None
+    assert turn_reversed_regions(half, None, parts, lambda m, m_yx: (m, m_yx), lambda: mirror_x, agreement) is None
     plane = ident.copy()
     plane[4:] = [0, 1]  # region 3, its own mirror region, alone sent away (and "righted" by the turn below)
     only_plane = lambda m: np.where(np.arange(6) >= 4, np.where(np.asarray(m) == plane, -1.0, 1.0), 1.0)  # noqa
-    assert turn_reversed_regions(plane, None, parts, lambda m: ident, lambda: mirror_x, only_plane) is None
+    assert turn_reversed_regions(plane, None, parts, lambda m, m_yx: (ident, None), lambda: mirror_x,
+                                 only_plane) is None
     calls = []
-    assert turn_reversed_regions(ident, None, parts, lambda m: calls.append(1) or m, lambda: mirror_x,
+    assert turn_reversed_regions(ident, None, parts, lambda m, m_yx: calls.append(1) or (m, m_yx), lambda: mirror_x,
                                  agreement) is None and not calls  # nothing in question: no reflection
 
 
@@ -295,8 +296,12 @@ def test_the_reflection_that_distorts_less_turns_the_map(wolf_pair):
     assert good < 0.1 * bad
     assert reflection_distortion(np.arange(wolf0.n_vertices), parts0.embedding) == 0.0
     ident = np.arange(wolf0.n_vertices)
-    np.testing.assert_array_equal(mirrored_map(ident, mirror0, shuffled, parts0, parts1), mirror0)
-    np.testing.assert_array_equal(mirrored_map(ident, None, shuffled, parts0, parts1), shuffled)
+    turned_xy, turned_yx = mirrored_map(ident, ident, mirror0, shuffled, parts0, parts1)
+    np.testing.assert_array_equal(turned_xy, mirror0)
+    np.testing.assert_array_equal(turned_yx, mirror0)  # S_X ∘ m⁻¹
+    turned_xy, turned_yx = mirrored_map(ident, None, None, shuffled, parts0, parts1)
+    np.testing.assert_array_equal(turned_xy, shuffled)
+    assert turned_yx is None
 
 
 @pytest.mark.slow
@@ -326,13 +331,17 @@ def test_kernel_matching_turns_a_mirrored_upper_body():
     assert turned.extras["turned_regions"] >= 2 and not turned.extras["turned"]
     direct, sym = errors(turned)
     assert direct <= 1.3 * sym and direct < 0.03, (direct, sym)
+    # the backward map is turned too (the studio colours the target through it)
+    backward = geodesic_errors(turned.map_yx, rest, mirror, ident).summary()["mean"]
+    assert backward < 0.05, backward
 
 
 def test_turned_regions_are_reported():
     from corrlib.methods.kernel_matching import turn_note
 
     note = turn_note({"turned_regions": 3})
-    assert note.startswith("3 regions (a protrusion with the body beside it) matched mirror-inverted were turned")
+    assert note.startswith("3 regions (a protrusion with the body beside it) matched mirror-inverted were turned by a "
+                           "reflection (the source's or the target's")
 
 
 def test_the_whole_map_is_reversed_only_if_every_region_is():

@@ -982,7 +982,8 @@ def _reoriented(state: KernelState, map_xy: np.ndarray, map_yx: np.ndarray):
         return mirror_x[0]
 
     turned_regions = turn_reversed_regions(map_xy, map_yx, parts_x,
-                                           lambda m: mirrored_map(m, mirror_x_(), mirror_y(), parts_x, parts_y),
+                                           lambda m, m_yx: mirrored_map(m, m_yx, mirror_x_(), mirror_y(), parts_x,
+                                                                        parts_y),
                                            mirror_x_, local)
     if turned_regions is not None:
         map_xy, map_yx = turned_regions.map_xy, turned_regions.map_yx
@@ -1098,7 +1099,8 @@ def turn_note(extras: dict) -> str | None:
     if extras.get("turned_regions"):
         count = extras["turned_regions"]
         said.append(f"{count} region{'s' if count > 1 else ''} (a protrusion with the body beside it) matched "
-                    f"mirror-inverted {'were' if count > 1 else 'was'} turned by the target's reflection")
+                    f"mirror-inverted {'were' if count > 1 else 'was'} turned by a reflection (the source's or the "
+                    f"target's, whichever is nearer an isometry)")
     if extras.get("turned_parts"):
         count = extras["turned_parts"]
         said.append(f"{count} protrusion{'s' if count > 1 else ''} (limbs) matched to the mirror-image limb "

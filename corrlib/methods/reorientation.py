@@ -290,14 +290,21 @@ def shoulder_regions(parts: ShapeParts) -> np.ndarray:
     return np.where(parts.labels > 0, parts.labels, parts.shoulders)
 
 
-def mirrored_map(map_xy: np.ndarray, mirror_x: np.ndarray | None, mirror_y: np.ndarray | None,
-                 parts_x: ShapeParts, parts_y: ShapeParts) -> np.ndarray:
-    """The map turned by the better of the two shapes' reflections: ``S_Y ∘ m`` or ``m ∘ S_X``.
+def mirrored_map(map_xy: np.ndarray, map_yx: np.ndarray | None, mirror_x: np.ndarray | None,
+                 mirror_y: np.ndarray | None, parts_x: ShapeParts,
+                 parts_y: ShapeParts) -> tuple[np.ndarray, np.ndarray | None]:
+    """The maps turned by the better of the two shapes' reflections: ``S_Y ∘ m`` or ``m ∘ S_X``.
 
     For a map that is an isometry both turn it alike (``S_Y ∘ m = m ∘ S_X``); a computed reflection can be
     poor on one shape (a posed person whose limbs are posed unlike their mirror limbs) and good on the other,
     so the one with the smaller :func:`reflection_distortion` is used. ``None`` for a reflection not given.
-    (n_X,) int, -1 where the map (or its composition) is unmatched.
+
+    Returns
+    -------
+    turned_xy : (n_X,) int
+        -1 where the map (or its composition) is unmatched.
+    turned_yx : (n_Y,) int or None
+        The inverse turned alike, ``m⁻¹ ∘ S_Y`` or ``S_X ∘ m⁻¹`` (None without ``map_yx``).
     """
     candidates = []
     if mirror_y is not None:
@@ -305,9 +312,12 @@ def mirrored_map(map_xy: np.ndarray, mirror_x: np.ndarray | None, mirror_y: np.n
     if mirror_x is not None:
         candidates.append((reflection_distortion(mirror_x, parts_x.embedding), "x"))
     _, side = min(candidates)
+    map_xy = np.asarray(map_xy)
     if side == "y":
-        return np.where(map_xy >= 0, mirror_y[np.maximum(map_xy, 0)], -1)
-    return np.asarray(map_xy)[mirror_x]
+        turned_yx = None if map_yx is None else np.asarray(map_yx)[mirror_y]
+        return np.where(map_xy >= 0, mirror_y[np.maximum(map_xy, 0)], -1), turned_yx
+    turned_yx = None if map_yx is None else np.where(map_yx >= 0, mirror_x[np.maximum(map_yx, 0)], -1)
+    return map_xy[mirror_x], turned_yx
 
 
 def reversed_everywhere(map_xy: np.ndarray, parts_x: ShapeParts,
@@ -337,8 +347,8 @@ def turn_reversed_regions(map_xy: np.ndarray, map_yx: np.ndarray | None, parts_x
     parts_x : ShapeParts
         Of the source (its regions: :func:`shoulder_regions`).
     mirror : callable
-        ``(n_X,) int map -> (n_X,) int``: the map turned by a reflection (:func:`mirrored_map`); called only if
-        a region's agreement is negative.
+        ``(map_xy, map_yx) -> (turned_xy, turned_yx)``: the maps turned by a reflection (:func:`mirrored_map`);
+        called only if a region's agreement is negative.
     mirror_x : callable returning (n_X,) int
         The source's reflection, which pairs every region with its mirror region.
     local_agreement : callable
@@ -362,7 +372,8 @@ def turn_reversed_regions(map_xy: np.ndarray, map_yx: np.ndarray | None, parts_x
     reversed_ = [r for r in present if before[r] < 0]
     if not reversed_ or len(reversed_) == len(present):
         return None
-    mirrored_xy = np.asarray(mirror(map_xy))
+    mirrored_xy, mirrored_yx = mirror(map_xy, map_yx)
+    mirrored_xy = np.asarray(mirrored_xy)
     after = means(np.where(mirrored_xy >= 0, local_agreement(mirrored_xy), 0.0))
     righted = [r for r in reversed_ if after[r] > 0]
     partner = {r: _majority(regions[np.asarray(mirror_x())[regions == r]]) for r in righted}
@@ -375,8 +386,8 @@ def turn_reversed_regions(map_xy: np.ndarray, map_yx: np.ndarray | None, parts_x
     if not turned:
         return None
     turned_yx = None
-    if map_yx is not None:  # a target vertex that a turned region now reaches takes a partner there
-        turned_yx = np.array(map_yx, copy=True)
-        in_turned = np.flatnonzero(np.isin(regions, turned) & (turned_xy >= 0))
-        turned_yx[turned_xy[in_turned]] = in_turned
+    if map_yx is not None:  # a target vertex whose turned partner lies in a turned region takes it
+        in_turned = np.isin(regions, turned)
+        take = (mirrored_yx >= 0) & in_turned[np.maximum(mirrored_yx, 0)]
+        turned_yx = np.where(take, mirrored_yx, map_yx)
     return TurnedParts(turned_xy, turned_yx, turned)

@@ -409,8 +409,12 @@ class SketchQuery:
 
 
 def sketch_queries(folder) -> list[SketchQuery]:
-    """The labelled sketches of a folder (every ``NAME_contour.txt``; its mesh and labels must exist)."""
+    """The labelled sketches of a folder (every ``NAME_contour.txt``; its mesh and labels must exist).
+
+    Each outline, sketch mesh and label file is read once here, so that a malformed one is a named error
+    before any matching (one label per sketch vertex)."""
     from corrlib.errors import FileFormatError
+    from corrlib.io import load_contour, load_labels, load_mesh
 
     folder = Path(folder)
     if not folder.is_dir():
@@ -424,6 +428,8 @@ def sketch_queries(folder) -> list[SketchQuery]:
         if missing:
             raise FileFormatError(f"{contour}: the sketch's {' and '.join(missing)} are missing (a labelled "
                                   "sketch is an outline, its triangulated sketch and one label per sketch vertex)")
+        load_contour(contour)
+        load_labels(labels, load_mesh(mesh).n_vertices, "sketch part labels")
         found.append(SketchQuery(name, contour, mesh, labels))
     if not found:
         raise FileFormatError(f"{folder}: no sketches (NAME{SKETCH_CONTOUR_SUFFIX})")
@@ -594,7 +600,7 @@ class SketchJob:
 def sketch_jobs(datasets, sketch_folders) -> list[SketchJob]:
     """Every labelled sketch of ``sketch_folders`` against every mesh of ``datasets`` with part labels."""
     from corrlib.bench import load_dataset
-    from corrlib.io import load_vts
+    from corrlib.io import load_labels, load_mesh, load_vts
 
     sketches = [q for folder in sketch_folders for q in sketch_queries(folder)]
     if not sketches:
@@ -607,6 +613,7 @@ def sketch_jobs(datasets, sketch_folders) -> list[SketchJob]:
         for name, path in data.shapes.items():
             labels = path.with_name(f"{name}{PART_LABELS_SUFFIX}")
             if labels.is_file():
+                load_labels(labels, load_mesh(path).n_vertices, "mesh part labels")  # named error before any work
                 jobs += [SketchJob(q, path, labels, mirror.get(name)) for q in sketches]
     if not jobs:
         raise InputError(f"no mesh of {', '.join(str(d) for d in datasets)} has part labels "

@@ -369,7 +369,9 @@ def _square_sketch(folder, name="square_sketch"):
     trimesh.Trimesh(grid, faces, process=False).export(folder / f"{name}.off")
     labels = np.where(grid[:, 0] < 0.45, 1, np.where(grid[:, 0] > 0.55, 2, 0))
     np.savetxt(folder / f"{name}_segmentation.txt", labels, fmt="%d", header="part label per vertex")
-    np.savetxt(folder / f"{name}_contour.txt", [(0, 0), (1, 0), (1, 1), (0, 1)])
+    t = np.linspace(0.0, 1.0, 10, endpoint=False)
+    outline = np.vstack([np.c_[t, 0 * t], np.c_[1 + 0 * t, t], np.c_[1 - t, 1 + 0 * t], np.c_[0 * t, 1 - t]])
+    np.savetxt(folder / f"{name}_contour.txt", outline)
     return folder
 
 
@@ -405,6 +407,29 @@ def test_incomplete_sketches_and_unlabelled_meshes_are_named_errors(tmp_path):
     with pytest.raises(InputError, match="wolves.*part labels.*wolf0|part labels"):
         sketch_jobs([data], [_square_sketch(tmp_path / "good")])
     assert sketch_jobs([data], []) == []
+    # label files of the wrong length, of a sketch or of a mesh: named before any matching
+    bad = _square_sketch(tmp_path / "bad")
+    np.savetxt(bad / "square_sketch_segmentation.txt", [1, 2, 0], fmt="%d")
+    with pytest.raises(FileFormatError, match="square_sketch_segmentation.txt.*3 labels, expected 121"):
+        sketch_queries(bad)
+    np.savetxt(data / "wolf0_segmentation.txt", [1, 2], fmt="%d")
+    with pytest.raises(FileFormatError, match="wolf0_segmentation.txt.*2 labels"):
+        sketch_jobs([data], [_square_sketch(tmp_path / "good")])
+
+
+def test_sketch_command_errors_exit_2_before_any_output(tmp_path, capsys):
+    data = tmp_path / "wolves"
+    data.mkdir()
+    shutil.copy(TOSCA / "wolf0.off", data / "wolf0.off")
+    out = tmp_path / "out"
+    assert main(["bench-contour", str(data), "--planes", "none", "-o", str(out)]) == 2
+    assert "nothing to run" in capsys.readouterr().err
+    assert main(["bench-contour", str(data), "--sketches", str(tmp_path / "missing"), "-o", str(out)]) == 2
+    assert "missing: not a folder" in capsys.readouterr().err
+    assert main(["bench-contour", str(data), "--planes", "none", "--sketches", str(_square_sketch(tmp_path / "sk")),
+                 "-o", str(out)]) == 2
+    assert "part labels" in capsys.readouterr().err
+    assert not out.exists()
 
 
 def test_the_people_carry_the_sketches_part_labels():

@@ -249,7 +249,11 @@ def test_a_region_turns_with_its_mirror_region_only():
     is a crossed limb or noise, not a mirrored part); region 3 alone (its own mirror region): kept. All
     regions mirrored: the whole map's rule, not this one. A "reflection" that does not right the map (the
     identity) turns nothing."""
-    from corrlib.methods.reorientation import turn_reversed_regions
+    from corrlib.methods.reorientation import region_agreements, turn_reversed_regions
+
+    def turn_regions(map_xy, map_yx, turn, agreement):
+        before = region_agreements(map_xy, parts, agreement)
+        return turn_reversed_regions(map_xy, map_yx, parts, before, turn, lambda: mirror_x, agreement)
 
     regions = np.array([1, 1, 2, 2, 3, 3])
     side = np.array([0, 0, 1, 1, 2, 2])  # the target's vertices are the source's
@@ -260,24 +264,23 @@ def test_a_region_turns_with_its_mirror_region_only():
     ident = np.arange(6)
     half = ident.copy()
     half[:4] = mirror_x[:4]
-    turned = turn_reversed_regions(half, half.copy(), parts, turn, lambda: mirror_x, agreement)
+    turned = turn_regions(half, half.copy(), turn, agreement)
     assert turned is not None and sorted(turned.parts) == [1, 2]
     np.testing.assert_array_equal(turned.map_xy, ident)
     np.testing.assert_array_equal(turned.map_yx, ident)
     one = ident.copy()
     one[:2] = [2, 3]  # region 1 sent to the right side, region 2 right
-    assert turn_reversed_regions(one, None, parts, turn, lambda: mirror_x, agreement) is None
+    assert turn_regions(one, None, turn, agreement) is None
     everywhere = lambda m: -np.ones(6)  # noqa: E731  (reversed on every region)
-    assert turn_reversed_regions(half, None, parts, turn, lambda: mirror_x, everywhere) is None
-    assert turn_reversed_regions(half, None, parts, lambda m, m_yx: (m, m_yx), lambda: mirror_x, agreement) is None
+    assert turn_regions(half, None, turn, everywhere) is None
+    assert turn_regions(half, None, lambda m, m_yx: (m, m_yx), agreement) is None
     plane = ident.copy()
     plane[4:] = [0, 1]  # region 3, its own mirror region, alone sent away (and "righted" by the turn below)
     only_plane = lambda m: np.where(np.arange(6) >= 4, np.where(np.asarray(m) == plane, -1.0, 1.0), 1.0)  # noqa
-    assert turn_reversed_regions(plane, None, parts, lambda m, m_yx: (ident, None), lambda: mirror_x,
-                                 only_plane) is None
+    assert turn_regions(plane, None, lambda m, m_yx: (ident, None), only_plane) is None
     calls = []
-    assert turn_reversed_regions(ident, None, parts, lambda m, m_yx: calls.append(1) or (m, m_yx), lambda: mirror_x,
-                                 agreement) is None and not calls  # nothing in question: no reflection
+    assert turn_regions(ident, None, lambda m, m_yx: calls.append(1) or (m, m_yx),
+                        agreement) is None and not calls  # nothing in question: no reflection
 
 
 def test_the_reflection_that_distorts_less_turns_the_map(wolf_pair):
@@ -344,16 +347,18 @@ def test_turned_regions_are_reported():
                            "reflection (the source's or the target's")
 
 
-def test_the_whole_map_is_reversed_only_if_every_region_is():
+def test_region_agreements_are_the_means_over_each_region():
     """A map mirrored on one region and strongly so (the legs of a posed person, crossed) can have a
-    negative mean agreement while the rest is right; the whole-map rule then stays out."""
-    from corrlib.methods.reorientation import reversed_everywhere
+    negative mean agreement while the other regions are right: the per-region means show it, and the
+    whole-map rule (kernel matching's ``_reoriented``) applies only when all of them are negative."""
+    from corrlib.methods.reorientation import region_agreements
 
     parts = _toy_parts(np.array([1, 1, 2, 2, 3, 3]))
+    one_strong = lambda m: np.array([-30.0, -30.0, 5.0, 5.0, 5.0, 7.0])  # noqa: E731  (mean negative)
     ident = np.arange(6)
-    assert reversed_everywhere(ident, parts, lambda m: -np.ones(6))
-    one_strong = lambda m: np.array([-30.0, -30.0, 5.0, 5.0, 5.0, 5.0])  # noqa: E731  (mean negative)
-    assert np.mean(one_strong(ident)) < 0 and not reversed_everywhere(ident, parts, one_strong)
-    assert not reversed_everywhere(ident, parts, lambda m: np.ones(6))
-    body = _toy_parts(np.zeros(6, dtype=int))  # no protrusions: the whole shape's mean decides
-    assert reversed_everywhere(ident, body, one_strong)
+    assert np.mean(one_strong(ident)) < 0
+    assert region_agreements(ident, parts, one_strong) == {1: -30.0, 2: 5.0, 3: 6.0}
+    partial = ident.copy()
+    partial[[0, 5]] = -1  # unmatched vertices are left out
+    assert region_agreements(partial, parts, one_strong) == {1: -30.0, 2: 5.0, 3: 5.0}
+    assert region_agreements(ident, _toy_parts(np.zeros(6, dtype=int)), one_strong) == {}  # no protrusions

@@ -117,8 +117,8 @@ def reflection_distortion(mirror: np.ndarray, embedding: np.ndarray) -> float:
         :func:`~corrlib.descriptors.spectral.biharmonic_embedding` of the shape (divided by √area to compare
         shapes).
     """
-    sample = embedding[np.arange(0, mirror.size, max(1, mirror.size // REFLECTION_SAMPLES))]
-    image = embedding[np.asarray(mirror)[np.arange(0, mirror.size, max(1, mirror.size // REFLECTION_SAMPLES))]]
+    rows = np.arange(0, mirror.size, max(1, mirror.size // REFLECTION_SAMPLES))
+    sample, image = embedding[rows], embedding[np.asarray(mirror)[rows]]
     return float(np.mean(np.abs(cdist(sample, sample) - cdist(image, image))))
 
 

@@ -85,6 +85,7 @@ Map convention: ``map_xy[i]`` = vertex of Y matched to vertex i of X.
 
 from __future__ import annotations
 
+import functools
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 
@@ -106,7 +107,7 @@ from corrlib.geometry.sampling import (
 from corrlib.geometry.spectrum import Spectrum, mesh_spectrum
 from corrlib.methods.base import InitialMatch, MatchResult, param
 from corrlib.methods.registry import MethodSpec, register
-from corrlib.methods.reorientation import (ShapeParts, mirrored_map, reversed_everywhere, turn_reversed_map,
+from corrlib.methods.reorientation import (ShapeParts, mirrored_map, region_agreements, turn_reversed_map,
                                            turn_reversed_parts, turn_reversed_regions)
 from corrlib.methods.resolution import keep_resolved_matches, kernel_width
 from corrlib.progress import Progress, Stopwatch, scaled_progress
@@ -954,37 +955,26 @@ def multiscale_refinement(state: KernelState):
 
 def _reoriented(state: KernelState, map_xy: np.ndarray, map_yx: np.ndarray):
     """The final map turned by a reflection where it reverses orientation (:mod:`.reorientation`): the whole
-    map by the target's if its orientation agreement is negative on every region, else every region (a protrusion with its
-    shoulder) whose agreement is negative and turns positive by the better of the two shapes' reflections,
-    then every protrusion of the source whose image, turned by the target's, fits its shoulder better. A
-    reflection is computed only when one of them is in question. Returns the maps and the three decisions
-    (None: not turned)."""
+    map by the target's if its agreement is negative on every region, else every region (a protrusion with
+    its shoulder) whose agreement is negative and turns positive by the better of the two shapes'
+    reflections, then every protrusion of the source whose image, turned by the target's, fits its shoulder
+    better. A reflection is computed only when one of them is in question. Returns the maps and the three
+    decisions (None: not turned)."""
     source, target = state.source, state.target
-    mirror = []
-
-    def mirror_y():
-        if not mirror:
-            mirror.append(mesh_reflection(target, state.spec_y))
-        return mirror[0]
-
+    mirror_x = functools.cache(lambda: mesh_reflection(source, state.spec_x))
+    mirror_y = functools.cache(lambda: mesh_reflection(target, state.spec_y))
     parts_x, parts_y = (ShapeParts.of(mesh, spec) for mesh, spec in ((source, state.spec_x), (target, state.spec_y)))
     local = lambda m: _local_agreement(*state.orientation_blocks(), m)  # noqa: E731
+    before = region_agreements(map_xy, parts_x, local)
     turned = None
-    if reversed_everywhere(map_xy, parts_x, local):
+    if all(value < 0 for value in before.values()):  # reversed everywhere (or no regions: the mean decides)
         turned = turn_reversed_map(map_xy, map_yx, mirror_y, lambda m: _agreement(*state.orientation_blocks(), m))
     if turned is not None:
         map_xy, map_yx = turned.map_xy, turned.map_yx
-    mirror_x = []
-
-    def mirror_x_():
-        if not mirror_x:
-            mirror_x.append(mesh_reflection(source, state.spec_x))
-        return mirror_x[0]
-
-    turned_regions = turn_reversed_regions(map_xy, map_yx, parts_x,
-                                           lambda m, m_yx: mirrored_map(m, m_yx, mirror_x_(), mirror_y(), parts_x,
-                                                                        parts_y),
-                                           mirror_x_, local)
+        before = region_agreements(map_xy, parts_x, local)
+    turned_regions = turn_reversed_regions(
+        map_xy, map_yx, parts_x, before, lambda m, m_yx: mirrored_map(m, m_yx, mirror_x(), mirror_y(), parts_x,
+                                                                      parts_y), mirror_x, local)
     if turned_regions is not None:
         map_xy, map_yx = turned_regions.map_xy, turned_regions.map_yx
     turned_parts = turn_reversed_parts(map_xy, map_yx, parts_x, parts_y, mirror_y)

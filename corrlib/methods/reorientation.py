@@ -36,8 +36,8 @@ legs — so no seam shows it, and the orientation descriptors, strong on a body
 and weak round a thin limb, hardly see it. What does is the metric:
 :func:`turn_reversed_parts` takes the protrusions of the source
 (:mod:`corrlib.geometry.segmentation`: legs, head, tail), gives each the body
-vertices nearer to it than to any other protrusion (its shoulder, found by one
-multi-source Dijkstra), and compares the distortion of the distances between
+vertices nearer to it than to any other protrusion (its shoulder, the geodesic
+Voronoi cells of the protrusions), and compares the distortion of the distances between
 the part and its shoulder,
 
     D(v) = mean over x in P, a in A_P of | d_X(x, a) − d_Y(v(x), m(a)) |,
@@ -58,8 +58,8 @@ mean over a region ``R`` of the source, has as clean a sign there.
 with its shoulder (a limb with the body beside it), and applies the
 whole-map rule to every region, ``a_R(m) < 0 < a_R(S ∘ m)``, while at least
 one region keeps its orientation (otherwise it is the whole map's case, and
-the whole-map rule applies only then, :func:`reversed_everywhere`: one
-strongly mirrored region can make the mean negative), and
+the whole-map rule applies only then: one strongly mirrored region can make
+the mean negative), and
 turns it together with its mirror region (``S_X(R)``, the other arm; the
 head is its own): a mirrored part of a bilaterally symmetric map is closed
 under the reflection, a single limb with a negative agreement is not (that
@@ -320,22 +320,21 @@ def mirrored_map(map_xy: np.ndarray, map_yx: np.ndarray | None, mirror_x: np.nda
     return map_xy[mirror_x], turned_yx
 
 
-def reversed_everywhere(map_xy: np.ndarray, parts_x: ShapeParts,
-                        local_agreement: Callable[[np.ndarray], np.ndarray]) -> bool:
-    """Whether the map's agreement is negative on every region of the source (:func:`shoulder_regions`; on
-    the whole shape if it has no protrusions): the whole-map rule's case (:func:`turn_reversed_map`). A map
-    mirrored on some regions only is :func:`turn_reversed_regions`' case, however negative its mean."""
+def region_agreements(map_xy: np.ndarray, parts_x: ShapeParts,
+                      local_agreement: Callable[[np.ndarray], np.ndarray]) -> dict[int, float]:
+    """The mean agreement of the map on every region of the source with matched vertices
+    (:func:`shoulder_regions`; empty for a shape without protrusions).
+
+    A map reversed on every region is the whole-map rule's case (:func:`turn_reversed_map`); one reversed on
+    some regions only is :func:`turn_reversed_regions`', however negative its mean."""
     regions = shoulder_regions(parts_x)
     matched = map_xy >= 0
     values = local_agreement(map_xy)
-    present = [r for r in np.unique(regions[matched]) if r > 0]
-    if not present:
-        return bool(np.mean(values[matched]) < 0) if matched.any() else False
-    return all(np.mean(values[(regions == r) & matched]) < 0 for r in present)
+    return {int(r): float(np.mean(values[(regions == r) & matched])) for r in np.unique(regions[matched]) if r > 0}
 
 
 def turn_reversed_regions(map_xy: np.ndarray, map_yx: np.ndarray | None, parts_x: ShapeParts,
-                          mirror: Callable[[np.ndarray], np.ndarray], mirror_x: Callable[[], np.ndarray],
+                          before: dict[int, float], mirror: Callable, mirror_x: Callable[[], np.ndarray],
                           local_agreement: Callable[[np.ndarray], np.ndarray]) -> TurnedParts | None:
     """Turn every region that the map reverses and the reflection rights (see the module docstring).
 
@@ -346,6 +345,8 @@ def turn_reversed_regions(map_xy: np.ndarray, map_yx: np.ndarray | None, parts_x
     map_yx : (n_Y,) int or None
     parts_x : ShapeParts
         Of the source (its regions: :func:`shoulder_regions`).
+    before : dict of int -> float
+        :func:`region_agreements` of ``map_xy``.
     mirror : callable
         ``(map_xy, map_yx) -> (turned_xy, turned_yx)``: the maps turned by a reflection (:func:`mirrored_map`);
         called only if a region's agreement is negative.
@@ -358,33 +359,25 @@ def turn_reversed_regions(map_xy: np.ndarray, map_yx: np.ndarray | None, parts_x
     Returns
     -------
     TurnedParts or None
-        ``parts``: the turned regions (:func:`shoulder_regions` labels); None when no region is turned. A map reversed on every region is the whole-map rule's
-        (:func:`turn_reversed_map`) and is left to it.
+        ``parts``: the turned regions (:func:`shoulder_regions` labels); None when no region is turned. A
+        map reversed on every region is the whole-map rule's (:func:`turn_reversed_map`) and is left to it.
     """
+    reversed_ = [r for r, value in before.items() if value < 0]
+    if not reversed_ or len(reversed_) == len(before):
+        return None
     regions = shoulder_regions(parts_x)
     matched = map_xy >= 0
-    present = [r for r in range(1, int(regions.max(initial=0)) + 1) if np.any((regions == r) & matched)]
-
-    def means(values):
-        return {r: float(np.mean(values[(regions == r) & matched])) for r in present}
-
-    before = means(local_agreement(map_xy))
-    reversed_ = [r for r in present if before[r] < 0]
-    if not reversed_ or len(reversed_) == len(present):
-        return None
     mirrored_xy, mirrored_yx = mirror(map_xy, map_yx)
     mirrored_xy = np.asarray(mirrored_xy)
-    after = means(np.where(mirrored_xy >= 0, local_agreement(mirrored_xy), 0.0))
-    righted = [r for r in reversed_ if after[r] > 0]
+    values = np.where(mirrored_xy >= 0, local_agreement(mirrored_xy), 0.0)
+    righted = [r for r in reversed_ if np.mean(values[(regions == r) & matched]) > 0]
     partner = {r: _majority(regions[np.asarray(mirror_x())[regions == r]]) for r in righted}
     turned = [r for r in righted if partner[r] in righted]
-    if all(partner[r] == r for r in turned):  # no pair of mirror regions among them
+    if all(partner[r] == r for r in turned):  # none, or no pair of mirror regions among them
         return None
     turned_xy = np.array(map_xy, copy=True)
     members = np.isin(regions, turned) & matched & (mirrored_xy >= 0)
     turned_xy[members] = mirrored_xy[members]
-    if not turned:
-        return None
     turned_yx = None
     if map_yx is not None:  # a target vertex whose turned partner lies in a turned region takes it
         in_turned = np.isin(regions, turned)

@@ -12,15 +12,29 @@ same generation thresholds. :func:`collect_on_gui_thread` does that for as
 long as one window holds it; when the last window releases it, a final
 collection runs on the GUI thread and automatic collection is switched back
 on, so non-GUI code in the same process (the test suite) is unaffected.
+Automatic collection comes back only once no studio thread (a thread named
+``corr-…``: jobs, the kernels' warm-up) is alive: the window being closed
+becomes garbage right after its release, and a studio thread still running
+would otherwise be the one that collects it. Until then the timer keeps
+collecting here.
 """
 
 from __future__ import annotations
 
 import gc
+import threading
 
 from PySide6.QtCore import QObject, QTimer
 
 CHECK_INTERVAL_MS = 500
+#: name prefix of the threads the studio starts (:mod:`app.worker`, the warm-up of the compiled kernels)
+STUDIO_THREAD_PREFIX = "corr-"
+
+
+def studio_threads_alive() -> bool:
+    """Whether a thread the studio started, other than the calling one, is still running."""
+    current = threading.current_thread()
+    return any(t is not current and t.name.startswith(STUDIO_THREAD_PREFIX) for t in threading.enumerate())
 
 
 class GuiThreadCollector(QObject):
@@ -30,25 +44,38 @@ class GuiThreadCollector(QObject):
         super().__init__(parent)
         self._timer = QTimer(self)
         self._timer.setInterval(CHECK_INTERVAL_MS)
-        self._timer.timeout.connect(self.collect_due)
+        self._timer.timeout.connect(self._tick)
         self._holders: set[int] = set()
+        self._enable_pending = False
 
     def hold(self, owner: QObject) -> None:
         """Switch automatic collection off while ``owner`` is alive (idempotent)."""
         if not self._holders:
             gc.disable()
             self._timer.start()
+        self._enable_pending = False
         self._holders.add(id(owner))
 
     def release(self, owner: QObject) -> None:
-        """Drop ``owner``'s hold; the last release collects here and re-enables automatic collection."""
+        """Drop ``owner``'s hold; after the last release automatic collection comes back (see the module)."""
         if id(owner) not in self._holders:
             return
         self._holders.discard(id(owner))
         if not self._holders:
-            self._timer.stop()
-            gc.collect()
-            gc.enable()
+            self._enable_pending = True
+            self._enable_when_safe()
+
+    def _enable_when_safe(self) -> None:
+        if self._holders or not self._enable_pending or studio_threads_alive():
+            return  # the timer keeps collecting on this thread and tries again
+        self._enable_pending = False
+        self._timer.stop()
+        gc.collect()
+        gc.enable()
+
+    def _tick(self) -> None:
+        self.collect_due()
+        self._enable_when_safe()
 
     def collect_due(self) -> int:
         """Collect the oldest generation whose count has reached its threshold (as CPython would)."""

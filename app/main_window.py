@@ -30,7 +30,7 @@ from PySide6.QtWidgets import (
 )
 
 import corrlib
-from app.gui_gc import collect_on_gui_thread
+from app.gui_gc import STUDIO_THREAD_PREFIX, collect_on_gui_thread
 from app.jobs import LoadedShape, MethodOutcome, describe, load_job, method_job
 from app.param_form import ParamForm
 from app.sketch import SketchPanel
@@ -39,7 +39,7 @@ from app.views.pair import PairView
 from app.views.product import ProductView
 from app.views.retrieval import RetrievalView, retrieval_job
 from app.views.sequence import SequenceView
-from app.worker import JobRunner, progress_text
+from app.worker import SHUTDOWN_TIMEOUT_S, JobRunner, progress_text
 from corrlib.errors import CorrError
 from corrlib.io import CONTOUR_SUFFIXES, dialog_filter
 from corrlib.methods import all_methods, methods_for
@@ -176,6 +176,8 @@ class MainWindow(QMainWindow):
         self.gt: tuple | None = None  # (source rows, target rows, target mirrored rows or None)
         self.last_result = None
         self._collector = collect_on_gui_thread(self)  # no cyclic GC on worker threads (see app.gui_gc)
+        self._closed = False
+        self._warm_up_thread = None  # started once the window is idle (_warm_up)
         self.runner = JobRunner(self)
         self.runner.progress.connect(self._on_progress)
         self.runner.finished.connect(self._on_finished)
@@ -245,7 +247,10 @@ class MainWindow(QMainWindow):
 
         from corrlib.warmup import warm_up
 
-        threading.Thread(target=warm_up, name="corr-warm-up", daemon=True).start()
+        if self._closed:
+            return  # closed before the timer fired: a thread started now would outlive the window
+        self._warm_up_thread = threading.Thread(target=warm_up, name=f"{STUDIO_THREAD_PREFIX}warm-up", daemon=True)
+        self._warm_up_thread.start()
 
     # ------------------------------------------------------------------ layout
 
@@ -1038,7 +1043,10 @@ class MainWindow(QMainWindow):
     def closeEvent(self, event):
         self.settings.setValue("window/state", self.saveState())
         self.settings.setValue("window/geometry", self.saveGeometry())
+        self._closed = True
         self.runner.shutdown()
+        if self._warm_up_thread is not None:  # no studio thread may outlive the window (see app.gui_gc)
+            self._warm_up_thread.join(SHUTDOWN_TIMEOUT_S)
         was_loading = self.is_loading()
         self._load_queue.clear()
         self._loading = None

@@ -23,6 +23,7 @@ from collections.abc import Callable, Generator
 
 from PySide6.QtCore import QObject, Signal
 
+from app.gui_gc import STUDIO_THREAD_PREFIX
 from corrlib.errors import Cancelled, CorrError
 from corrlib.progress import CancelToken, Progress
 
@@ -62,7 +63,8 @@ class JobRunner(QObject):
         self._serial += 1
         job = _Job(key, self._serial, factory)
         self._jobs[key] = job
-        job.thread = threading.Thread(target=self._run, args=(job,), name=f"corr-job-{key}", daemon=True)
+        job.thread = threading.Thread(target=self._run, args=(job,), name=f"{STUDIO_THREAD_PREFIX}job-{key}",
+                                      daemon=True)
         job.thread.start()
         return job.serial
 

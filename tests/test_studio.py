@@ -230,6 +230,27 @@ def test_reference_cycles_are_collected_on_the_gui_thread(qtbot, tmp_path):
     assert gc.isenabled()
 
 
+def test_automatic_collection_waits_for_the_studio_threads(qtbot, tmp_path):
+    """A studio thread still running when the last window closes would collect the closed window's
+    Qt/VTK objects once automatic collection is back: it stays off (collected on the GUI thread's
+    timer) until no such thread is left."""
+    import gc
+    import threading
+
+    from app.gui_gc import STUDIO_THREAD_PREFIX
+
+    win = make_window(qtbot, tmp_path / "s.ini")
+    release = threading.Event()
+    straggler = threading.Thread(target=release.wait, name=f"{STUDIO_THREAD_PREFIX}test-straggler", daemon=True)
+    straggler.start()
+    win.close()
+    qtbot.wait(1200)  # two ticks of the collector's timer
+    assert not gc.isenabled()
+    release.set()
+    straggler.join()
+    qtbot.waitUntil(gc.isenabled, timeout=5_000)
+
+
 def test_the_window_fits_a_laptop_screen(qtbot, tmp_path):
     """Every dock scrolls instead of imposing its content's height, so the window's minimum size is below
     1280 x 720; at that size every dock stays on screen and the central views keep most of the width."""

@@ -957,8 +957,8 @@ def _reoriented(state: KernelState, map_xy: np.ndarray, map_yx: np.ndarray):
     """The final map turned by a reflection where it reverses orientation (:mod:`.reorientation`): the whole
     map by the target's if its agreement is negative on every region, else every region (a protrusion with
     its shoulder) whose agreement is negative and turns positive by the better of the two shapes'
-    reflections, then every protrusion of the source whose image, turned by the target's, fits its shoulder
-    better. A reflection is computed only when one of them is in question. Returns the maps and the three
+    reflections (with its mirror region, or alone where it crosses onto its mirror limb's image), then every
+    protrusion of the source whose image, turned by the target's, fits its shoulder better. A reflection is computed only when one of them is in question. Returns the maps and the three
     decisions (None: not turned)."""
     source, target = state.source, state.target
     mirror_x = functools.cache(lambda: mesh_reflection(source, state.spec_x))
@@ -974,7 +974,8 @@ def _reoriented(state: KernelState, map_xy: np.ndarray, map_yx: np.ndarray):
         before = region_agreements(map_xy, parts_x, local)
     turned_regions = turn_reversed_regions(
         map_xy, map_yx, parts_x, before, lambda m, m_yx: mirrored_map(m, m_yx, mirror_x(), mirror_y(), parts_x,
-                                                                      parts_y), mirror_x, local)
+                                                                      parts_y), mirror_x, local,
+        parts_y, mirror_y)
     if turned_regions is not None:
         map_xy, map_yx = turned_regions.map_xy, turned_regions.map_yx
     turned_parts = turn_reversed_parts(map_xy, map_yx, parts_x, parts_y, mirror_y)

@@ -77,6 +77,18 @@ orientation, the parts' test, does not decide here: an arm is about as far
 from either leg, so turning a mirrored arm back changed it by less than the
 poses do, and in either direction.
 
+**Crossed limbs.** A map of a complete shape onto a complete one sends every
+limb onto a limb of its own. A single reversed region whose limb shares its
+image limb with its mirror limb (a leg with its hip sent onto the other
+leg, where that leg lies too) lacks the mirror closure, but the collision is
+the evidence instead: it is turned by the target's reflection, ``S_Y ∘ m``
+(the mirror limb's map, which ``m ∘ S_X`` would copy, is the one it collides
+with), when that moves it onto a limb no other limb's image lies on and
+rights it (``a_R(S_Y ∘ m) > 0``). For the same reason the parts' rule makes
+no turn that leaves two limbs on one target limb: a twist at the hip sends
+a leg's shoulder beside the other leg while the leg itself is right, and
+the shoulder-relative distortion would then move the right leg.
+
 All these decisions assume complete shapes: a cut (a partial scan, the front of an
 animal) changes the intrinsic reflection and the biharmonic distances near
 and far from it (measured: the front 60 % of a wolf against a whole wolf had
@@ -233,7 +245,8 @@ def turn_reversed_parts(map_xy: np.ndarray, map_yx: np.ndarray | None, parts_x: 
     shoulder needs no reflection, so a consistent map costs no reflection. A part in question is turned if
     the reflection sends its image to another protrusion of the target (a limb to its mirror limb; a part on
     the plane of symmetry, or a self-map that is not the target's left–right reflection there, stays) and
-    the distortion of its distances to its shoulder drops.
+    the distortion of its distances to its shoulder drops, unless after all the turns another part's image
+    lies on the limb it would be turned onto.
 
     Parameters
     ----------
@@ -253,18 +266,19 @@ def turn_reversed_parts(map_xy: np.ndarray, map_yx: np.ndarray | None, parts_x: 
     labels, labels_y = parts_x.labels, parts_y.labels
     embed_x, embed_y = parts_x.embedding, parts_y.embedding
     turned_xy = np.array(map_xy, copy=True)
-    parts = []
+    images, turned_images = {}, {}  # part -> its image limb as mapped, and as turned where it turns
     for part in range(1, int(labels.max(initial=0)) + 1):
         members = np.flatnonzero((labels == part) & (map_xy >= 0))
         anchors = np.flatnonzero((parts_x.shoulders == part) & (map_xy >= 0))
-        if members.size == 0 or anchors.size == 0:
+        if members.size == 0:
             continue
         image = map_xy[members]
-        target_part = _majority(labels_y[image])
-        if target_part == 0 or _majority(parts_y.shoulders[map_xy[anchors]]) == target_part:
+        images[part] = target_part = _majority(labels_y[image])
+        if anchors.size == 0 or target_part == 0 or _majority(parts_y.shoulders[map_xy[anchors]]) == target_part:
             continue
         turned_image = mirror_y()[image]
-        if _majority(labels_y[turned_image]) in (0, target_part):
+        turned_part = _majority(labels_y[turned_image])
+        if turned_part in (0, target_part):
             continue
         d_x = cdist(embed_x[members], embed_x[anchors])
         anchor_images = embed_y[map_xy[anchors]]
@@ -272,7 +286,14 @@ def turn_reversed_parts(map_xy: np.ndarray, map_yx: np.ndarray | None, parts_x: 
         mirrored = np.mean(np.abs(d_x - cdist(embed_y[turned_image], anchor_images)))
         if mirrored < kept:
             turned_xy[members] = turned_image
-            parts.append(part)
+            turned_images[part] = turned_part
+    # no turn may send a limb onto the limb another limb's image lies on after the turns
+    final = {**images, **turned_images}
+    parts = [part for part, limb in turned_images.items()
+             if not any(other != part and final[other] == limb for other in final)]
+    for part in set(turned_images) - set(parts):
+        members = (labels == part) & (map_xy >= 0)
+        turned_xy[members] = map_xy[members]
     if not parts:
         return None
     turned_yx = None
@@ -335,8 +356,10 @@ def region_agreements(map_xy: np.ndarray, parts_x: ShapeParts,
 
 def turn_reversed_regions(map_xy: np.ndarray, map_yx: np.ndarray | None, parts_x: ShapeParts,
                           before: dict[int, float], mirror: Callable, mirror_x: Callable[[], np.ndarray],
-                          local_agreement: Callable[[np.ndarray], np.ndarray]) -> TurnedParts | None:
-    """Turn every region that the map reverses and the reflection rights (see the module docstring).
+                          local_agreement: Callable[[np.ndarray], np.ndarray], parts_y: ShapeParts | None = None,
+                          mirror_y: Callable[[], np.ndarray] | None = None) -> TurnedParts | None:
+    """Turn every region that the map reverses and the reflection rights: mirror pairs, and crossed limbs
+    when the target's limbs and reflection are given (see the module docstring).
 
     Parameters
     ----------
@@ -355,6 +378,10 @@ def turn_reversed_regions(map_xy: np.ndarray, map_yx: np.ndarray | None, parts_x
     local_agreement : callable
         ``(n_X,) int map -> (n_X,) float``: every source vertex's agreement ``⟨O_X(x), O_Y(m(x))⟩`` (any
         value where unmatched; those vertices are left out).
+    parts_y : ShapeParts, optional
+        Of the target: its limbs tell a crossed limb (two source limbs on one target limb).
+    mirror_y : callable returning (n_Y,) int, optional
+        The target's reflection, which turns a crossed limb. Without these two, crossed limbs are kept.
 
     Returns
     -------
@@ -371,16 +398,59 @@ def turn_reversed_regions(map_xy: np.ndarray, map_yx: np.ndarray | None, parts_x
     mirrored_xy = np.asarray(mirrored_xy)
     values = np.where(mirrored_xy >= 0, local_agreement(mirrored_xy), 0.0)
     righted = [r for r in reversed_ if np.mean(values[(regions == r) & matched]) > 0]
-    partner = {r: _majority(regions[np.asarray(mirror_x())[regions == r]]) for r in righted}
+    partner = {r: _majority(regions[np.asarray(mirror_x())[regions == r]]) for r in reversed_}
     turned = [r for r in righted if partner[r] in righted]
     if all(partner[r] == r for r in turned):  # none, or no pair of mirror regions among them
+        turned = []
+    single = [] if parts_y is None or mirror_y is None else _colliding_regions(
+        map_xy, parts_x, parts_y, mirror_y, local_agreement,
+        [r for r in reversed_ if partner[r] not in reversed_ and partner[r] != r], partner)
+    if not turned and not single:
         return None
     turned_xy = np.array(map_xy, copy=True)
     members = np.isin(regions, turned) & matched & (mirrored_xy >= 0)
     turned_xy[members] = mirrored_xy[members]
+    if single:
+        members = np.isin(regions, single) & matched
+        turned_xy[members] = mirror_y()[map_xy[members]]
     turned_yx = None
     if map_yx is not None:  # a target vertex whose turned partner lies in a turned region takes it
         in_turned = np.isin(regions, turned)
         take = (mirrored_yx >= 0) & in_turned[np.maximum(mirrored_yx, 0)]
         turned_yx = np.where(take, mirrored_yx, map_yx)
-    return TurnedParts(turned_xy, turned_yx, turned)
+        if single:
+            partner_of_mirror = np.asarray(map_yx)[mirror_y()]
+            take = (partner_of_mirror >= 0) & np.isin(regions, single)[np.maximum(partner_of_mirror, 0)]
+            turned_yx = np.where(take, partner_of_mirror, turned_yx)
+    return TurnedParts(turned_xy, turned_yx, sorted(turned + single))
+
+
+def _colliding_regions(map_xy: np.ndarray, parts_x: ShapeParts, parts_y: ShapeParts, mirror_y: Callable,
+                       local_agreement: Callable, candidates: list, partner: dict) -> list:
+    """The reversed regions whose limb shares its image limb with its mirror limb and is righted, onto the
+    free mirror limb, by the target's reflection (see the module docstring)."""
+    if not candidates:
+        return []
+    regions = shoulder_regions(parts_x)
+    labels, labels_y = parts_x.labels, parts_y.labels
+    matched = map_xy >= 0
+
+    def image_part(part: int, mapping: np.ndarray) -> int:
+        members = (labels == part) & (mapping >= 0)
+        return _majority(labels_y[mapping[members]]) if members.any() else 0
+
+    images = {p: image_part(p, map_xy) for p in range(1, int(labels.max(initial=0)) + 1)}
+    turned_map = np.where(matched, mirror_y()[np.maximum(map_xy, 0)], -1)
+    values = local_agreement(turned_map)
+    chosen = []
+    for r in candidates:
+        shared = images.get(r, 0)
+        if shared == 0 or images.get(partner[r], 0) != shared:
+            continue  # no collision: the limb has its own image
+        moved = image_part(r, turned_map)
+        taken = {images[p] for p in images if p != r}
+        if moved in (0, shared) or moved in taken:
+            continue  # the reflection does not move it onto a free limb
+        if np.mean(values[(regions == r) & matched]) > 0:
+            chosen.append(r)
+    return chosen

@@ -29,10 +29,11 @@ map to the nearest vertex in the sign-flipped coordinates ``s_i φ_i /
 √λ_i``; of the sequences whose map reverses orientation (the odd
 descriptors change sign on average) the one that distorts the biharmonic
 distances least (:func:`reflection_distortion`). Refined by ZoomOut, it
-replaces the first start's map where it distorts less. The search assumes
-those eigenvalues simple (on a multiplet the symmetry rotates the
-eigenfunctions, and no sign sequence follows it); the first start does
-not.
+replaces the first start's map where it distorts less. The search needs
+those eigenvalues simple: on a repeated one (a shape of revolution, a
+sphere) the eigenfunctions are any basis of their eigenspace, the symmetry
+rotates them, and no sign sequence follows it, so there only the first
+start is used.
 
 **The half shape.** Functions with ``f ∘ S = f`` are the functions on the
 quotient ``X / S``, one half of the shape cut open along the curve of
@@ -73,6 +74,9 @@ COMMUTATIVITY = 1.0
 #: the signs of this many lowest non-constant eigenfunctions are searched (2^k − 1 sequences) for a second start:
 #: the coarse layout of a shape (its limbs) is in the first few
 SIGN_MODES = 6
+#: eigenvalues closer than this (relative) count as one repeated eigenvalue: the eigensolver's precision, far
+#: below the splitting of a near-degenerate pair by a pose (1e-3 and more)
+MULTIPLET_TOLERANCE = 1e-6
 
 
 def _normalised(functions: np.ndarray, mass: np.ndarray) -> np.ndarray:
@@ -137,7 +141,7 @@ def _zoomout(spectrum, c: np.ndarray, k_final: int) -> np.ndarray:
 
 def _sign_search(spectrum, odd: np.ndarray, embedding: np.ndarray) -> np.ndarray | None:
     """(n,) int: the orientation-reversing sign candidate of least distortion (the module's second start), or
-    None when no sign sequence reverses orientation.
+    None when no sign sequence reverses orientation or a searched eigenvalue is repeated.
 
     Parameters
     ----------
@@ -147,7 +151,10 @@ def _sign_search(spectrum, odd: np.ndarray, embedding: np.ndarray) -> np.ndarray
     embedding : (n, e) float
         The biharmonic embedding the candidates' distortion is measured in.
     """
-    modes = min(SIGN_MODES, spectrum.k - 1)
+    modes = min(SIGN_MODES, spectrum.k - 2)
+    evals = spectrum.evals[1:modes + 2]
+    if modes < 1 or np.any(np.diff(evals) <= MULTIPLET_TOLERANCE * evals[1:]):
+        return None  # a repeated eigenvalue: its eigenfunctions are any basis of their space, signs mean nothing
     coordinates = spectrum.evecs[:, 1:modes + 1] / np.sqrt(np.maximum(spectrum.evals[1:modes + 1], 1e-300))
     tree = cKDTree(coordinates)
     sample = np.arange(0, coordinates.shape[0], max(1, coordinates.shape[0] // REFLECTION_SAMPLES))

@@ -405,7 +405,7 @@ def test_turned_regions_are_reported():
 
     note = turn_note({"turned_regions": 3})
     assert note.startswith("3 regions (a protrusion with the body beside it) matched mirror-inverted were turned by a "
-                           "reflection (the source's or the target's")
+                           "reflection (a mirrored pair by the source's or the target's")
 
 
 def test_region_agreements_are_the_means_over_each_region():

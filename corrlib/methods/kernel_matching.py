@@ -1090,8 +1090,9 @@ def turn_note(extras: dict) -> str | None:
     if extras.get("turned_regions"):
         count = extras["turned_regions"]
         said.append(f"{count} region{'s' if count > 1 else ''} (a protrusion with the body beside it) matched "
-                    f"mirror-inverted {'were' if count > 1 else 'was'} turned by a reflection (the source's or the "
-                    f"target's, whichever is nearer an isometry)")
+                    f"mirror-inverted {'were' if count > 1 else 'was'} turned by a reflection (a mirrored pair by the "
+                    f"source's or the target's, whichever is nearer an isometry; a limb crossed onto another limb's "
+                    f"image by the target's)")
     if extras.get("turned_parts"):
         count = extras["turned_parts"]
         said.append(f"{count} protrusion{'s' if count > 1 else ''} (limbs) matched to the mirror-image limb "

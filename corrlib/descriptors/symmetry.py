@@ -157,7 +157,7 @@ def _sign_search(spectrum, odd: np.ndarray, embedding: np.ndarray) -> np.ndarray
         return None  # a repeated eigenvalue: its eigenfunctions are any basis of their space, signs mean nothing
     coordinates = spectrum.evecs[:, 1:modes + 1] / np.sqrt(np.maximum(spectrum.evals[1:modes + 1], 1e-300))
     tree = cKDTree(coordinates)
-    sample = np.arange(0, coordinates.shape[0], max(1, coordinates.shape[0] // REFLECTION_SAMPLES))
+    sample = distortion_sample(coordinates.shape[0])
     distances = cdist(embedding[sample], embedding[sample])
     best = None
     for signs in itertools.product((1.0, -1.0), repeat=modes):
@@ -166,7 +166,7 @@ def _sign_search(spectrum, odd: np.ndarray, embedding: np.ndarray) -> np.ndarray
         images = tree.query(coordinates[sample] * signs)[1]
         if np.mean(np.sum(odd[sample] * odd[images], axis=1)) >= 0:
             continue  # keeps orientation: not a reflection
-        distortion = float(np.mean(np.abs(distances - cdist(embedding[images], embedding[images]))))
+        distortion = _distortion(distances, embedding[images])
         if best is None or distortion < best[0]:
             best = (distortion, np.array(signs))
     return None if best is None else tree.query(coordinates * best[1])[1]
@@ -189,9 +189,18 @@ def reflection_distortion(mirror: np.ndarray, embedding: np.ndarray) -> float:
         :func:`~corrlib.descriptors.spectral.biharmonic_embedding` of the shape (divided by √area to compare
         shapes).
     """
-    rows = np.arange(0, mirror.size, max(1, mirror.size // REFLECTION_SAMPLES))
-    sample, image = embedding[rows], embedding[np.asarray(mirror)[rows]]
-    return float(np.mean(np.abs(cdist(sample, sample) - cdist(image, image))))
+    rows = distortion_sample(mirror.size)
+    return _distortion(cdist(embedding[rows], embedding[rows]), embedding[np.asarray(mirror)[rows]])
+
+
+def distortion_sample(n: int) -> np.ndarray:
+    """The evenly strided vertices (about :data:`REFLECTION_SAMPLES`) a distortion is measured on."""
+    return np.arange(0, n, max(1, n // REFLECTION_SAMPLES))
+
+
+def _distortion(sample_distances: np.ndarray, image_points: np.ndarray) -> float:
+    """Mean ``|d(x, y) − d(S x, S y)|`` given the sample's distances and its images' embedding."""
+    return float(np.mean(np.abs(sample_distances - cdist(image_points, image_points))))
 
 
 def even_spectrum(spectrum, mirror: np.ndarray, k: int) -> tuple[np.ndarray, np.ndarray]:

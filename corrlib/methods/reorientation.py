@@ -236,6 +236,18 @@ def _majority(values: np.ndarray) -> int:
     return int(np.argmax(np.bincount(values))) if values.size else 0
 
 
+def image_limbs(map_xy: np.ndarray, parts_x: ShapeParts, parts_y: ShapeParts) -> dict[int, int]:
+    """Every source protrusion with matched vertices -> the target protrusion most of them are sent to (0: the
+    body)."""
+    labels = parts_x.labels
+    limbs = {}
+    for part in range(1, int(labels.max(initial=0)) + 1):
+        members = (labels == part) & (map_xy >= 0)
+        if members.any():
+            limbs[part] = _majority(parts_y.labels[map_xy[members]])
+    return limbs
+
+
 def turn_reversed_parts(map_xy: np.ndarray, map_yx: np.ndarray | None, parts_x: ShapeParts, parts_y: ShapeParts,
                         mirror_y: Callable[[], np.ndarray]) -> TurnedParts | None:
     """Turn every protrusion whose turned image fits its shoulder better (see the module docstring).
@@ -266,16 +278,14 @@ def turn_reversed_parts(map_xy: np.ndarray, map_yx: np.ndarray | None, parts_x: 
     labels, labels_y = parts_x.labels, parts_y.labels
     embed_x, embed_y = parts_x.embedding, parts_y.embedding
     turned_xy = np.array(map_xy, copy=True)
-    images, turned_images = {}, {}  # part -> its image limb as mapped, and as turned where it turns
-    for part in range(1, int(labels.max(initial=0)) + 1):
+    images = image_limbs(map_xy, parts_x, parts_y)
+    turned_images = {}  # part -> the limb it is turned onto
+    for part, target_part in images.items():
         members = np.flatnonzero((labels == part) & (map_xy >= 0))
         anchors = np.flatnonzero((parts_x.shoulders == part) & (map_xy >= 0))
-        if members.size == 0:
-            continue
-        image = map_xy[members]
-        images[part] = target_part = _majority(labels_y[image])
         if anchors.size == 0 or target_part == 0 or _majority(parts_y.shoulders[map_xy[anchors]]) == target_part:
             continue
+        image = map_xy[members]
         turned_image = mirror_y()[image]
         turned_part = _majority(labels_y[turned_image])
         if turned_part in (0, target_part):
@@ -432,22 +442,17 @@ def _colliding_regions(map_xy: np.ndarray, parts_x: ShapeParts, parts_y: ShapePa
     if not candidates:
         return []
     regions = shoulder_regions(parts_x)
-    labels, labels_y = parts_x.labels, parts_y.labels
     matched = map_xy >= 0
-
-    def image_part(part: int, mapping: np.ndarray) -> int:
-        members = (labels == part) & (mapping >= 0)
-        return _majority(labels_y[mapping[members]]) if members.any() else 0
-
-    images = {p: image_part(p, map_xy) for p in range(1, int(labels.max(initial=0)) + 1)}
+    images = image_limbs(map_xy, parts_x, parts_y)
     turned_map = np.where(matched, mirror_y()[np.maximum(map_xy, 0)], -1)
+    moved_to = image_limbs(turned_map, parts_x, parts_y)
     values = local_agreement(turned_map)
     chosen = []
     for r in candidates:
         shared = images.get(r, 0)
         if shared == 0 or images.get(partner[r], 0) != shared:
             continue  # no collision: the limb has its own image
-        moved = image_part(r, turned_map)
+        moved = moved_to.get(r, 0)
         taken = {images[p] for p in images if p != r}
         if moved in (0, shared) or moved in taken:
             continue  # the reflection does not move it onto a free limb

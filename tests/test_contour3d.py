@@ -618,3 +618,21 @@ def test_side_view_without_a_usable_reflection_goes_on_without_the_terms(monkeyp
     result = solve("contour3d", cut_query(wolf0, "main").contour, wolf0, n_contour=40, view="side")
     assert result.extras["view"] == "front" and np.isfinite(result.energy)
     assert "side view" not in result.energy_meaning
+
+
+def test_a_side_view_is_read_as_the_half_model_only(wolf_pair):
+    """An outline seen across the plane of symmetry is one half of the surface: with ``model=auto`` a side view
+    searches the half model's readings alone (the whole model would be a front view's reading with the side
+    view's terms), so its optimum is exactly the half model's; a front view still searches both models."""
+    wolf0, wolf1 = wolf_pair
+    contour, _ = silhouette_with_ground_truth(wolf0, resolution=200)
+    auto = solve("contour3d", contour, wolf1, n_contour=60)
+    half = solve("contour3d", contour, wolf1, n_contour=60, model="half")
+    assert auto.extras["view"] == "side" and auto.extras["model"] == "half"
+    assert auto.energy == pytest.approx(half.energy, rel=1e-12)
+    whole = solve("contour3d", contour, wolf1, n_contour=60, model="whole")
+    assert whole.extras["view"] == "side"  # the whole model stays selectable by name
+    front = solve("contour3d", contour, wolf1, n_contour=60, view="front")
+    front_half = solve("contour3d", contour, wolf1, n_contour=60, view="front", model="half")
+    front_whole = solve("contour3d", contour, wolf1, n_contour=60, view="front", model="whole")
+    assert front.energy == pytest.approx(min(front_half.energy, front_whole.energy), rel=1e-9)

@@ -64,10 +64,11 @@ near and the far side of the shape; a person seen from the front). Its
 spectrum is the union of the Neumann and the Dirichlet spectra of the filled
 outline (:func:`~corrlib.geometry.spectrum.doubled_spectrum`), so that both
 sides of every feature distance are closed surfaces of the same area and
-their eigenvalues cover the same range. ``"auto"`` (default) searches both
-and keeps the lower energy (both measured in the unit of the whole model);
-it uses the whole model alone on a mesh too coarse for the half model's
-eigenpairs or without an even subspace. ``"flat"`` compares the filled
+their eigenvalues cover the same range. ``"auto"`` (default) reads a side
+view (below) as the half model, which is what a side view is; any other
+view it searches with both models and keeps the lower energy (both measured
+in the unit of the whole model). It uses the whole model alone on a mesh
+too coarse for the half model's eigenpairs or without an even subspace. ``"flat"`` compares the filled
 outline itself with the whole surface, as the paper does. Half features are the same at a point and
 at its mirror image, so the matched curve may pass on either side of the
 body, as a silhouette cannot tell them apart either.
@@ -667,21 +668,30 @@ def relaxation_tree(graphs: list[ProductGraph], readings: list[tuple]) -> list[R
     return roots
 
 
+def _view_models(models, side_view: bool) -> list[str]:
+    """The shape models a view is read as: a side view is the half model (an outline seen across the plane
+    of symmetry is one half of the surface, see the module docstring) where the mesh has one; any other view,
+    every model asked for."""
+    if side_view and "half" in models:
+        return ["half"]
+    return list(models)
+
+
 def match_prepared(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams, token):
     """Solver generator for a prepared query against one mesh (see :func:`solve_contour3d`)."""
     watch = Stopwatch()
     yield Progress("mesh features", 0.05)
     with watch("features"):
         target = prepare_mesh(mesh, params)
-        distances = {model: feature_distances(query.model_features(model), feats)
-                     for model, feats in target.features.items()}
+        side = side_view_terms(mesh, params) if query.is_side_view(params) else None
+        distances = {model: feature_distances(query.model_features(model), target.features[model])
+                     for model in _view_models(target.features, side is not None)}
         labels = label_penalty(query.labels, mesh.labels, params.tau)
         # one unit for every model, so that their energies compare: the mean distance of the first model
         unit_distance = float(next(iter(distances.values())).mean())
         scales = {model: axis_scales(query, target, model, unit_distance, params) for model in distances}
-        side = side_view_terms(mesh, params) if query.is_side_view(params) else None
     token.raise_if_cancelled()
-    # an axis has no direction, the model is chosen by energy, and which half of a side view is near is
+    # an axis has no direction, a front view's model is chosen by energy, and which half of a side view is near is
     # unknown (the sign of the orientation term): one branch-and-bound over every combination
     readings = [(model, signs, near) for model in distances
                 for signs in itertools.product(*[(False, True) if scale > 0 else (False,)

@@ -67,7 +67,7 @@ sides of every feature distance are closed surfaces of the same area and
 their eigenvalues cover the same range. ``"auto"`` (default) reads a side
 view (below) as the half model, which is what a side view is; any other
 view it searches with both models and keeps the lower energy (both measured
-in the unit of the whole model). It uses the whole model alone on a mesh
+in the unit of the whole model, as is the half model of a side view). It uses the whole model alone on a mesh
 too coarse for the half model's eigenpairs or without an even subspace. ``"flat"`` compares the filled
 outline itself with the whole surface, as the paper does. Half features are the same at a point and
 at its mirror image, so the matched curve may pass on either side of the
@@ -684,11 +684,14 @@ def match_prepared(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams,
     with watch("features"):
         target = prepare_mesh(mesh, params)
         side = side_view_terms(mesh, params) if query.is_side_view(params) else None
-        distances = {model: feature_distances(query.model_features(model), target.features[model])
-                     for model in _view_models(target.features, side is not None)}
+        distances = {model: feature_distances(query.model_features(model), feats)
+                     for model, feats in target.features.items()}
         labels = label_penalty(query.labels, mesh.labels, params.tau)
         # one unit for every model, so that their energies compare: the mean distance of the first model
+        # asked for (also where a side view reads the half model alone)
         unit_distance = float(next(iter(distances.values())).mean())
+        unit_cost = float(np.mean(next(iter(distances.values())) + labels))
+        distances = {model: distances[model] for model in _view_models(distances, side is not None)}
         scales = {model: axis_scales(query, target, model, unit_distance, params) for model in distances}
     token.raise_if_cancelled()
     # an axis has no direction, a front view's model is chosen by energy, and which half of a side view is near is
@@ -697,7 +700,6 @@ def match_prepared(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams,
                 for signs in itertools.product(*[(False, True) if scale > 0 else (False,)
                                                  for scale in scales[model]])
                 for near in _near_halves(side, params)]
-    unit_cost = float(np.mean(next(iter(distances.values())) + labels))
     graphs = []
     for model, signs, near in readings:
         cost = distances[model] + labels + axis_cost(query, target, model, scales[model], signs)

@@ -36,25 +36,3 @@ def nearest_rows(query: np.ndarray, data: np.ndarray, chunk: int = 2048) -> np.n
         q = query[start:start + chunk].astype(np.float32)
         out[start:start + chunk] = np.argmin(sq[None, :] - 2.0 * (q @ data32.T), axis=1)
     return out
-
-
-def nearest_rows_brute(query: np.ndarray, data: np.ndarray, chunk: int = 1024) -> np.ndarray:
-    """(q,) int: :func:`nearest_rows` by chunked float64 products, whatever the dimension.
-
-    For queries far from every data row: a k-d tree's pruning fails for them and it visits most of its
-    cells, while the products cost the same wherever the query lies.
-
-    Parameters
-    ----------
-    query : (q, d) float
-    data : (p, d) float
-    chunk : int
-        Query rows per block (bounds the memory to ``chunk × p``).
-    """
-    query = np.asarray(query, dtype=np.float64)
-    data = np.asarray(data, dtype=np.float64)
-    sq = np.einsum("ij,ij->i", data, data)
-    out = np.empty(query.shape[0], dtype=np.int64)
-    for start in range(0, query.shape[0], chunk):
-        out[start:start + chunk] = np.argmin(sq[None, :] - 2.0 * (query[start:start + chunk] @ data.T), axis=1)
-    return out

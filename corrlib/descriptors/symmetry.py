@@ -61,7 +61,6 @@ from corrlib.descriptors.orientation import orientation_descriptors
 from corrlib.descriptors.spectral import biharmonic_embedding, hks, wks
 from corrlib.errors import InputError, ParameterError
 from corrlib.geometry.fmaps import functional_map, resolvent_mask, zoomout
-from corrlib.neighbours import nearest_rows_brute
 
 #: scales of the even probes (HKS and WKS each) and of the HKS whose pairs give the odd probes
 EVEN_SCALES = 16
@@ -157,19 +156,20 @@ def _sign_search(spectrum, odd: np.ndarray, embedding: np.ndarray) -> np.ndarray
     if modes < 1 or np.any(np.diff(evals) <= MULTIPLET_TOLERANCE * evals[1:]):
         return None  # a repeated eigenvalue: its eigenfunctions are any basis of their space, signs mean nothing
     coordinates = spectrum.evecs[:, 1:modes + 1] / np.sqrt(np.maximum(spectrum.evals[1:modes + 1], 1e-300))
+    tree = cKDTree(coordinates)
     sample = distortion_sample(coordinates.shape[0])
     distances = cdist(embedding[sample], embedding[sample])
     best = None
     for signs in itertools.product((1.0, -1.0), repeat=modes):
         if min(signs) > 0:
             continue  # the identity
-        images = nearest_rows_brute(coordinates[sample] * signs, coordinates)  # most lie far from every vertex
+        images = tree.query(coordinates[sample] * signs)[1]
         if np.mean(np.sum(odd[sample] * odd[images], axis=1)) >= 0:
             continue  # keeps orientation: not a reflection
         distortion = _distortion(distances, embedding[images])
         if best is None or distortion < best[0]:
             best = (distortion, np.array(signs))
-    return None if best is None else cKDTree(coordinates).query(coordinates * best[1])[1]
+    return None if best is None else tree.query(coordinates * best[1])[1]
 
 
 #: vertices (evenly strided) on which a reflection's distortion is measured

@@ -73,9 +73,12 @@ Design choices, in brief (the measurements behind them are in
   orientation-aware descriptors agree best (:func:`orientation_agreement`).
   The kernel energy is the wrong judge here: maps that differ by a
   reflection of a symmetric shape have nearly equal kernel energies.
-* ``smooth_k``: a last pointwise step projects the map onto the first
-  eigenfunctions and gives every vertex its best-scoring partner (no longer
-  bijective, which suits independently remeshed shapes).
+* ``smooth_k``: a last pointwise step, one ZoomOut step (Melzi et al.
+  2019): the map is projected onto the first eigenfunctions and every vertex
+  takes its nearest partner in them (no longer bijective, which suits
+  independently remeshed shapes). By default the basis is what the smallest
+  kernel resolves, the eigenfunctions with ``τ_min λ · area ≤ 1``: finer
+  ones it cannot tell apart, coarser ones would blur what it resolved.
 * Unequal vertex counts: rectangular assignments are padded; with
   ``partial=True`` slack variables (Eq. 8.15–8.16) let low-scoring vertices
   stay unmatched (-1 in the maps, reported).
@@ -110,6 +113,7 @@ from corrlib.methods.registry import MethodSpec, register
 from corrlib.methods.reorientation import (ShapeParts, mirrored_map, region_agreements, turn_reversed_map,
                                            turn_reversed_parts, turn_reversed_regions)
 from corrlib.methods.resolution import keep_resolved_matches, kernel_width
+from corrlib.neighbours import nearest_rows
 from corrlib.progress import Progress, Stopwatch, scaled_progress
 
 #: threads solving the cells of a refinement pass: the auction releases the GIL, so cells can overlap; two,
@@ -130,9 +134,10 @@ MONOTONE_RTOL = 1e-5
 #: the finer scales' samples are farthest-point prefixes up to ``n_seed × growth ** FPS_SCALES`` vertices
 #: (the first finer scales); the rest, only in the last dense scales, are ordered by distance from the centroid
 FPS_SCALES = 2
-#: progress bar layout (start, width): DC iterations on the seeds, then the finer scales
+#: progress bar layout (start, width): DC iterations on the seeds, then the finer scales (the final ZoomOut
+#: step reports at :data:`PROGRESS_SMOOTHING`, after them)
 PROGRESS_DC = (0.1, 0.6)
-PROGRESS_MULTISCALE = (0.7, 0.3)
+PROGRESS_MULTISCALE = (0.7, 0.27)
 #: progress fractions of the initial-map computation and of the final smoothing step
 PROGRESS_INIT, PROGRESS_SMOOTHING = 0.05, 0.98
 
@@ -189,10 +194,11 @@ class KernelMatchingParams:
     slack_quantile: float = param(0.1, label="Slack quantile", low=0.0, high=1.0,
                                   help="With partial matching: the slack equals this quantile of the rows' "
                                        "best scores in each cell.")
-    smooth_k: int = param(0, label="Final smoothing basis", low=0, high=3000,
+    smooth_k: int = param(-1, label="Final ZoomOut basis", low=-1, high=3000,
                           help="Final pointwise step: the map is projected onto this many eigenfunctions and "
-                               "every vertex takes the best-scoring partner (one ZoomOut-style step; removes "
-                               "the jitter a bijection forces between differently sampled meshes). 0: off.")
+                               "every vertex takes its nearest partner in them (one ZoomOut step; removes the "
+                               "jitter a bijection forces between differently sampled meshes). -1: the "
+                               "eigenfunctions the smallest kernel resolves (τ λ·area ≤ 1); 0: off.")
     capacity: str = param("area", label="Finer-scale capacity", choices=("area", "one"),
                           help="Finer scales: a target sample may take as many source samples as its area "
                                "holds (measure-preserving; for differently meshed shapes) or exactly one "
@@ -232,23 +238,28 @@ def diffusion_times(params: KernelMatchingParams) -> np.ndarray:
     return np.geomspace(params.tau_max, params.tau_min, params.n_times)
 
 
-def _pointwise_from_basis(map_xy, map_yx, phi, psi, k, chunk: int = 1024):
-    """Best-scoring partners of ``Ψ_k C Φ_kᵀ`` with ``C = Ψ_k[map]ᵀ Φ_k`` (unmatched vertices stay -1)."""
-    valid = map_xy >= 0
-    c = psi[map_xy[valid], :k].T @ phi[valid, :k]
-    left = (psi[:, :k] @ c).astype(np.float32)  # (n_y, k): rows of the score, one per target vertex
-    right = phi[:, :k].astype(np.float32)
-    new_xy = map_xy.copy()
-    for start in range(0, right.shape[0], chunk):
-        best = np.argmax(left @ right[start:start + chunk].T, axis=0)
-        block = slice(start, start + chunk)
-        new_xy[block] = np.where(valid[block], best, -1)
-    new_yx = map_yx.copy()
-    for start in range(0, left.shape[0], chunk):
-        best = np.argmax(left[start:start + chunk] @ right.T, axis=1)
-        block = slice(start, start + chunk)
-        new_yx[block] = np.where(map_yx[block] >= 0, best, -1)
+def _pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k):
+    """One ZoomOut step (Melzi et al. 2019, the pointwise map from a functional map): every vertex takes the
+    nearest vertex in the first ``k`` eigenfunctions, ``m(x) = argmin_y ‖Φ_k(x) C − Ψ_k(y)‖`` with
+    ``C = Φ_kᵀ M_X Ψ_k[m]``, and the inverse alike (unmatched vertices stay -1).
+
+    The nearest neighbour, not the best inner product ``Φ_k(x) C Ψ_k(y)ᵀ``: the latter favours target vertices
+    whose spectral embedding is long, so it moves the partners of an exact isometry too.
+    """
+    phi, psi = spec_x.evecs[:, :k], spec_y.evecs[:, :k]
+    mass_x, mass_y = spec_x.mass.diagonal(), spec_y.mass.diagonal()
+    valid_x, valid_y = map_xy >= 0, map_yx >= 0
+    c_xy = phi[valid_x].T @ (mass_x[valid_x, None] * psi[map_xy[valid_x]])
+    c_yx = psi[valid_y].T @ (mass_y[valid_y, None] * phi[map_yx[valid_y]])
+    new_xy = np.where(valid_x, nearest_rows(phi @ c_xy, psi), -1)
+    new_yx = np.where(valid_y, nearest_rows(psi @ c_yx, phi), -1)
     return new_xy, new_yx
+
+
+def resolved_eigenpairs(evals: np.ndarray, area: float, tau: float) -> int:
+    """How many eigenfunctions the heat kernel of relative time ``tau`` resolves: those with ``τ λ · area ≤ 1``
+    (the decay ``e^{-tλ}`` above ``1/e``; at least one)."""
+    return max(1, int(np.count_nonzero(np.asarray(evals) * area * tau <= 1.0)))
 
 
 def kernel_energy(c: np.ndarray, decay_y: np.ndarray, decay_x: np.ndarray) -> float:
@@ -985,8 +996,9 @@ def _reoriented(state: KernelState, map_xy: np.ndarray, map_yx: np.ndarray):
 
 
 def kernel_result(state: KernelState, full_map_xy: np.ndarray, full_map_yx: np.ndarray):
-    """Stage 7: the kernel energy ``<Π, K_Y Π K_X>`` of the final map at the smallest time, the optional
-    pointwise smoothing (:func:`_pointwise_from_basis`), the :class:`MatchResult`. A generator."""
+    """Stage 7: the turns of reversed regions, the final ZoomOut step (:func:`_pointwise_from_basis`), the
+    kernel energy ``<Π, K_Y Π K_X>`` of the final map at the smallest time, the :class:`MatchResult`. A
+    generator."""
     params, k, watch = state.params, state.k, state.watch
     psi, phi, anchor_c, trace = state.psi, state.phi, state.problem.anchor_c, state.trace
     monotone, dc_start, n_seed = state.monotone, state.dc_start, state.n_seed
@@ -999,14 +1011,16 @@ def kernel_result(state: KernelState, full_map_xy: np.ndarray, full_map_yx: np.n
         with watch("orientation"):
             full_map_xy, full_map_yx, turned, turned_regions, turned_parts = _reoriented(state, full_map_xy,
                                                                                          full_map_yx)
+    smooth_k = min(params.smooth_k, k) if params.smooth_k >= 0 else min(
+        resolved_eigenpairs(state.spec_x.evals, state.source.area, state.taus[-1]),
+        resolved_eigenpairs(state.spec_y.evals, state.target.area, state.taus[-1]))
+    if smooth_k > 0:
+        yield Progress("smoothing", PROGRESS_SMOOTHING, f"pointwise map from a {smooth_k}-dimensional basis")
+        with watch("smoothing"):
+            full_map_xy, full_map_yx = _pointwise_from_basis(full_map_xy, full_map_yx, state.spec_x,
+                                                             state.spec_y, smooth_k)
     c = _alignment(psi[full_map_xy[full_map_xy >= 0]], phi[full_map_xy >= 0]) + anchor_c
     energy = kernel_energy(c, decay_y, decay_x)
-    if params.smooth_k > 0:
-        yield Progress("smoothing", PROGRESS_SMOOTHING,
-                       f"pointwise map from a {min(params.smooth_k, k)}-dimensional basis")
-        with watch("smoothing"):
-            full_map_xy, full_map_yx = _pointwise_from_basis(full_map_xy, full_map_yx, phi, psi,
-                                                             min(params.smooth_k, k))
     extras = {
         "orientation_agreement": _agreement(*state.orientation_blocks(), full_map_xy),
         "turned": turned is not None,

@@ -1015,8 +1015,8 @@ def kernel_result(state: KernelState, full_map_xy: np.ndarray, full_map_yx: np.n
         resolved_eigenpairs(state.spec_x.evals, state.source.area, state.taus[-1]),
         resolved_eigenpairs(state.spec_y.evals, state.target.area, state.taus[-1]))
     if smooth_k > 0:
-        yield Progress("smoothing", PROGRESS_SMOOTHING, f"pointwise map from a {smooth_k}-dimensional basis")
-        with watch("smoothing"):
+        yield Progress("final ZoomOut step", PROGRESS_SMOOTHING, f"nearest partners in {smooth_k} eigenfunctions")
+        with watch("zoomout"):
             full_map_xy, full_map_yx = _pointwise_from_basis(full_map_xy, full_map_yx, state.spec_x,
                                                              state.spec_y, smooth_k)
     c = _alignment(psi[full_map_xy[full_map_xy >= 0]], phi[full_map_xy >= 0]) + anchor_c

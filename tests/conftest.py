@@ -1,5 +1,8 @@
 """Shared fixtures. Every test uses a private spectra cache so runs never depend on each other."""
 
+import gc
+import sys
+
 import numpy as np
 import pytest
 
@@ -12,6 +15,23 @@ def _private_cache(tmp_path_factory):
     mp.setenv("CORRLIB_CACHE_DIR", str(tmp_path_factory.mktemp("corrlib-cache")))
     yield
     mp.undo()
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_runtest_teardown(item):
+    """Delete the test's closed windows now, on this thread, while none of their worker threads runs.
+
+    pytest-qt closes a test's widgets and calls ``deleteLater``, which Qt carries out only in the next event
+    loop, i.e. inside the *next* test, while that test's studio threads load files. Deleting a closed studio
+    window (its VTK render windows) there crashed Qt now and then. Flushing the deferred deletions and the
+    reference cycles here makes every window die at the end of its own test.
+    """
+    qt_core = sys.modules.get("PySide6.QtCore")
+    if qt_core is None or qt_core.QCoreApplication.instance() is None:
+        return
+    qt_core.QCoreApplication.sendPostedEvents(None, qt_core.QEvent.Type.DeferredDelete)
+    gc.collect()
+    qt_core.QCoreApplication.sendPostedEvents(None, qt_core.QEvent.Type.DeferredDelete)
 
 
 @pytest.fixture(scope="session")

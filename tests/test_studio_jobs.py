@@ -250,3 +250,19 @@ def test_no_long_functions_in_app():
                 if lines > MAX_FUNCTION_LINES:
                     long.append(f"{path.relative_to(APP.parent)}:{node.name} ({lines} lines)")
     assert not long, long
+
+
+_CLOSED_WINDOWS = []
+
+
+def test_a_window_lives_until_the_end_of_its_test(qtbot, window):
+    _CLOSED_WINDOWS.append(window)
+    assert window.isVisible()
+
+
+def test_the_previous_tests_window_is_deleted_before_the_next_test(qtbot):
+    """conftest's teardown hook deletes a test's windows at its end, not inside the next test's event loop
+    (where a closed window's VTK objects died while the new window's threads loaded files)."""
+    import shiboken6
+
+    assert _CLOSED_WINDOWS and not shiboken6.isValid(_CLOSED_WINDOWS[0])

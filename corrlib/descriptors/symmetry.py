@@ -74,6 +74,8 @@ COMMUTATIVITY = 1.0
 #: the signs of this many lowest non-constant eigenfunctions are searched (2^k − 1 sequences) for a second start:
 #: the coarse layout of a shape (its limbs) is in the first few
 SIGN_MODES = 6
+#: leaf size of the k-d tree of the sign search (a speed setting only: every leaf size gives the same images)
+SIGN_SEARCH_LEAF_SIZE = 128
 #: eigenvalues closer than this (relative) count as one repeated eigenvalue: the eigensolver's precision, far
 #: below the splitting of a near-degenerate pair by a pose (1e-3 and more)
 MULTIPLET_TOLERANCE = 1e-6
@@ -156,20 +158,22 @@ def _sign_search(spectrum, odd: np.ndarray, embedding: np.ndarray) -> np.ndarray
     if modes < 1 or np.any(np.diff(evals) <= MULTIPLET_TOLERANCE * evals[1:]):
         return None  # a repeated eigenvalue: its eigenfunctions are any basis of their space, signs mean nothing
     coordinates = spectrum.evecs[:, 1:modes + 1] / np.sqrt(np.maximum(spectrum.evals[1:modes + 1], 1e-300))
-    tree = cKDTree(coordinates)
+    # Most sign vectors are no symmetry: their images lie far from every vertex, where a k-d tree with small
+    # leaves visits most of its nodes. One query of all candidates on large leaves (exact all the same).
+    tree = cKDTree(coordinates, leafsize=SIGN_SEARCH_LEAF_SIZE)
     sample = distortion_sample(coordinates.shape[0])
     distances = cdist(embedding[sample], embedding[sample])
+    candidates = np.array([signs for signs in itertools.product((1.0, -1.0), repeat=modes) if min(signs) < 0])
+    flipped = coordinates[sample][None, :, :] * candidates[:, None, :]
+    all_images = tree.query(flipped.reshape(-1, modes), workers=-1)[1].reshape(len(candidates), sample.size)
     best = None
-    for signs in itertools.product((1.0, -1.0), repeat=modes):
-        if min(signs) > 0:
-            continue  # the identity
-        images = tree.query(coordinates[sample] * signs)[1]
+    for signs, images in zip(candidates, all_images):
         if np.mean(np.sum(odd[sample] * odd[images], axis=1)) >= 0:
             continue  # keeps orientation: not a reflection
         distortion = _distortion(distances, embedding[images])
         if best is None or distortion < best[0]:
-            best = (distortion, np.array(signs))
-    return None if best is None else tree.query(coordinates * best[1])[1]
+            best = (distortion, signs)
+    return None if best is None else tree.query(coordinates * best[1], workers=-1)[1]
 
 
 #: vertices (evenly strided) on which a reflection's distortion is measured

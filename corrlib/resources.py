@@ -37,7 +37,7 @@ def bundled_shapes() -> list[tuple[str, str]]:
     root = resource_dir()
     out = []
     for pattern in ("data/tosca/*.off", "data/sumner/*.off", "data/sketch2d/*.off", "data/silhouettes/*.png",
-                    "data/silhouettes/mpeg7/*.gif"):
+                    "data/silhouettes/mpeg7/*.gif", "data/silhouettes/drawn/*.txt"):
         for path in sorted(root.glob(pattern)):
             rel = path.relative_to(root).as_posix()
             out.append((rel.removeprefix("data/"), rel))

@@ -624,21 +624,16 @@ def test_side_view_without_a_usable_reflection_goes_on_without_the_terms(monkeyp
 def test_a_side_view_is_read_as_the_half_model_only():
     """An outline seen across the plane of symmetry is one half of the surface: with ``model=auto`` a side view
     searches the half model's readings alone (the whole model would be a front view's reading with the side
-    view's terms); a front view still searches both. The outline is the drawn wolf of
-    ``scripts/retrieval_set.py``, which the lion used to take through a whole-model reading."""
-    import importlib.util
-    from pathlib import Path
-
+    view's terms); a front view still searches both. The outline is the bundled drawn wolf (a query of
+    ``scripts/retrieval_set.py``), which the lion used to take through a whole-model reading."""
+    from corrlib.io import load_contour
     from corrlib.methods.contour3d import _view_models
+    from corrlib.resources import resource
 
     assert _view_models({"whole": 0, "half": 0}, True) == ["half"]
     assert _view_models({"whole": 0, "half": 0}, False) == ["whole", "half"]
     assert _view_models({"whole": 0}, True) == ["whole"]  # a mesh without the half model keeps the whole one
-    spec = importlib.util.spec_from_file_location("retrieval_set", Path(__file__).parents[1] / "scripts" /
-                                                  "retrieval_set.py")
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    drawn_wolf = Contour2D(np.array(module.DRAWN["wolf"], dtype=float))
+    drawn_wolf = load_contour(resource("data/silhouettes/drawn/wolf.txt"))
     lion = load_mesh(SUMNER / "lion-00.off")
     side = solve("contour3d", drawn_wolf, lion, n_contour=100)
     assert side.extras["view"] == "side" and side.extras["model"] == "half"

@@ -4,7 +4,7 @@ import numpy as np
 import pytest
 
 from corrlib.descriptors.orientation import orientation_operators
-from corrlib.geometry.fmaps import functional_map, multiplication_operators, resolvent_mask
+from corrlib.geometry.fmaps import functional_map, multiplication_operators, pointwise_to_functional, resolvent_mask
 from corrlib.geometry.spectrum import mesh_spectrum
 from corrlib.io import load_mesh, load_vts
 from corrlib.methods import solve
@@ -64,6 +64,28 @@ def test_functional_map_is_the_least_squares_minimiser():
     np.testing.assert_allclose(c, reference, rtol=1e-7, atol=1e-9)
     with pytest.raises(ValueError, match="weights"):
         functional_map(coef_x, coef_y, mask, pairs, (1.0, 1.0))
+
+
+def test_pointwise_to_functional_against_the_explicit_permutation_matrix():
+    """``C_yx = Ψᵀ M_Y Π_yx Φ`` with Π built entry by entry (unmatched rows zero); the identity map of a
+    shape onto itself gives the identity (M-orthonormal eigenfunctions), a sparse or a lumped mass alike."""
+    import scipy.sparse as sp
+
+    rng = np.random.default_rng(3)
+    n_x, n_y, k = 9, 7, 4
+    evecs_x, evecs_y = rng.standard_normal((n_x, k)), rng.standard_normal((n_y, k + 1))
+    masses = rng.uniform(0.5, 2.0, n_y)
+    map_yx = rng.integers(0, n_x, n_y)
+    map_yx[[1, 4]] = -1
+    permutation = np.zeros((n_y, n_x))
+    permutation[np.flatnonzero(map_yx >= 0), map_yx[map_yx >= 0]] = 1.0
+    expected = evecs_y.T @ np.diag(masses) @ permutation @ evecs_x
+    assert np.allclose(pointwise_to_functional(map_yx, evecs_x, evecs_y, masses), expected)
+    assert np.allclose(pointwise_to_functional(map_yx, evecs_x, evecs_y, sp.diags(masses)), expected)
+    spectrum = mesh_spectrum(load_mesh(TOSCA / "wolf0.off"), 20)
+    identity = pointwise_to_functional(np.arange(spectrum.evecs.shape[0]), spectrum.evecs, spectrum.evecs,
+                                       spectrum.mass)
+    assert np.allclose(identity, np.eye(20), atol=1e-8)
 
 
 def test_resolvent_mask_vanishes_between_equal_eigenvalues_and_grows_apart():

@@ -60,7 +60,7 @@ from corrlib import cache
 from corrlib.descriptors.orientation import orientation_descriptors
 from corrlib.descriptors.spectral import biharmonic_embedding, hks, wks
 from corrlib.errors import InputError, ParameterError
-from corrlib.geometry.fmaps import functional_map, resolvent_mask, zoomout
+from corrlib.geometry.fmaps import functional_map, pointwise_to_functional, resolvent_mask, zoomout
 
 #: scales of the even probes (HKS and WKS each) and of the HKS whose pairs give the odd probes
 EVEN_SCALES = 16
@@ -125,7 +125,7 @@ def reflection_map(mesh, spectrum, *, k_init: int = K_INIT, k_final: int = K_FIN
     searched = _sign_search(spectrum, probes[:, even.shape[1]:], embedding)
     # refined only if it starts better than the first start ends (ZoomOut then lowers it further)
     if searched is not None and reflection_distortion(searched, embedding) < distortion:
-        second = _zoomout(spectrum, phi.T @ (mass[:, None] * phi[searched]), k_final)
+        second = _zoomout(spectrum, pointwise_to_functional(searched, phi, phi, mass), k_final)
         if reflection_distortion(second, embedding) < distortion:
             return second
     return mirror
@@ -249,7 +249,7 @@ def _parity_spectrum(spectrum, mirror: np.ndarray, k: int, even: bool) -> tuple[
     if mirror.shape != (phi.shape[0],):
         raise InputError(f"the reflection must map each of the {phi.shape[0]} vertices, got shape {mirror.shape}")
     mass = spectrum.mass.diagonal()
-    c = phi.T @ (mass[:, None] * phi[mirror])
+    c = pointwise_to_functional(mirror, phi, phi, mass)
     projector_evals, projector_evecs = np.linalg.eigh(0.5 * np.eye(c.shape[0]) + 0.25 * (c + c.T))
     basis = projector_evecs[:, projector_evals > 0.5] if even else projector_evecs[:, projector_evals < 0.5]
     if basis.shape[1] < k:

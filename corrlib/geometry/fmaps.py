@@ -14,8 +14,33 @@ coefficients of a function on X to those of its pull-back on Y,
 from __future__ import annotations
 
 import numpy as np
+import scipy.sparse as sp
 
 from corrlib.neighbours import nearest_rows
+
+
+def pointwise_to_functional(map_yx: np.ndarray, evecs_x: np.ndarray, evecs_y: np.ndarray, mass_y) -> np.ndarray:
+    """The functional map of a pointwise map, ``C_yx = Ψᵀ M_Y Π_yx Φ`` (the module's convention).
+
+    Parameters
+    ----------
+    map_yx : (n_y,) int
+        ``map_yx[j]``: the vertex of X matched to vertex j of Y; -1 for none (a zero row of ``Π_yx``).
+    evecs_x : (n_x, k_x) float
+    evecs_y : (n_y, k_y) float
+    mass_y : (n_y, n_y) sparse or (n_y,) float
+        The mass matrix of Y, or its diagonal (lumped masses).
+
+    Returns
+    -------
+    (k_y, k_x) float
+    """
+    map_yx = np.asarray(map_yx)
+    valid = map_yx >= 0
+    pulled_back = np.zeros((map_yx.size, evecs_x.shape[1]))
+    pulled_back[valid] = evecs_x[map_yx[valid]]
+    weighted = mass_y @ pulled_back if sp.issparse(mass_y) else np.asarray(mass_y)[:, None] * pulled_back
+    return evecs_y.T @ weighted
 
 
 def zoomout(evecs_x: np.ndarray, evecs_y: np.ndarray, mass_y, c_yx: np.ndarray, k_final: int, step: int,
@@ -50,7 +75,7 @@ def zoomout(evecs_x: np.ndarray, evecs_y: np.ndarray, mass_y, c_yx: np.ndarray, 
         if k >= k_final:
             return map_yx, c_yx
         k = min(k + step, k_final)
-        c_yx = evecs_y[:, :k].T @ (mass_y @ evecs_x[map_yx, :k])
+        c_yx = pointwise_to_functional(map_yx, evecs_x[:, :k], evecs_y[:, :k], mass_y)
         yield k
 
 

@@ -100,6 +100,7 @@ from corrlib.descriptors.orientation import orientation_descriptors
 from corrlib.descriptors.symmetry import K_FINAL as REFLECTION_EIGENPAIRS
 from corrlib.descriptors.symmetry import mesh_reflection
 from corrlib.errors import ParameterError
+from corrlib.geometry.fmaps import pointwise_to_functional
 from corrlib.geometry.sampling import (
     SurfaceSample,
     farthest_point_sampling,
@@ -247,12 +248,10 @@ def _pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k):
     whose spectral embedding is long, so it moves the partners of an exact isometry too.
     """
     phi, psi = spec_x.evecs[:, :k], spec_y.evecs[:, :k]
-    mass_x, mass_y = spec_x.mass.diagonal(), spec_y.mass.diagonal()
-    valid_x, valid_y = map_xy >= 0, map_yx >= 0
-    c_xy = phi[valid_x].T @ (mass_x[valid_x, None] * psi[map_xy[valid_x]])
-    c_yx = psi[valid_y].T @ (mass_y[valid_y, None] * phi[map_yx[valid_y]])
-    new_xy = np.where(valid_x, nearest_rows(phi @ c_xy, psi), -1)
-    new_yx = np.where(valid_y, nearest_rows(psi @ c_yx, phi), -1)
+    c_xy = pointwise_to_functional(map_xy, psi, phi, spec_x.mass.diagonal())  # pulls Y's functions back to X
+    c_yx = pointwise_to_functional(map_yx, phi, psi, spec_y.mass.diagonal())
+    new_xy = np.where(map_xy >= 0, nearest_rows(phi @ c_xy, psi), -1)
+    new_yx = np.where(map_yx >= 0, nearest_rows(psi @ c_yx, phi), -1)
     return new_xy, new_yx
 
 

@@ -37,8 +37,11 @@ def pointwise_to_functional(map_yx: np.ndarray, evecs_x: np.ndarray, evecs_y: np
     """
     map_yx = np.asarray(map_yx)
     valid = map_yx >= 0
-    pulled_back = np.zeros((map_yx.size, evecs_x.shape[1]))
-    pulled_back[valid] = evecs_x[map_yx[valid]]
+    if valid.all():  # ZoomOut's maps: no masking on its hot path
+        pulled_back = evecs_x[map_yx]
+    else:
+        pulled_back = np.zeros((map_yx.size, evecs_x.shape[1]))
+        pulled_back[valid] = evecs_x[map_yx[valid]]
     weighted = mass_y @ pulled_back if sp.issparse(mass_y) else np.asarray(mass_y)[:, None] * pulled_back
     return evecs_y.T @ weighted
 

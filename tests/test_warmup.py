@@ -52,12 +52,48 @@ SCRIPT = textwrap.dedent("""
 
 @pytest.mark.slow
 def test_methods_compile_nothing_after_the_warm_up(tmp_path):
-    # nothing read from caches: the descriptors are computed, and every kernel compiled for exactly the types
-    # it is called with (a kernel cached on disk for other types could otherwise stand in)
-    env = {**os.environ, "CORRLIB_CACHE_DIR": str(tmp_path / "cache"), "NUMBA_CACHE_DIR": str(tmp_path / "numba")}
+    # a private spectra cache, so that the descriptors are computed. Numba's own cache is the one the warm-up
+    # fills (a fresh one would make this test compile everything, a minute): a signature loaded from it is added
+    # to the dispatcher's signatures just as a compiled one is, so a type the warm-up misses is still seen
+    # (test_a_signature_loaded_from_numbas_cache_counts_as_added checks that premise)
+    env = {**os.environ, "CORRLIB_CACHE_DIR": str(tmp_path / "cache")}
     out = subprocess.run([sys.executable, "-c", SCRIPT, str(ROOT / "resources" / "people"),
                           str(SILHOUETTES / "horse.png")],
                          capture_output=True, text=True, env=env, timeout=600)
     assert out.returncode == 0, out.stderr[-2000:]
     added = json.loads(out.stdout.strip().splitlines()[-1])
     assert {name: sigs for name, sigs in added.items() if sigs} == {}
+
+
+CACHED_KERNEL = textwrap.dedent("""
+    import numba
+
+    @numba.njit(cache=True)
+    def add_one(x):
+        return x + 1
+""")
+
+CALL_AND_REPORT = textwrap.dedent("""
+    import json, sys
+    import numpy as np
+    sys.path.insert(0, sys.argv[1])
+    import cached_kernel
+    before = sorted(map(str, cached_kernel.add_one.signatures))
+    cached_kernel.add_one(np.ones(3))
+    after = sorted(map(str, cached_kernel.add_one.signatures))
+    print(json.dumps({"before": before, "after": after, "hits": sum(cached_kernel.add_one.stats.cache_hits.values())}))
+""")
+
+
+def test_a_signature_loaded_from_numbas_cache_counts_as_added(tmp_path):
+    (tmp_path / "cached_kernel.py").write_text(CACHED_KERNEL)
+    env = {**os.environ, "NUMBA_CACHE_DIR": str(tmp_path / "numba")}
+    runs = []
+    for _ in range(2):  # the first run compiles and writes the cache, the second loads from it
+        out = subprocess.run([sys.executable, "-c", CALL_AND_REPORT, str(tmp_path)], capture_output=True, text=True,
+                             env=env, timeout=300)
+        assert out.returncode == 0, out.stderr[-2000:]
+        runs.append(json.loads(out.stdout.strip().splitlines()[-1]))
+    assert [r["hits"] for r in runs] == [0, 1]
+    for run in runs:
+        assert run["before"] == [] and len(run["after"]) == 1

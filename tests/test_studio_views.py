@@ -262,3 +262,37 @@ def test_thumbnails_are_rendered_upright_by_vtk():
     upper = shape[top:top + band].mean()
     lower = shape[bottom - band:bottom + 1].mean()
     assert lower < upper  # legs below, the back above
+
+
+def test_a_closed_plotter_leaves_no_python_callback_on_its_widget(qtbot):
+    """Qt sends a widget events while it deletes it; a closed plotter's widget must not call into Python then."""
+    from PySide6.QtCore import SIGNAL, QObject, QSize
+    from PySide6.QtGui import QResizeEvent
+    from PySide6.QtWidgets import QApplication, QWidget
+
+    from app.views.scene import close_plotter, make_plotter
+
+    parent = QWidget()
+    qtbot.addWidget(parent)
+    plotter = make_plotter(parent)
+    seen = []
+
+    class Filter(QObject):
+        def eventFilter(self, _obj, event):  # noqa: N802 (Qt's name)
+            seen.append(event.type())
+            return False
+
+    widget = plotter.interactor
+    widget.installEventFilter(Filter(widget))
+    resize = QResizeEvent(QSize(20, 20), QSize(10, 10))
+    QApplication.sendEvent(widget, resize)
+    assert seen  # the filter works while the plotter is open
+    watchers = parent.receivers(SIGNAL("destroyed(QObject*)"))
+    assert watchers >= 1  # VTK's widget closes itself when its parent is destroyed
+
+    close_plotter(plotter)
+    seen.clear()
+    QApplication.sendEvent(widget, resize)
+    assert seen == []
+    assert parent.receivers(SIGNAL("destroyed(QObject*)")) == watchers - 1
+    close_plotter(plotter)  # closing twice is harmless

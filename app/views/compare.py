@@ -35,6 +35,7 @@ from app.views.camera import Displayed, FramedView, enable_hover, picked_vertex
 from app.views.scene import (
     ERROR_COLOR_MAX,
     PLAIN_COLOR,
+    close_plotter,
     coordinate_colors,
     make_plotter,
     polydata,
@@ -138,7 +139,7 @@ class CompareView(QWidget, FramedView):
         self.canvas.draw_idle()
         if self.plotter is not None:
             self.views_box.removeWidget(self.plotter.interactor)
-            self.plotter.close()
+            close_plotter(self.plotter)
             self.plotter.interactor.deleteLater()
             self.plotter = None
         self.inspected = None
@@ -359,7 +360,7 @@ class CompareView(QWidget, FramedView):
 
     def close_plotters(self) -> None:
         if self.plotter is not None:
-            self.plotter.close()
+            close_plotter(self.plotter)
 
 
 def grid_shape(n_views: int) -> tuple[int, int]:

@@ -13,6 +13,7 @@ from app.views.scene import (
     ERROR_COLOR_MAX,
     PLAIN_COLOR,
     UNMATCHED_GREY,
+    close_plotter,
     coordinate_colors,
     make_plotter,
     polydata,
@@ -269,4 +270,4 @@ class PairView(QWidget, FramedView):
         self.redraw()
 
     def close_plotters(self) -> None:
-        self.plotter.close()
+        close_plotter(self.plotter)

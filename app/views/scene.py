@@ -60,6 +60,31 @@ def make_plotter(parent, **kwargs):
     return QtInteractor(parent, auto_update=False, **kwargs)
 
 
+def close_plotter(plotter) -> None:
+    """Close a QtInteractor and cut every Python callback Qt could still run for its widget.
+
+    A closed plotter's widget lives on until Qt deletes it with its window (or a view replaces it), and Qt
+    sends a widget events while it deletes it. Python code run from inside that C++ destructor chain is a
+    known source of crashes, so none is left: the event filters that are the widget's children (ours, e.g.
+    the camera's refit on resize) are removed, and VTK's connection of the parent's ``destroyed`` signal to
+    the widget's ``close`` (already done here) is cut.
+    """
+    import warnings
+
+    plotter.close()
+    widget = plotter.interactor
+    for child in widget.children():
+        widget.removeEventFilter(child)  # a no-op for children that are no filter
+    parent = widget.parent()
+    if parent is not None:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # PySide warns when nothing was connected
+            try:
+                parent.destroyed.disconnect(widget.close)
+            except (RuntimeError, TypeError):
+                pass
+
+
 class LazyPlotter:
     """A view's plotter, created on first use (views on hidden tabs cost nothing at start-up).
 
@@ -84,4 +109,4 @@ class LazyPlotter:
 
     def close(self) -> None:
         if self._plotter is not None:
-            self._plotter.close()
+            close_plotter(self._plotter)

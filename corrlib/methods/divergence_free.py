@@ -28,6 +28,10 @@ correspondence and the coefficients are estimated jointly by EM:
   averaged over the N samples (the paper sums it; β = 0.1 here is β = 0.1 N
   there), so β does not depend on the sample count; a weaker prior lets
   high frequencies grow until RK2 no longer follows the field.
+* Derivative of the flow (our addition, documented): the exact derivative
+  (Eq. C.15) is formed every ``jacobian_every`` iterations; in between the
+  samples are flowed alone and the last derivative gets Broyden's secant
+  update along the coefficient change (:class:`FlowLinearisation`).
 * Annealing (our addition, documented): the E-step variance starts at σ²
   and is multiplied by ``anneal`` after every iteration down to
   ``sigma2_min``; the feature term of the E-step distance is scaled by the
@@ -64,7 +68,7 @@ import numpy as np
 from scipy.spatial.distance import cdist
 
 from corrlib.deformation.basis import DivFreeBasis
-from corrlib.deformation.flow import check_points, flow_with_jacobian
+from corrlib.deformation.flow import check_points, flow, flow_with_jacobian
 from corrlib.deformation.mixture import mixture_moments
 from corrlib.deformation.model import Deformation, Frames, StoredSteps
 from corrlib.errors import InputError
@@ -105,6 +109,9 @@ class DivergenceFreeParams:
                                   help="Multiplies the factor that equalises the means of the coordinate "
                                        "and feature terms.")
     max_iter: int = param(40, label="EM iterations", low=1, high=10000, help="Iteration cap.")
+    jacobian_every: int = param(2, label="Exact derivative every", low=1, high=10000,
+                                help="EM iterations per exact flow derivative (Eq. C.15); in between, the flow "
+                                     "alone and Broyden's secant update of the last derivative (1: exact always).")
     tol: float = param(1e-4, label="Tolerance", low=0.0, high=1.0,
                        help="Stop when the coefficient update is below tol × |a| (and 1e-8).")
     init: str = param("none", label="Initial map", choices=("none", "fmap-zoomout", "kernel-matching"),
@@ -229,7 +236,7 @@ def gauss_newton_step(positions, jac, targets, weights, coeffs, prior_precision,
     positions : (N, 3) float
         ``x_n(a)``.
     jac : (N, 3, K) float
-        ``∂x_n/∂a``; overwritten (scaled by √w in place, to spare a copy of the largest array).
+        ``∂x_n/∂a`` (not modified).
     targets : (N, 3) float
         ``ŷ_n``.
     weights : (N,) float
@@ -248,7 +255,7 @@ def gauss_newton_step(positions, jac, targets, weights, coeffs, prior_precision,
     """
     n, _, k = jac.shape
     sw = np.sqrt(weights)
-    jw = np.multiply(jac, sw.astype(jac.dtype)[:, None, None], out=jac).reshape(3 * n, k)  # W^½ J
+    jw = (jac * sw.astype(jac.dtype)[:, None, None]).reshape(3 * n, k)  # W^½ J
     residual = ((positions - targets) * sw[:, None]).reshape(-1).astype(jw.dtype)
     rhs = -(jw.T @ residual).astype(np.float64) - prior_precision * coeffs
     diagonal = np.einsum("ij,ij->j", jw, jw, dtype=np.float64) + prior_precision
@@ -280,15 +287,72 @@ def gauss_newton_step(positions, jac, targets, weights, coeffs, prior_precision,
     return delta
 
 
-def em_iteration(basis, start, targets_y, feature_dist, coeffs, sigma2_e, precision, params, watch,
-                 feature_scale: float = 1.0):
-    """One EM iteration: flow with derivatives, E-step, one Gauss–Newton step.
+def broyden_update(jac, delta_coeffs, delta_positions) -> None:
+    """Broyden's rank-one secant update of a derivative, in place (Broyden 1965; Dennis & Schnabel 1996, §8.1).
+
+    ``J ← J + (Δx − J Δa) Δaᵀ / (Δaᵀ Δa)``: the least change of ``J`` (in the Frobenius norm) after which
+    ``J Δa = Δx``, the observed change of the end points. Directions orthogonal to ``Δa`` keep their
+    derivative.
+
+    Parameters
+    ----------
+    jac : (N, 3, K) float
+        ``∂x_n/∂a`` at the previous coefficients; updated in place.
+    delta_coeffs : (K,) float
+        ``Δa``, the coefficient change since then.
+    delta_positions : (N, 3) float
+        ``Δx``, the change of the end points it caused.
+    """
+    da = np.asarray(delta_coeffs, dtype=np.float64)
+    norm2 = float(da @ da)
+    if norm2 == 0.0:
+        return
+    flat = jac.reshape(-1, jac.shape[2])
+    miss = np.asarray(delta_positions, dtype=np.float64).reshape(-1) - flat @ da.astype(flat.dtype)
+    flat += np.outer((miss / norm2).astype(flat.dtype), da.astype(flat.dtype))
+
+
+class FlowLinearisation:
+    """End points of the samples' flow and their derivative in the coefficients, for Gauss–Newton.
+
+    The exact derivative (Eq. C.15) costs several flows: it carries a (3, K) sensitivity per sample through
+    every RK2 step. When asked for an approximate one, the end points come from the flow alone and the
+    last derivative is corrected by :func:`broyden_update` along the coefficient change since it was
+    formed: Gauss–Newton with a secant update of the Jacobian (Dennis & Schnabel 1996, §8). The EM's
+    coefficient updates shrink as it anneals, so the derivative changes little between iterations.
 
     Parameters
     ----------
     basis : DivFreeBasis
     start : (N, 3) float
-        Source samples in the unit cube (t = 0).
+        Samples at t = 0 (unit cube).
+    n_steps : int
+        RK2 steps T.
+    """
+
+    def __init__(self, basis: DivFreeBasis, start: np.ndarray, n_steps: int):
+        self.basis, self.start, self.n_steps = basis, start, n_steps
+        self.coeffs = self.positions = self.jac = None
+
+    def __call__(self, coeffs: np.ndarray, exact: bool = True) -> tuple[np.ndarray, np.ndarray]:
+        """``(x, ∂x/∂a)`` at ``coeffs``: (N, 3) float64 and (N, 3, K) float32 (kept; do not modify)."""
+        if exact or self.jac is None:
+            positions, jac = flow_with_jacobian(self.basis, self.start, coeffs, self.n_steps, dtype=np.float32)
+        else:
+            positions, jac = flow(self.basis, self.start, coeffs, 1.0, self.n_steps), self.jac
+            broyden_update(jac, coeffs - self.coeffs, positions - self.positions)
+        self.coeffs, self.positions, self.jac = np.array(coeffs, dtype=np.float64), positions, jac
+        return positions, jac
+
+
+def em_iteration(linearisation: FlowLinearisation, targets_y, feature_dist, coeffs, sigma2_e, precision, params,
+                 watch, feature_scale: float = 1.0, exact: bool = True):
+    """One EM iteration: flow (with its derivative), E-step, one Gauss–Newton step.
+
+    Parameters
+    ----------
+    linearisation : FlowLinearisation
+        The flow of the source samples (N of them).
     targets_y : (M, 3) float
         Target samples in the unit cube.
     feature_dist : (N, M) float or None
@@ -302,6 +366,8 @@ def em_iteration(basis, start, targets_y, feature_dist, coeffs, sigma2_e, precis
     watch : Stopwatch
     feature_scale : float
         Factor of ``feature_dist`` in the E-step distance (its annealed weight).
+    exact : bool
+        Form the exact flow derivative (else the secant update of the last one).
 
     Returns
     -------
@@ -312,9 +378,9 @@ def em_iteration(basis, start, targets_y, feature_dist, coeffs, sigma2_e, precis
     rnorm : (N,) float
         Residual lengths.
     """
-    n = len(start)
+    n = len(linearisation.start)
     with watch("flow"):
-        pos, jac = flow_with_jacobian(basis, start, coeffs, params.n_steps, dtype=np.float32)
+        pos, jac = linearisation(coeffs, exact)
     with watch("e-step"):
         mass, y_hat = mixture_moments(pos, targets_y, sigma2_e, params.outlier, feature_dist, feature_scale)
         rnorm = np.linalg.norm(pos - y_hat, axis=1)
@@ -414,6 +480,7 @@ def fit(points_x, points_y, params: DivergenceFreeParams | None = None, token=No
     targets_y = frames.target_to_cube(py[sy])
     precision = params.prior_weight / basis.prior_variance
     coeffs = np.zeros(basis.n_fields)
+    linearisation = FlowLinearisation(basis, start, params.n_steps)
     trace = []
     converged = False
     it = 0
@@ -422,8 +489,9 @@ def fit(points_x, points_y, params: DivergenceFreeParams | None = None, token=No
         if token is not None:
             token.raise_if_cancelled()
         # the feature term shrinks with σ² so its share of the exponent stays that of Eq. 10.17 at σ²
-        delta, energy, rnorm = em_iteration(basis, start, targets_y, feat_dist, coeffs, sigma2_e, precision, params,
-                                            watch, feature_scale=w * sigma2_e / params.sigma2)
+        delta, energy, rnorm = em_iteration(linearisation, targets_y, feat_dist, coeffs, sigma2_e, precision,
+                                            params, watch, feature_scale=w * sigma2_e / params.sigma2,
+                                            exact=(it - 1) % params.jacobian_every == 0)
         coeffs = coeffs + delta
         sigma2_e = max(params.sigma2_min, sigma2_e * params.anneal)
         step = float(np.linalg.norm(delta))

@@ -753,8 +753,8 @@ def _add_bench_parsers(sub) -> None:
     p.add_argument("datasets", nargs="+", help="dataset folders (the layouts of 'corr bench'; the class of a mesh "
                                                 "is its name without a trailing number)")
     p.add_argument("--planes", default="main,symmetry,silhouette",
-                   help="comma-separated queries: the sections main, symmetry, cross and the side-view "
-                        "silhouette, or none (default: main,symmetry,silhouette)")
+                   help="comma-separated queries: the sections main, symmetry, cross, the side-view "
+                        "silhouette and the top-view outline top, or none (default: main,symmetry,silhouette)")
     p.add_argument("--sketches", action="append", metavar="FOLDER",
                    help="folder of labelled sketches (NAME_contour.txt, NAME.off, NAME_segmentation.txt), matched "
                         "to every mesh with part labels (MESH_segmentation.txt) and scored by part agreement "

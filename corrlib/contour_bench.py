@@ -19,13 +19,15 @@ Three section planes are offered:
 * ``cross``: spanned by the first and third principal axes (for a quadruped
   the horizontal section of the torso).
 
-and one silhouette, the query a user draws:
+and two silhouettes, the queries a user draws:
 
 * ``silhouette``: the outline of the orthographic projection onto the
   ``main`` plane (a side view, rendered at 400 pixels); the ground truth of
   an outline point are the vertices that project onto it, the nearest and
   the farthest from the viewer (a silhouette cannot tell the near side of
-  the rim from the far side), and the nearer of the two is scored.
+  the rim from the far side), and the nearer of the two is scored;
+* ``top``: the same along the axis of middle variance (up: the first axis;
+  a quadruped seen from above, a standing person from the side).
 
 A dataset folder may also hold maps between shapes of different classes,
 one 0-based target vertex per line for every source vertex, named
@@ -77,7 +79,8 @@ from corrlib.geometry.sections import SilhouetteProjection
 from corrlib.shapes import Contour2D, TriMesh
 
 PLANES = ("main", "symmetry", "cross")
-QUERY_KINDS = PLANES + ("silhouette",)
+SILHOUETTES = ("silhouette", "top")
+QUERY_KINDS = PLANES + SILHOUETTES
 SILHOUETTE_RESOLUTION = 400
 DEFAULT_PLANES = ("main", "symmetry", "silhouette")
 COLLAPSE_COVERAGE = 0.7  # a matched curve shorter than this fraction of the ground truth counts as collapsed
@@ -208,7 +211,7 @@ class SilhouetteQuery:
     ----------
     mesh_name : str
     plane : str
-        ``"silhouette"``.
+        ``"silhouette"`` or ``"top"``.
     contour : Contour2D
         The outline in pixel units.
     projection : SilhouetteProjection
@@ -232,16 +235,21 @@ class SilhouetteQuery:
         return rim_vertices(points_2d, self.projection)
 
 
-def silhouette_query(mesh: TriMesh, resolution: int = SILHOUETTE_RESOLUTION) -> SilhouetteQuery:
-    """The outline of ``mesh`` seen along its axis of least variance (up: the second axis)."""
+def silhouette_query(mesh: TriMesh, resolution: int = SILHOUETTE_RESOLUTION, view: str = "silhouette"
+                     ) -> SilhouetteQuery:
+    """The outline of ``mesh`` seen along its axis of least variance (up: the second axis), or for
+    ``view="top"`` along its axis of middle variance (up: the first axis)."""
     from corrlib.geometry.sections import project_for_silhouette, render_silhouette
 
+    if view not in SILHOUETTES:
+        raise ParameterError(f"unknown silhouette view {view!r}; expected one of {', '.join(SILHOUETTES)}")
     _, axes = principal_frame(mesh)
-    contour = render_silhouette(mesh, axes[2], resolution, up=axes[1])
-    projection = project_for_silhouette(mesh, axes[2], resolution, up=axes[1])
+    direction, up = (axes[2], axes[1]) if view == "silhouette" else (axes[1], axes[0])
+    contour = render_silhouette(mesh, direction, resolution, up=up)
+    projection = project_for_silhouette(mesh, direction, resolution, up=up)
     length = contour.length / projection.pixels_per_unit
-    return SilhouetteQuery(mesh.name, "silhouette", Contour2D(contour.points, name=f"{mesh.name}-silhouette",
-                                                              validate=False), projection, length)
+    return SilhouetteQuery(mesh.name, view, Contour2D(contour.points, name=f"{mesh.name}-{view}", validate=False),
+                           projection, length)
 
 
 def _vts_transfer(source_vertices: np.ndarray, rows_source: np.ndarray, rows_target: np.ndarray):
@@ -334,7 +342,7 @@ def match_cut_query(source_path, target_path, plane: str, params: dict, *, gt_ro
         if plane == "symmetry" and abs(section_plane(source, "symmetry")[1] @ section_plane(source, "main")[1]) > 0.99:
             row.update(status="skipped", error="the symmetry plane is the main plane")
             return row
-        query = silhouette_query(source) if plane == "silhouette" else cut_query(source, plane)
+        query = silhouette_query(source, view=plane) if plane in SILHOUETTES else cut_query(source, plane)
         if row["self"]:
             transfer = None
         elif gt_rows is not None:

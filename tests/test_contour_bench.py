@@ -196,11 +196,16 @@ def test_cross_class_map_files_add_pairs_with_their_ground_truth(tmp_path, capsy
         contour_jobs([tmp_path], planes=("main",))
 
 
-def test_silhouette_ground_truth_lies_on_the_outline_and_is_near_and_far_side():
+@pytest.mark.parametrize("view, depth_axis", [("silhouette", 2), ("top", 1)])
+def test_silhouette_ground_truth_lies_on_the_outline_and_is_near_and_far_side(view, depth_axis):
     """Rim vertices project within the search radius of their outline point; the near-side one is never
-    deeper than the far-side one; the outline length in mesh units is about the projection's perimeter."""
+    deeper than the far-side one; the outline length in mesh units is about the projection's perimeter.
+    The side view looks along the axis of least variance, the top view along the middle one."""
     wolf = load_mesh(TOSCA / "wolf0.off")
-    query = silhouette_query(wolf)
+    query = silhouette_query(wolf, view=view)
+    assert query.plane == view
+    _, axes = principal_frame(wolf)
+    assert np.ptp(query.projection.depth) == pytest.approx(np.ptp(wolf.vertices @ axes[depth_axis]), rel=1e-9)
     points = query.contour.resample(150).points
     rim = query.ground_truth(points, wolf.vertices)
     pixels, depth = query.projection.pixels, query.projection.depth
@@ -220,6 +225,11 @@ def test_silhouette_ground_truth_lies_on_the_outline_and_is_near_and_far_side():
     assert inside.mean() > 0.99
     extent = (pixels.max(axis=0) - pixels.min(axis=0)) / query.projection.pixels_per_unit
     assert 2 * extent.max() < query.length_3d < 4 * extent.sum()
+
+
+def test_an_unknown_silhouette_view_is_a_named_error():
+    with pytest.raises(ParameterError, match="unknown silhouette view 'back'"):
+        silhouette_query(load_mesh(TOSCA / "wolf0.off"), view="back")
 
 
 @pytest.mark.slow

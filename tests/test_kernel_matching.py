@@ -235,6 +235,20 @@ def test_bad_inputs(wolf_pair):
         solve("descriptor-nn", *wolf_pair, initial=InitialMatch(map_xy=np.zeros(5, int)))
 
 
+@pytest.mark.parametrize("name, value", [("tau_min", -1e-3), ("tau_max", -0.5), ("tau_min", 0.0),
+                                         ("tau_max", float("nan"))])
+def test_a_non_positive_time_is_named_without_a_numerical_warning(name, value):
+    import warnings
+
+    from corrlib.methods import make_params
+    from corrlib.methods.kernel_matching import KernelMatchingParams
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")  # geomspace of a negative or NaN time used to warn before the error
+        with pytest.raises(ParameterError, match=name):
+            make_params(KernelMatchingParams, **{name: value})
+
+
 @pytest.mark.slow
 def test_fmap_initialisation_and_final_smoothing(wolf_pair):
     wolf0, wolf1 = wolf_pair

@@ -92,6 +92,8 @@ import functools
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 
+import math
+
 import numpy as np
 
 from corrlib.assignment import area_capacities, linear_assignment
@@ -234,6 +236,10 @@ def diffusion_times(params: KernelMatchingParams) -> np.ndarray:
         if taus.size == 0 or not np.all(np.isfinite(taus)) or np.any(taus <= 0):
             raise ParameterError(f"times must be positive numbers, got {params.times!r}")
         return taus
+    for name in ("tau_min", "tau_max"):
+        value = getattr(params, name)
+        if not (math.isfinite(value) and value > 0):
+            raise ParameterError(f"{name} must be a positive number, got {value!r}")
     if params.tau_min > params.tau_max:
         raise ParameterError(f"tau_min ({params.tau_min}) must not exceed tau_max ({params.tau_max})")
     return np.geomspace(params.tau_max, params.tau_min, params.n_times)

@@ -6,8 +6,9 @@ What a script needs is importable from here::
     x, y = corrlib.load_mesh("wolf0.off"), corrlib.load_mesh("wolf1.off")
     result = corrlib.solve("kernel-matching", x, y)
 
-``load_mesh``, ``load_contour``, ``load_shape``, ``solve``, ``MatchResult``
-and ``evaluate`` are loaded on first use, so ``import corrlib`` stays light;
+``TriMesh``, ``Contour2D``, ``load_mesh``, ``load_contour``, ``load_shape``,
+``solve``, ``MatchResult`` and ``evaluate`` are loaded on first use, so
+``import corrlib`` stays light (no NumPy or SciPy);
 ``corrlib.methods.all_methods()`` lists the registered methods.
 
 Map convention used throughout: ``map_xy[i]`` is the index on shape Y of the
@@ -45,10 +46,10 @@ from corrlib.errors import (  # noqa: F401
     ParameterError,
     SolverError,
 )
-from corrlib.shapes import Contour2D, TriMesh  # noqa: F401
 
-#: lazily re-exported names -> the module defining them
+#: lazily re-exported names -> the module defining them (NumPy and SciPy load with the first of them)
 _EXPORTS = {
+    "TriMesh": "corrlib.shapes", "Contour2D": "corrlib.shapes",
     "load_mesh": "corrlib.io", "load_contour": "corrlib.io", "load_shape": "corrlib.io",
     "solve": "corrlib.methods", "MatchResult": "corrlib.methods.base", "evaluate": "corrlib.evaluation",
 }

@@ -14,8 +14,6 @@ import sys
 import time
 from pathlib import Path
 
-import numpy as np
-
 from corrlib.errors import CorrError, FileFormatError
 
 EXIT_BAD_INPUT = 2
@@ -93,6 +91,8 @@ def cmd_info(args) -> int:
 
 
 def cmd_eval(args) -> int:
+    import numpy as np
+
     from corrlib.evaluation import cumulative_curve, geodesic_errors
     from corrlib.io import check_output_file, load_map, load_mesh, load_vts
 
@@ -434,6 +434,8 @@ MAX_FRAMES = 2000
 
 
 def cmd_morph(args) -> int:
+    import numpy as np
+
     from corrlib.methods import get_method, solve
     from corrlib.morph import export_sequence, frame_positions, has_deformation
     from corrlib.shapes import TriMesh
@@ -467,6 +469,8 @@ def cmd_morph(args) -> int:
 
 
 def cmd_demo(args) -> int:
+    import numpy as np
+
     from corrlib.evaluation import geodesic_errors
     from corrlib.io import load_mesh
     from corrlib.methods import methods_for, solve
@@ -718,7 +722,7 @@ def _add_retrieve_parser(sub) -> None:
 
 def _add_bench_parsers(sub) -> None:
     """``bench``, ``bench-retrieval`` and ``bench-contour``."""
-    from corrlib.io import suffixes
+    from corrlib.formats import suffixes
 
     meshes = " ".join("*" + s for s in suffixes("mesh", vertex_order=True))
     p = _command(sub, "bench", "run methods over a benchmark dataset",
@@ -779,7 +783,7 @@ def _add_refine_parser(sub) -> None:
 
 
 def _add_morph_parser(sub) -> None:
-    from corrlib.io import suffixes
+    from corrlib.formats import suffixes
 
     p = _command(sub, "morph", "deform the source into the target, export the frames",
                  "Deform the source into the target and export interpolated and extrapolated meshes.",

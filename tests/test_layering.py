@@ -33,6 +33,20 @@ def test_import_time_dependencies():
     assert out.strip() == "[]"
 
 
+def test_help_texts_load_no_numerical_library():
+    """`corr --help` and every command's --help (issue 19: start-up pays only for what it uses)."""
+    code = ("import contextlib, io, sys\n"
+            "from corrlib.cli import build_parser, main\n"
+            "commands = [[]] + [[name] for name in build_parser()._subparsers._group_actions[0].choices]\n"
+            "for command in commands:\n"
+            "    with contextlib.suppress(SystemExit), contextlib.redirect_stdout(io.StringIO()):\n"
+            "        main(command + ['--help'])\n"
+            "print(len(commands), sorted(m for m in ('numpy', 'scipy', 'numba', 'trimesh') if m in sys.modules))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True).stdout
+    count, loaded = out.strip().split(" ", 1)
+    assert int(count) > 10 and loaded == "[]", out
+
+
 # ----------------------------------------------------------------------------- the import graph of corrlib
 
 ROOT = Path(corrlib.__file__).parent.parent

@@ -119,8 +119,10 @@ def test_interrupted_morph_leaves_nothing(tmp_path, sig, status):
         time.sleep(0.05)
     time.sleep(0.5)
     proc.send_signal(sig)
-    assert proc.wait(timeout=60) == status
-    assert "Traceback" not in proc.stderr.read()
+    code = proc.wait(timeout=60)
+    stderr = proc.stderr.read()
+    assert code == status, stderr
+    assert "Traceback" not in stderr
     assert [p.name for p in out.iterdir()] == []
 
 

@@ -36,9 +36,8 @@ def _fail(message: str) -> None:
 
 
 def main(out: Path) -> None:
-    from corrlib.contour_bench import principal_frame, silhouette_query
+    from corrlib.contour_bench import silhouette_query
     from corrlib.errors import CorrError
-    from corrlib.geometry.sections import render_silhouette
     from corrlib.io import ensure_output_folder, load_mesh
     from corrlib.resources import resource, retrieval_collection
 
@@ -67,8 +66,7 @@ def main(out: Path) -> None:
         mesh = load_mesh(collection / f"{name}.off")
         label = name.rstrip("0123456789")
         write(silhouette_query(mesh).contour.points, label)
-        _, axes = principal_frame(mesh)
-        write(render_silhouette(mesh, axes[1], 256, up=axes[0]).points, label)
+        write(silhouette_query(mesh, 256, view="top").contour.points, label)
     for name in ("human0", "human3"):
         write(silhouette_query(load_mesh(collection / f"{name}.off")).contour.points, "human")
     for sketch in "ab":

@@ -92,8 +92,6 @@ import functools
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 
-import math
-
 import numpy as np
 
 from corrlib.assignment import area_capacities, linear_assignment
@@ -219,15 +217,19 @@ class KernelMatchingParams:
         if isinstance(self.times, str) and isinstance(self.tau_min, (int, float)) and \
                 isinstance(self.tau_max, (int, float)):
             try:
-                diffusion_times(self)  # raises ParameterError on a bad schedule, before any run
+                _given_times(self)  # raises ParameterError on a bad schedule, before any run
             except ParameterError:
                 raise
             except (TypeError, ValueError, OverflowError):
                 pass  # a value of the wrong type or range: validate_params names the field
 
 
-def diffusion_times(params: KernelMatchingParams) -> np.ndarray:
-    """(n_times,) float: relative times τ, decreasing."""
+def _given_times(params: KernelMatchingParams) -> np.ndarray | None:
+    """The relative times written out in ``times`` ((t,) float), or None for the geometric schedule.
+
+    Checks what the per-field ranges cannot: the text of ``times``, and ``tau_min <= tau_max``. No
+    arithmetic on the values, so that it can run before the ranges are validated.
+    """
     if params.times.strip():
         try:
             taus = np.array([float(v) for v in params.times.replace(";", ",").split(",") if v.strip()])
@@ -236,12 +238,16 @@ def diffusion_times(params: KernelMatchingParams) -> np.ndarray:
         if taus.size == 0 or not np.all(np.isfinite(taus)) or np.any(taus <= 0):
             raise ParameterError(f"times must be positive numbers, got {params.times!r}")
         return taus
-    for name in ("tau_min", "tau_max"):
-        value = getattr(params, name)
-        if not (math.isfinite(value) and value > 0):
-            raise ParameterError(f"{name} must be a positive number, got {value!r}")
     if params.tau_min > params.tau_max:
         raise ParameterError(f"tau_min ({params.tau_min}) must not exceed tau_max ({params.tau_max})")
+    return None
+
+
+def diffusion_times(params: KernelMatchingParams) -> np.ndarray:
+    """(n_times,) float: relative times τ, decreasing."""
+    taus = _given_times(params)
+    if taus is not None:
+        return taus
     return np.geomspace(params.tau_max, params.tau_min, params.n_times)
 
 

@@ -126,6 +126,28 @@ def intrinsic_asymmetry(features: np.ndarray) -> float:
     -------
     float
     """
+    return float(_reflection_scores(features).min())
+
+
+def mirror_shift(features: np.ndarray) -> int:
+    """The outline's best intrinsic reflection ``i ↦ (s − i) mod m``: the shift ``s`` that minimises
+    :func:`intrinsic_asymmetry` (its axis crosses the outline at points ``s/2`` and ``(s + m)/2``).
+
+    Parameters
+    ----------
+    features : (m, d) float
+        As for :func:`intrinsic_asymmetry`.
+
+    Returns
+    -------
+    int
+        ``s`` in ``0 .. m-1``.
+    """
+    return int(np.argmin(_reflection_scores(features)))
+
+
+def _reflection_scores(features: np.ndarray) -> np.ndarray:
+    """(m,) float: the normalised feature distance of every point to its image, per reflection shift ``s``."""
     features = np.asarray(features, dtype=np.float64)
     if features.ndim != 2 or features.shape[0] < 3 or not np.all(np.isfinite(features)):
         raise InputError(f"intrinsic_asymmetry needs (m, d) finite features of m >= 3 points, got shape "
@@ -134,10 +156,10 @@ def intrinsic_asymmetry(features: np.ndarray) -> float:
     pairwise = cdist(features, features, "cityblock")
     scale = pairwise.mean()
     if scale <= 0.0:
-        return 0.0  # every point alike: any reflection keeps the features
+        return np.zeros(m)  # every point alike: any reflection keeps the features
     points = np.arange(m)
     images = (points[:, None] - points[None, :]) % m  # [s, i] -> the image of point i under the reflection s
-    return float(pairwise[points[None, :], images].mean(axis=1).min() / scale)
+    return pairwise[points[None, :], images].mean(axis=1) / scale
 
 
 def paired_limbs(labels: np.ndarray, mirror: np.ndarray) -> np.ndarray:

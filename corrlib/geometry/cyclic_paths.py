@@ -183,7 +183,8 @@ class ProductGraph:
     Parameters
     ----------
     node_cost : (m, n) float
-        Cost of matching curve point i to graph vertex j (non-negative).
+        Cost of matching curve point i to graph vertex j (non-negative;
+        ``inf`` forbids the node: no path passes it).
     curve_points : (m, d1) float
         Coordinates of the closed curve.
     graph_points : (n, d2) float
@@ -216,8 +217,8 @@ class ProductGraph:
         if curve.shape[0] != m or pts.shape[0] != n:
             raise InputError(f"node costs {cost.shape} do not match {curve.shape[0]} curve points and "
                              f"{pts.shape[0]} graph vertices")
-        if not np.all(np.isfinite(cost)) or cost.min() < 0:
-            raise InputError("node costs must be finite and non-negative")
+        if np.any(np.isnan(cost)) or cost.min() < 0 or not np.isfinite(cost).any():
+            raise InputError("node costs must be non-negative (inf forbids a node) and not all inf")
         adj = csr_matrix(adjacency)
         if not directed:
             adj = (adj + adj.T).tocsr()
@@ -436,9 +437,10 @@ class ProductGraph:
         if self._closing_weights is None:  # the closing layer's edge costs, built once
             layer_cost = self.cost[self.m]
             tails = np.repeat(np.arange(self.n), np.diff(self.indptr))
-            self._closing_weights = csr_matrix(
-                ((0.5 * (layer_cost[tails] + layer_cost[self.indices]) + self.stretch) * self.edge_len + self.extra,
-                 self.indices, self.indptr), shape=(self.n, self.n))
+            weights = (0.5 * (layer_cost[tails] + layer_cost[self.indices]) + self.stretch) * self.edge_len + self.extra
+            usable = np.isfinite(weights)  # an edge at a forbidden node is no edge
+            self._closing_weights = csr_matrix((weights[usable], (tails[usable], self.indices[usable])),
+                                               shape=(self.n, self.n))
         dist, pred = dijkstra(self._closing_weights, directed=True, indices=t, return_predecessors=True)
         if not np.isfinite(dist[s]):
             return np.inf, None

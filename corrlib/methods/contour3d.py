@@ -96,6 +96,18 @@ front view of a posed person is bent, not stretched). The orientation
 cost enters the first-order energies (``paper``, ``ratio``); the
 second-order graphs take the distance cost only.
 
+Sided front-view curves (``front_curve="sided"``, not the default): a view
+within the plane of symmetry has an outline that is its own intrinsic
+mirror image (:func:`~corrlib.descriptors.side_view.mirror_shift` gives its
+reflection), and the curve it is on the surface crosses the curve of
+symmetry where the outline crosses its axis and keeps each half of the
+outline on its own half of the surface. A free closed curve may instead run
+down one flank and back up the same one (both halves of the outline and both
+flanks have the same features). With ``"sided"`` the whole model's readings
+forbid every match on the wrong half (:mod:`corrlib.geometry.symmetric_paths`;
+the sign of the lowest odd eigenfunction), both ways round, and the search
+stays exact. See ``docs/decisions.md`` for why it is off by default.
+
 Part term (the thesis' automatic part features; ``parts="auto"``, not the
 default): the protrusions of the filled silhouette and of the mesh
 (:mod:`corrlib.geometry.segmentation`: heat-kernel persistence, the same
@@ -152,8 +164,8 @@ import numba
 import numpy as np
 import scipy.sparse as sp
 
-from corrlib.descriptors.side_view import (edge_orientation, intrinsic_asymmetry, mirror_asymmetry, paired_limbs,
-                                           symmetry_curve_cost)
+from corrlib.descriptors.side_view import (edge_orientation, intrinsic_asymmetry, mirror_asymmetry, mirror_shift,
+                                           paired_limbs, symmetry_curve_cost)
 from corrlib.descriptors.spectral import hks, wks
 from corrlib.descriptors.symmetry import K_FINAL, even_spectrum, mesh_reflection, odd_eigenfunction
 from corrlib.errors import ContourError, InputError, ParameterError
@@ -164,6 +176,7 @@ from corrlib.geometry.intrinsic_axis import IntrinsicAxis, axis_mismatch, spectr
 from corrlib.geometry.laplacian import mesh_laplacian
 from corrlib.geometry.segmentation import assign_parts, protrusion_parts
 from corrlib.geometry.spectrum import doubled_spectrum, eigenpairs, mesh_spectrum
+from corrlib.geometry.symmetric_paths import sided_cost, symmetry_curve_vertices
 from corrlib.geometry.triangulate import fill_contour
 from corrlib.methods.base import ContourPath, MatchResult, SearchCertificate, param
 from corrlib.methods.registry import MethodSpec, register
@@ -255,6 +268,11 @@ class Contour3DParams:
     part_weight: float = param(1.0, label="Part weight", low=0.0, high=1e3,
                                help="Cost of matching points of different parts, in units of the mean feature "
                                     "distance.")
+    front_curve: str = param("free", label="Front-view curve", choices=("free", "sided"),
+                             help="A view within the plane of symmetry (not a side view) read as the whole surface: "
+                                  "sided: each half of the outline (between the crossings of its axis of symmetry) "
+                                  "is matched on its own half of the surface, both ways round; free: any closed "
+                                  "curve.")
     metric: str = param("max", label="Product metric", choices=("max", "euclidean"),
                         help="Length of a step of the matching on the product graph that advances a along the "
                              "contour and b on the mesh: max(a, b) (a matched curve gains nothing by being shorter "
@@ -378,6 +396,10 @@ class PreparedQuery:
         :func:`~corrlib.descriptors.side_view.intrinsic_asymmetry` of the
         outline's WKS (0: intrinsically symmetric, e.g. a posed person from
         the front).
+    reflection_shift : int
+        The outline's best intrinsic reflection ``i ↦ (s − i) mod m`` at the
+        matching's points (:func:`~corrlib.descriptors.side_view.mirror_shift`
+        of ``features``).
     """
 
     points: np.ndarray
@@ -389,6 +411,7 @@ class PreparedQuery:
     parts: np.ndarray | None = None
     asymmetry: float = 0.0
     intrinsic_asymmetry: float = 0.0
+    reflection_shift: int = 0
 
     def is_side_view(self, params: "Contour3DParams") -> bool:
         """Whether the side-view terms apply: ``view``, or for ``auto`` an outline that is neither its own
@@ -466,7 +489,7 @@ def prepare_query(contour: Contour2D, params: Contour3DParams) -> PreparedQuery:
     else:
         intrinsic = outline_intrinsic_asymmetry(contour, params.area_ratio)
     return PreparedQuery(canonical.points, feats[:m], resampled.labels, resampled, axes, doubled, parts,
-                         mirror_asymmetry(canonical.points), intrinsic)
+                         mirror_asymmetry(canonical.points), intrinsic, mirror_shift(feats[:m]))
 
 
 def canonical_outline(contour: Contour2D, n_points: int, area_ratio: float) -> tuple[Contour2D, Contour2D]:
@@ -588,6 +611,38 @@ def side_view_terms(mesh: TriMesh, params: Contour3DParams) -> SideViewTerms | N
         return None
 
 
+@dataclass
+class MeshSymmetry:
+    """A mesh's halves for front views (:mod:`corrlib.geometry.symmetric_paths`).
+
+    Attributes
+    ----------
+    odd : (n,) float
+        The lowest odd eigenfunction: one sign on each half, zero on the curve of symmetry.
+    on_curve : (n,) bool
+        Vertices next to the curve of symmetry (where ``odd`` changes sign).
+    """
+
+    odd: np.ndarray
+    on_curve: np.ndarray
+
+
+def mesh_symmetry(mesh: TriMesh, params: Contour3DParams) -> MeshSymmetry | None:
+    """The mesh's halves, or None where it has no usable reflection (too coarse for the eigenpairs, no odd
+    eigenfunction); front views are then matched by free closed curves."""
+    k_mesh = max(HALF_EIGENPAIRS_PER_K * params.k, K_FINAL)
+    if mesh.n_vertices <= k_mesh:
+        return None
+    spectrum = mesh_spectrum(mesh, k_mesh)
+    try:
+        odd = odd_eigenfunction(spectrum, mesh_reflection(mesh, spectrum))
+    except (ParameterError, InputError):
+        return None
+    if not (np.all(np.isfinite(odd)) and (odd > 0).any() and (odd < 0).any()):
+        return None
+    return MeshSymmetry(odd, symmetry_curve_vertices(mesh.adjacency, odd))
+
+
 def _near_halves(side: SideViewTerms | None, params: Contour3DParams) -> tuple[float, ...]:
     """Signs of the odd function searched: both halves where the orientation cost enters the graph, one
     where only the distance cost does (the elastic energies: both signs would give the same graph), none
@@ -696,15 +751,22 @@ def match_prepared(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams,
     token.raise_if_cancelled()
     # an axis has no direction, a front view's model is chosen by energy, and which half of a side view is near is
     # unknown (the sign of the orientation term): one branch-and-bound over every combination
+    # a front view read as the whole surface: its halves on the two halves of the surface, either way round
+    sided = None
+    if side is None and params.front_curve == "sided" and "whole" in distances:
+        with watch("features"):
+            sided = mesh_symmetry(mesh, params)
     readings = [(model, signs, near) for model in distances
                 for signs in itertools.product(*[(False, True) if scale > 0 else (False,)
                                                  for scale in scales[model]])
-                for near in _near_halves(side, params)]
+                for near in (_near_halves(side, params) if sided is None or model != "whole" else (1.0, -1.0))]
     graphs = []
     for model, signs, near in readings:
         cost = distances[model] + labels + axis_cost(query, target, model, scales[model], signs)
         if not isinstance(labels, np.ndarray):  # user part labels on both shapes replace the automatic parts
             cost = cost + part_cost(query, target, cost, unit_distance, params)
+        if sided is not None and model == "whole":
+            cost = sided_cost(cost, query.reflection_shift, sided.odd, sided.on_curve, near)
         penalty = None
         if side is not None:
             weight = params.symmetry_weight * unit_cost
@@ -714,7 +776,7 @@ def match_prepared(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams,
         graphs.append(product_graph(cost, query.points, target.vertices, mesh.adjacency, params, unit_cost,
                                     edge_penalty=penalty))
     yield Progress("branch and bound", 0.1, f"{graphs[0].m} x {graphs[0].n} product graph, {len(graphs)} readings "
-                                            "(shape model, direction of the axis)")
+                                            "(shape model, direction of the axis, half of the surface)")
     with watch("search"):
         search = minimum_ratio_union if params.energy.endswith("ratio") else branch_and_bound_union
         # graphs that fit in one parallel round of backward searches gain nothing from relaxations
@@ -728,7 +790,7 @@ def match_prepared(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams,
     extras = {"axis_reversed": bool(signs[0]) if signs else False, "axis_signs": [bool(s) for s in signs],
               "model": model, "view": "side" if side is not None else "front", "asymmetry": query.asymmetry,
               "intrinsic_asymmetry": query.intrinsic_asymmetry,
-              "near_half": int(near)}
+              "near_half": int(near), "sided": sided is not None and model == "whole"}
     yield Progress("done", 1.0, f"energy {bb.energy:.6g} after {bb.iterations} iterations")
     per_length = " per contour length matched to a moving curve" if params.energy.endswith("ratio") else ""
     metric = f"{params.metric} product metric, " if params.energy in FIRST_ORDER_ENERGIES else ""

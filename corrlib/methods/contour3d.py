@@ -800,7 +800,9 @@ def match_prepared(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams,
                        energy_meaning=f"{params.energy} product-graph path energy{per_length} ({metric}{model} shape model, unit-area "
                                       f"mesh, contour area {params.area_ratio:g}, axis weight {params.axis_weight:g}"
                                       + (f", side view, symmetry-curve weight {params.symmetry_weight:g})"
-                                         if side is not None else ")"))
+                                         if side is not None else
+                                         ", sided: each half of the outline on its own half of the surface)"
+                                         if extras["sided"] else ")"))
 
 
 def solve_contour3d(source: Contour2D, target: TriMesh, params: Contour3DParams, token):

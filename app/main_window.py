@@ -174,6 +174,7 @@ class MainWindow(QMainWindow):
         self.interactive = interactive  # False in tests/screenshots: errors go to the log, not modal dialogs
         self.source = self.target = None
         self.gt: tuple | None = None  # (source rows, target rows, target mirrored rows or None)
+        self.shape_paths: dict[str, Path | None] = {"source": None, "target": None}  # files the shapes came from
         self.last_result = None
         self._collector = collect_on_gui_thread(self)  # no cyclic GC on worker threads (see app.gui_gc)
         self._closed = False
@@ -529,6 +530,9 @@ class MainWindow(QMainWindow):
             if not (isinstance(self.source, TriMesh) and isinstance(self.target, TriMesh)):
                 raise CorrError("load a source and a target mesh before their ground truth")
             gt = (load_vts(source_vts, self.source.n_vertices), load_vts(target_vts, self.target.n_vertices))
+            if gt[0].shape != gt[1].shape:
+                raise CorrError(f"{Path(source_vts).name} has {gt[0].size} rows and {Path(target_vts).name} "
+                                f"{gt[1].size}; the rows of a ground-truth pair correspond one to one")
             # the target's mirrored rows, where they lie next to its rows (<name>.sym.vts, as in corr bench)
             sym_path = Path(target_vts).with_name(Path(target_vts).stem + ".sym.vts")
             sym = load_vts(sym_path, self.target.n_vertices) if sym_path.is_file() else None
@@ -540,6 +544,28 @@ class MainWindow(QMainWindow):
         self.gt = gt + (sym,)
         self.job_panel.write(f"ground truth: {gt[0].size} rows" +
                              (f", mirrored rows from {sym_path.name}" if sym is not None else ""))
+
+    def _ground_truth_beside_files(self) -> None:
+        """Load the pair's ground truth where both meshes came from files with ``<name>.vts`` beside them (the
+        layout ``corr bench`` reads; ``<target>.sym.vts`` adds the mirrored rows), so that the errors are
+        measured without a trip to the File menu. Unusable files are reported in the log, not in a dialog."""
+        from corrlib.io import load_vts
+
+        paths = [self.shape_paths.get(which) for which in ("source", "target")]
+        if not (isinstance(self.source, TriMesh) and isinstance(self.target, TriMesh)) or None in paths:
+            return
+        rows = [path.with_suffix(".vts") for path in paths]
+        if paths[0] == paths[1] or not all(row.is_file() for row in rows):
+            return
+        try:
+            sizes = load_vts(rows[0], self.source.n_vertices).size, load_vts(rows[1], self.target.n_vertices).size
+            if sizes[0] != sizes[1]:
+                raise CorrError(f"{rows[0].name} has {sizes[0]} rows and {rows[1].name} {sizes[1]}")
+        except CorrError as exc:
+            self.job_panel.write(f"ground truth beside the meshes not used: {exc}")
+            return
+        self.job_panel.write(f"ground truth found beside the meshes: {rows[0].name}, {rows[1].name}")
+        self.load_ground_truth(rows[0], rows[1])
 
     def load_file(self, path: str, which: str = "source", then: Callable[[], None] | None = None) -> None:
         """Load a mesh or contour as source/target in the worker (queued: files load one after another).
@@ -570,19 +596,22 @@ class MainWindow(QMainWindow):
         if isinstance(loaded.shape, Contour2D):
             self.sketch.show_contour(loaded.shape)
             self.retrieval_view.set_query(loaded.shape)
-        self.set_shape(loaded.shape, which, loaded.description)
+        self.set_shape(loaded.shape, which, loaded.description, path=loaded.path)
         self._add_recent(loaded.path)
+        self._ground_truth_beside_files()
         if then is not None:
             then()
         self._next_load()
 
-    def set_shape(self, shape, which: str, description: str | None = None) -> None:
-        """Use ``shape`` as source/target (``description``: from :func:`app.jobs.describe`, computed if None).
+    def set_shape(self, shape, which: str, description: str | None = None, path=None) -> None:
+        """Use ``shape`` as source/target (``description``: from :func:`app.jobs.describe`, computed if None;
+        ``path``: the file it was loaded from, if any).
 
         Method jobs on the previous pair are cancelled: their results would not fit the new pair.
         """
         self._cancel_method_jobs()
         text = describe(shape) if description is None else description
+        self.shape_paths[which] = None if path is None else Path(path)
         if which == "source":
             self.source = shape
             self.source_info.setText(text)

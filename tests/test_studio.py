@@ -176,6 +176,29 @@ def test_compare_shows_mirror_accepted_errors_heat_maps_and_sorts(qtbot, window)
     assert [r[0] for r in view.table_rows()] == ["descriptor-nn", "fmap-zoomout"]
 
 
+def test_ground_truth_beside_the_meshes_is_loaded_with_them(qtbot, window, tmp_path):
+    """Meshes opened from a folder in the layout corr bench reads (<name>.vts beside each, <target>.sym.vts)
+    bring their ground truth; without it, or with a file of the wrong size, there is none, and the log says
+    why without a dialog."""
+    assert load_file(qtbot, window, TOSCA / "cat0.off", "source")
+    assert window.gt is None  # one mesh is no pair
+    assert load_file(qtbot, window, TOSCA / "cat1.off", "target")
+    assert window.gt is not None and window.gt[0].shape == window.gt[1].shape == window.gt[2].shape
+    assert "cat0.vts, cat1.vts" in window.job_panel.log.toPlainText()
+    for name in ("cat0.off", "cat1.off"):
+        shutil.copy(TOSCA / name, tmp_path / name)
+    assert load_file(qtbot, window, tmp_path / "cat1.off", "target")
+    assert window.gt is None  # the copy has no ground truth beside it
+    (tmp_path / "cat0.vts").write_text("1\n2\n3\n")
+    (tmp_path / "cat1.vts").write_text("1\n2\n")
+    assert load_file(qtbot, window, tmp_path / "cat0.off", "source")
+    assert window.gt is None and "ground truth beside the meshes not used" in window.job_panel.log.toPlainText()
+    # the same pair through the File menu: a named error, no ground truth
+    with qtbot.waitSignal(window.error_shown, timeout=5000) as blocker:
+        window.load_ground_truth(str(tmp_path / "cat0.vts"), str(tmp_path / "cat1.vts"))
+    assert "3 rows" in blocker.args[0] and "correspond one to one" in blocker.args[0] and window.gt is None
+
+
 def test_cancel_during_a_run(qtbot, window):
     load_demo(qtbot, window)
     set_params(window, "kernel-matching", n_eigs=500, n_seeds=3000)

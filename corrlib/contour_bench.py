@@ -56,8 +56,9 @@ Every query is matched to the mesh it was cut from and to the other meshes of
 its class. Per match: mean geodesic error / √area and the fractions within
 0.05 and 0.1; **coverage**, the length of the matched closed curve on the
 mesh divided by the length of the ground-truth curve (a collapsed optimum has
-a small coverage); the number of distinct vertices the curve visits; energy,
-optimality gap and runtime. Where the target has a mirrored ground truth
+a small coverage); the number of distinct vertices the curve visits; the view
+(side or front) and the shape model the solver read the query as (CSV);
+energy, optimality gap and runtime. Where the target has a mirrored ground truth
 (``<target>.sym.vts`` next to its ``.vts``), the **mirror-accepted** mean
 error is the smaller of the mean errors against the ground truth and against
 its left–right mirror image: a view across the plane of symmetry (a person
@@ -372,6 +373,7 @@ def match_cut_query(source_path, target_path, plane: str, params: dict, *, gt_ro
             mirrored = score_curve(result.map_xy, path, _vts_transfer(target.vertices, *mirror_rows)(gt), target, 1.0,
                                    solver)
             row["mean_error_sym"] = min(row["mean_error"], mirrored["mean_error"])
+        row.update(view=result.extras.get("view", ""), model=result.extras.get("model", ""))
         row.update(energy=float(result.energy), gap=float(search.upper_bound - search.lower_bound),
                    optimal=search.optimal, iterations=search.iterations, seconds=seconds)
         if picture is not None:
@@ -726,7 +728,8 @@ def _sketch_markdown(summary: dict, rows: list[dict]) -> str:
 
 COLUMNS = ("query", "target", "plane", "self", "other_class", "status", "n_points", "mean_error", "mean_error_sym",
            "median_error", "within_005",
-           "within_01", "coverage", "distinct_vertices", "gt_distinct_vertices", "energy", "gap", "optimal",
+           "within_01", "coverage", "distinct_vertices", "gt_distinct_vertices", "view", "model", "energy", "gap",
+           "optimal",
            "iterations", "seconds", "part_agreement", "part_agreement_sym", "scored_points", "error")
 
 

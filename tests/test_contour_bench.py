@@ -131,9 +131,12 @@ def test_benchmark_end_to_end_with_vts_ground_truth(tmp_path):
         assert 0 <= r["mean_error"] < 1 and r["coverage"] > 0 and r["distinct_vertices"] > 1
         assert 0 <= r["mean_error_sym"] <= r["mean_error"]
         assert r["n_points"] == 60 and r["gap"] >= 0
+        # a section through the plane of symmetry is a side view, read as the half model
+        assert (r["view"], r["model"]) == ("side", "half")
     written = json.loads((out / "contour_summary.json").read_text())
     assert written["summary"]["all"]["queries"] == 4
-    assert len((out / "contour_bench.csv").read_text().splitlines()) == 5
+    csv_lines = (out / "contour_bench.csv").read_text().splitlines()
+    assert len(csv_lines) == 5 and "view,model" in csv_lines[0]
     assert len(list((out / "pictures").glob("*.png"))) == 4
     assert "| other pose |" in (out / "contour_summary.md").read_text()
     assert "mirror accepted" in (out / "contour_summary.md").read_text()

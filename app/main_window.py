@@ -524,23 +524,28 @@ class MainWindow(QMainWindow):
             self.load_ground_truth(a, b)
 
     def load_ground_truth(self, source_vts, target_vts) -> None:
-        from corrlib.io import load_vts
-
+        """Ground truth from two ``.vts`` files (File menu); a bad pair is shown as an error."""
         try:
-            if not (isinstance(self.source, TriMesh) and isinstance(self.target, TriMesh)):
-                raise CorrError("load a source and a target mesh before their ground truth")
-            gt = (load_vts(source_vts, self.source.n_vertices), load_vts(target_vts, self.target.n_vertices))
-            if gt[0].shape != gt[1].shape:
-                raise CorrError(f"{Path(source_vts).name} has {gt[0].size} rows and {Path(target_vts).name} "
-                                f"{gt[1].size}; the rows of a ground-truth pair correspond one to one")
-            # the target's mirrored rows, where they lie next to its rows (<name>.sym.vts, as in corr bench)
-            sym_path = Path(target_vts).with_name(Path(target_vts).stem + ".sym.vts")
-            sym = load_vts(sym_path, self.target.n_vertices) if sym_path.is_file() else None
-            if sym is not None and sym.shape != gt[1].shape:
-                raise CorrError(f"{sym_path} has {sym.size} rows, {target_vts} {gt[1].size}")
+            self._set_ground_truth(source_vts, target_vts)
         except CorrError as exc:
             self.show_error(str(exc))
-            return
+
+    def _set_ground_truth(self, source_vts, target_vts) -> None:
+        """Read and use a ground-truth pair (and ``<target>.sym.vts`` beside it); raises CorrError, naming the
+        file, where the pair does not fit the loaded meshes."""
+        from corrlib.io import load_vts
+
+        if not (isinstance(self.source, TriMesh) and isinstance(self.target, TriMesh)):
+            raise CorrError("load a source and a target mesh before their ground truth")
+        gt = (load_vts(source_vts, self.source.n_vertices), load_vts(target_vts, self.target.n_vertices))
+        if gt[0].shape != gt[1].shape:
+            raise CorrError(f"{Path(source_vts).name} has {gt[0].size} rows and {Path(target_vts).name} "
+                            f"{gt[1].size}; the rows of a ground-truth pair correspond one to one")
+        # the target's mirrored rows, where they lie next to its rows (<name>.sym.vts, as in corr bench)
+        sym_path = Path(target_vts).with_name(Path(target_vts).stem + ".sym.vts")
+        sym = load_vts(sym_path, self.target.n_vertices) if sym_path.is_file() else None
+        if sym is not None and sym.shape != gt[1].shape:
+            raise CorrError(f"{sym_path} has {sym.size} rows, {target_vts} {gt[1].size}")
         self.gt = gt + (sym,)
         self.job_panel.write(f"ground truth: {gt[0].size} rows" +
                              (f", mirrored rows from {sym_path.name}" if sym is not None else ""))
@@ -549,8 +554,6 @@ class MainWindow(QMainWindow):
         """Load the pair's ground truth where both meshes came from files with ``<name>.vts`` beside them (the
         layout ``corr bench`` reads; ``<target>.sym.vts`` adds the mirrored rows), so that the errors are
         measured without a trip to the File menu. Unusable files are reported in the log, not in a dialog."""
-        from corrlib.io import load_vts
-
         paths = [self.shape_paths.get(which) for which in ("source", "target")]
         if not (isinstance(self.source, TriMesh) and isinstance(self.target, TriMesh)) or None in paths:
             return
@@ -558,14 +561,11 @@ class MainWindow(QMainWindow):
         if paths[0] == paths[1] or not all(row.is_file() for row in rows):
             return
         try:
-            sizes = load_vts(rows[0], self.source.n_vertices).size, load_vts(rows[1], self.target.n_vertices).size
-            if sizes[0] != sizes[1]:
-                raise CorrError(f"{rows[0].name} has {sizes[0]} rows and {rows[1].name} {sizes[1]}")
+            self._set_ground_truth(rows[0], rows[1])
         except CorrError as exc:
             self.job_panel.write(f"ground truth beside the meshes not used: {exc}")
             return
         self.job_panel.write(f"ground truth found beside the meshes: {rows[0].name}, {rows[1].name}")
-        self.load_ground_truth(rows[0], rows[1])
 
     def load_file(self, path: str, which: str = "source", then: Callable[[], None] | None = None) -> None:
         """Load a mesh or contour as source/target in the worker (queued: files load one after another).

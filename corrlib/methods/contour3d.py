@@ -157,6 +157,7 @@ Map convention: ``map_xy[i]`` is the mesh vertex matched to contour point i
 
 from __future__ import annotations
 
+import functools
 import itertools
 from dataclasses import dataclass
 
@@ -396,10 +397,6 @@ class PreparedQuery:
         :func:`~corrlib.descriptors.side_view.intrinsic_asymmetry` of the
         outline's WKS (0: intrinsically symmetric, e.g. a posed person from
         the front).
-    reflection_shift : int
-        The outline's best intrinsic reflection ``i ↦ (s − i) mod m`` at the
-        matching's points (:func:`~corrlib.descriptors.side_view.mirror_shift`
-        of ``features``).
     """
 
     points: np.ndarray
@@ -411,7 +408,13 @@ class PreparedQuery:
     parts: np.ndarray | None = None
     asymmetry: float = 0.0
     intrinsic_asymmetry: float = 0.0
-    reflection_shift: int = 0
+
+    @functools.cached_property
+    def reflection_shift(self) -> int:
+        """The outline's best intrinsic reflection ``i ↦ (s − i) mod m`` at the matching's points
+        (:func:`~corrlib.descriptors.side_view.mirror_shift` of ``features``), computed once when the sided
+        front-view curves ask for it."""
+        return mirror_shift(self.features)
 
     def is_side_view(self, params: "Contour3DParams") -> bool:
         """Whether the side-view terms apply: ``view``, or for ``auto`` an outline that is neither its own
@@ -489,7 +492,7 @@ def prepare_query(contour: Contour2D, params: Contour3DParams) -> PreparedQuery:
     else:
         intrinsic = outline_intrinsic_asymmetry(contour, params.area_ratio)
     return PreparedQuery(canonical.points, feats[:m], resampled.labels, resampled, axes, doubled, parts,
-                         mirror_asymmetry(canonical.points), intrinsic, mirror_shift(feats[:m]))
+                         mirror_asymmetry(canonical.points), intrinsic)
 
 
 def canonical_outline(contour: Contour2D, n_points: int, area_ratio: float) -> tuple[Contour2D, Contour2D]:
@@ -592,15 +595,24 @@ class SideViewTerms:
         return out
 
 
-def side_view_terms(mesh: TriMesh, params: Contour3DParams) -> SideViewTerms | None:
-    """The side-view terms of a mesh, or None where it has no usable reflection (too coarse for the
-    eigenpairs, no odd eigenfunction, a reflection that fixes every vertex); the match then goes on without
-    them and says so (``extras["view"] == "front"``)."""
+def _mesh_reflection(mesh: TriMesh, params: Contour3DParams):
+    """(spectrum, mirror) of a mesh for the side-view terms and the sided front-view curves, or None on a mesh
+    too coarse for the eigenpairs the reflection needs (both cached on disk by mesh content)."""
     k_mesh = max(HALF_EIGENPAIRS_PER_K * params.k, K_FINAL)
     if mesh.n_vertices <= k_mesh:
         return None
     spectrum = mesh_spectrum(mesh, k_mesh)
-    mirror = mesh_reflection(mesh, spectrum)
+    return spectrum, mesh_reflection(mesh, spectrum)
+
+
+def side_view_terms(mesh: TriMesh, params: Contour3DParams) -> SideViewTerms | None:
+    """The side-view terms of a mesh, or None where it has no usable reflection (too coarse for the
+    eigenpairs, no odd eigenfunction, a reflection that fixes every vertex); the match then goes on without
+    them and says so (``extras["view"] == "front"``)."""
+    reflection = _mesh_reflection(mesh, params)
+    if reflection is None:
+        return None
+    spectrum, mirror = reflection
     try:
         odd = odd_eigenfunction(spectrum, mirror)
         limbs = paired_limbs(protrusion_parts(spectrum.evals, spectrum.evecs, mesh.adjacency, mesh.area).labels,
@@ -630,12 +642,11 @@ class MeshSymmetry:
 def mesh_symmetry(mesh: TriMesh, params: Contour3DParams) -> MeshSymmetry | None:
     """The mesh's halves, or None where it has no usable reflection (too coarse for the eigenpairs, no odd
     eigenfunction); front views are then matched by free closed curves."""
-    k_mesh = max(HALF_EIGENPAIRS_PER_K * params.k, K_FINAL)
-    if mesh.n_vertices <= k_mesh:
+    reflection = _mesh_reflection(mesh, params)
+    if reflection is None:
         return None
-    spectrum = mesh_spectrum(mesh, k_mesh)
     try:
-        odd = odd_eigenfunction(spectrum, mesh_reflection(mesh, spectrum))
+        odd = odd_eigenfunction(*reflection)
     except (ParameterError, InputError):
         return None
     if not (np.all(np.isfinite(odd)) and (odd > 0).any() and (odd < 0).any()):

@@ -560,12 +560,11 @@ class MainWindow(QMainWindow):
         rows = [path.with_suffix(".vts") for path in paths]
         if paths[0] == paths[1] or not all(row.is_file() for row in rows):
             return
+        self.job_panel.write(f"ground truth found beside the meshes: {rows[0].name}, {rows[1].name}")
         try:
             self._set_ground_truth(rows[0], rows[1])
         except CorrError as exc:
             self.job_panel.write(f"ground truth beside the meshes not used: {exc}")
-            return
-        self.job_panel.write(f"ground truth found beside the meshes: {rows[0].name}, {rows[1].name}")
 
     def load_file(self, path: str, which: str = "source", then: Callable[[], None] | None = None) -> None:
         """Load a mesh or contour as source/target in the worker (queued: files load one after another).

@@ -1071,6 +1071,7 @@ class MainWindow(QMainWindow):
     def closeEvent(self, event):
         self.settings.setValue("window/state", self.saveState())
         self.settings.setValue("window/geometry", self.saveGeometry())
+        self.settings.sync()  # on disk now, whatever happens at exit
         self._closed = True
         self.runner.shutdown()
         if self._warm_up_thread is not None:  # no studio thread may outlive the window (see app.gui_gc)

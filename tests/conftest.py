@@ -1,6 +1,7 @@
 """Shared fixtures. Every test uses a private spectra cache so runs never depend on each other."""
 
 import gc
+import os
 import sys
 
 import numpy as np
@@ -19,19 +20,46 @@ def _private_cache(tmp_path_factory):
 
 @pytest.hookimpl(trylast=True)
 def pytest_runtest_teardown(item):
-    """Delete the test's closed windows now, on this thread, while none of their worker threads runs.
+    """Close the test's studio windows and widgets now, on this thread, and keep them (never delete them).
 
-    pytest-qt closes a test's widgets and calls ``deleteLater``, which Qt carries out only in the next event
-    loop, i.e. inside the *next* test, while that test's studio threads load files. Deleting a closed studio
-    window (its VTK render windows) there crashed Qt now and then. Flushing the deferred deletions and the
-    reference cycles here makes every window die at the end of its own test.
+    Deleting a closed studio window (its VTK render windows) crashed the test process now and then, inside
+    the test that deleted it or the next one's event loop (docs/decisions.md); the studio itself deletes its
+    window only at exit. So the tests' widgets are closed (their jobs stopped, their plotters finalised) and
+    kept until the process ends, and :func:`pytest_unconfigure` ends it without destructors. Other deferred
+    deletions (e.g. a view's replaced plotter) are carried out here, at the end of their own test.
     """
+    studio = sys.modules.get("_studio")
+    if studio is not None:
+        studio.close_open_widgets()
     qt_core = sys.modules.get("PySide6.QtCore")
     if qt_core is None or qt_core.QCoreApplication.instance() is None:
         return
     qt_core.QCoreApplication.sendPostedEvents(None, qt_core.QEvent.Type.DeferredDelete)
     gc.collect()
     qt_core.QCoreApplication.sendPostedEvents(None, qt_core.QEvent.Type.DeferredDelete)
+
+
+_EXIT_STATUS = pytest.StashKey[int]()
+
+
+def pytest_sessionfinish(session, exitstatus):
+    session.config.stash[_EXIT_STATUS] = int(exitstatus)
+
+
+@pytest.hookimpl(trylast=True)
+def pytest_unconfigure(config):
+    """After every report: stop pytest-xvfb's display (its exit handler would not run) and end the process
+    with pytest's exit status, without the destructors of the kept studio windows (see
+    :func:`pytest_runtest_teardown`)."""
+    studio = sys.modules.get("_studio")
+    if studio is None or not studio.CLOSED_WIDGETS:
+        return
+    xvfb = sys.modules.get("pytest_xvfb")
+    if xvfb is not None:
+        xvfb.shutdown_xvfb()
+    sys.stdout.flush()
+    sys.stderr.flush()
+    os._exit(config.stash.get(_EXIT_STATUS, 1))
 
 
 @pytest.fixture(scope="session")

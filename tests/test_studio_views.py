@@ -10,7 +10,7 @@ os.environ.setdefault("QT_QPA_PLATFORM", "xcb")
 pytest.importorskip("pyvistaqt")
 
 from _data import TOSCA  # noqa: E402
-from _studio import wait_loaded  # noqa: E402
+from _studio import keep_widget, wait_loaded  # noqa: E402
 
 from app.views.camera import HOVER_INTERVAL  # noqa: E402
 
@@ -272,8 +272,7 @@ def test_a_closed_plotter_leaves_no_python_callback_on_its_widget(qtbot):
 
     from app.views.scene import close_plotter, make_plotter
 
-    parent = QWidget()
-    qtbot.addWidget(parent)
+    parent = keep_widget(QWidget())
     plotter = make_plotter(parent)
     seen = []
 

@@ -119,7 +119,8 @@ def _refine_on_torus(points_a, points_b, map_xy, params: Contour2DParams, token,
     keep = np.flatnonzero(map_xy >= 0)
     pm_params = ProductManifoldParams(bands=params.bands, n_harmonics=params.n_harmonics, t_global=2e-4,
                                       t_local=2e-4)
-    refined_xy, refined_yx, info = yield from refine(fx, fy, keep, map_xy[keep], points_b, pm_params, token, watch)
+    refined_xy, refined_yx, info = yield from refine(fx, fy, keep, map_xy[keep], points_a, points_b, pm_params,
+                                                     token, watch)
     shape = (fx.n, fy.n)
     if "band_pairs" in info:
         pairs, density_band = info["band_pairs"], info["band_density"]

@@ -113,7 +113,7 @@ from corrlib.methods.base import InitialMatch, MatchResult, param
 from corrlib.methods.registry import MethodSpec, register
 from corrlib.methods.reorientation import (ShapeParts, mirrored_map, region_agreements, turn_reversed_map,
                                            turn_reversed_parts, turn_reversed_regions)
-from corrlib.methods.resolution import keep_resolved_matches, kernel_width
+from corrlib.methods.resolution import keep_isometric_matches, keep_resolved_matches, kernel_width
 from corrlib.neighbours import nearest_rows
 from corrlib.progress import Progress, Stopwatch, scaled_progress
 
@@ -1057,7 +1057,8 @@ def kernel_matching(source, target, params: KernelMatchingParams, token, initial
 
     Prepare the spectra and seeds, assign the seeds initially, run the DC iterations of the first time from
     one or two starts and keep the better, continue over the decreasing times, refine on finer scales; a
-    refined dense map keeps its partners within the smallest kernel's width (``extras["kept_matches"]``).
+    refined dense map keeps its partners within the smallest kernel's width, and farther moved ones where they are
+    the more isometric partner (:mod:`corrlib.methods.resolution`; ``extras["kept_matches"]``).
     """
     state = yield from prepare(source, target, params, token)
     yield from initial_seed_map(state, initial)
@@ -1070,8 +1071,10 @@ def kernel_matching(source, target, params: KernelMatchingParams, token, initial
     full_map_xy, full_map_yx = yield from multiscale_refinement(state)
     kept = None
     if state.refined_map is not None:  # below the smallest kernel's width the input map's partners stand
-        width = kernel_width(state.taus[-1], target.area)
-        kept = keep_resolved_matches(full_map_xy, *state.refined_map, target.vertices, width)
+        width_x, width_y = kernel_width(state.taus[-1], source.area), kernel_width(state.taus[-1], target.area)
+        kept = keep_resolved_matches(full_map_xy, *state.refined_map, target.vertices, width_y)
+        kept |= keep_isometric_matches(full_map_xy, *state.refined_map, source.vertices, target.vertices,
+                                       width_x, width_y)
     result = yield from kernel_result(state, full_map_xy, full_map_yx)
     if kept is not None:
         result.extras["kept_matches"] = kept

@@ -51,7 +51,7 @@ import numpy as np
 from corrlib.errors import InputError, ParameterError
 from corrlib.geometry import product as pm
 from corrlib.methods.base import MatchResult, param
-from corrlib.methods.resolution import keep_resolved_matches, kernel_width
+from corrlib.methods.resolution import keep_isometric_matches, keep_resolved_matches, kernel_width
 from corrlib.methods.registry import MethodSpec, register
 from corrlib.progress import Progress, Stopwatch
 
@@ -120,9 +120,12 @@ def _extract(coeffs, fx: pm.Factor, fy: pm.Factor, how: str, token=None) -> tupl
     return pm.ml_map(coeffs, fx, fy), pm.ml_map(coeffs.T, fy, fx)
 
 
-def refine(fx: pm.Factor, fy: pm.Factor, ix, iy, target_points: np.ndarray, params: ProductManifoldParams,
-           token=None, watch: Stopwatch | None = None):
-    """Dense map from matches on two factors (generator; returns ``(map_xy, map_yx, extras)``)."""
+def refine(fx: pm.Factor, fy: pm.Factor, ix, iy, source_points: np.ndarray, target_points: np.ndarray,
+           params: ProductManifoldParams, token=None, watch: Stopwatch | None = None):
+    """Dense map from matches on two factors (generator; returns ``(map_xy, map_yx, extras)``).
+
+    The points of the factors (vertices, curve samples) decide which input partners the global stage keeps
+    (:mod:`corrlib.methods.resolution`)."""
     watch = watch or Stopwatch()
     ix, iy = np.asarray(ix, dtype=np.int64), np.asarray(iy, dtype=np.int64)
     if ix.size == 0:
@@ -132,7 +135,9 @@ def refine(fx: pm.Factor, fy: pm.Factor, ix, iy, target_points: np.ndarray, para
     with watch("global"):
         coeffs = pm.diffuse(_match_density_coeffs(ix, iy, fx, fy), fx, fy, params.t_global)
         map_xy, map_yx = _extract(coeffs, fx, fy, params.extraction, token)
-        kept = keep_resolved_matches(map_xy, ix, iy, target_points, kernel_width(params.t_global, fy.unit))
+        width_x, width_y = kernel_width(params.t_global, fx.unit), kernel_width(params.t_global, fy.unit)
+        kept = keep_resolved_matches(map_xy, ix, iy, target_points, width_y)
+        kept |= keep_isometric_matches(map_xy, ix, iy, source_points, target_points, width_x, width_y)
     global_map_xy = map_xy.copy()
     band_sizes = []
     match_keys = ix * fy.n + iy
@@ -200,7 +205,8 @@ def solve_product_manifold(source, target, params: ProductManifoldParams, token,
     yield Progress("eigenpairs", 0.0, f"{params.n_eigs} per shape")
     with watch("eigen"):
         fx, fy = pm.mesh_factor(source, params.n_eigs), pm.mesh_factor(target, params.n_eigs)
-    map_xy, map_yx, extras = yield from refine(fx, fy, ix, iy, target.vertices, params, token, watch)
+    map_xy, map_yx, extras = yield from refine(fx, fy, ix, iy, source.vertices, target.vertices, params, token,
+                                               watch)
     yield Progress("done", 1.0, f"dense map from {ix.size} matches")
     return MatchResult("product-manifold", map_xy, map_yx, None, watch.times, extras=extras)
 

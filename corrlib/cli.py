@@ -332,8 +332,11 @@ def cmd_refine(args) -> int:
     _print_reversal_note(result)
     kept = result.extras.get("kept_matches")
     if kept is not None and not args.quiet:
-        print(f"{int(kept.sum())} of {kept.size} rows kept their input partner (the refinement moved them by less "
-              f"than its kernel's width); the others were corrected")
+        given_back = result.extras.get("isometric_matches")
+        isometric = int(given_back.sum()) if given_back is not None else 0
+        print(f"{int(kept.sum())} of {kept.size} rows kept their input partner ({int(kept.sum()) - isometric} moved "
+              f"by less than the refinement's kernel width, {isometric} farther but the more isometric partner); "
+              "the others were corrected")
     _write_match_outputs(result, source, target, Path(args.output), quiet=args.quiet, pictures=args.pictures)
     return 0
 

@@ -349,8 +349,9 @@ def test_refining_the_functional_map_lowers_its_error(source, target):
     refined = solve("kernel-matching", x, y, initial=InitialMatch(map_xy=fmap))
     before, after = (geodesic_errors(m, y, gx, gy).summary()["mean"] for m in (fmap, refined.map_xy))
     assert after < before, (before, after)
-    kept = refined.extras["kept_matches"]
+    kept, isometric = refined.extras["kept_matches"], refined.extras["isometric_matches"]
     assert kept.shape == (x.n_vertices,) and 0.5 < kept.mean() < 1.0  # most rows stand, some are corrected
+    assert not np.any(isometric & ~kept)  # rows given back as the more isometric partner are kept rows
 
 
 def _people_mirror_pair():

@@ -1,6 +1,8 @@
 """The product manifold X × Y: Kronecker operators against their factors, Theorem 5, localized harmonics,
 and map refinement on the wolf pair."""
 
+import re
+
 import numpy as np
 import pytest
 import scipy.linalg as sl
@@ -202,6 +204,8 @@ def test_cli_refine(tmp_path, capsys):
     line = next(ln for ln in capsys.readouterr().out.splitlines() if "kept their input partner" in ln)
     kept = int(line.split()[0])
     assert 0.6 * 4344 < kept < 0.75 * 4344, line
+    close, isometric = (int(w) for w in re.search(r"\((\d+) moved by less .*, (\d+) farther", line).groups())
+    assert close + isometric == kept, line
     assert np.mean(load_map(tmp_path / "dense.map_xy.txt") == np.arange(4344)) > 0.9
 
 

@@ -1058,7 +1058,8 @@ def kernel_matching(source, target, params: KernelMatchingParams, token, initial
     Prepare the spectra and seeds, assign the seeds initially, run the DC iterations of the first time from
     one or two starts and keep the better, continue over the decreasing times, refine on finer scales; a
     refined dense map keeps its partners within the smallest kernel's width, and farther moved ones where they are
-    the more isometric partner (:mod:`corrlib.methods.resolution`; ``extras["kept_matches"]``).
+    the more isometric partner (:mod:`corrlib.methods.resolution`; ``extras["kept_matches"]``, the latter also
+    in ``extras["isometric_matches"]``).
     """
     state = yield from prepare(source, target, params, token)
     yield from initial_seed_map(state, initial)
@@ -1073,11 +1074,11 @@ def kernel_matching(source, target, params: KernelMatchingParams, token, initial
     if state.refined_map is not None:  # below the smallest kernel's width the input map's partners stand
         width_x, width_y = kernel_width(state.taus[-1], source.area), kernel_width(state.taus[-1], target.area)
         kept = keep_resolved_matches(full_map_xy, *state.refined_map, target.vertices, width_y)
-        kept |= keep_isometric_matches(full_map_xy, *state.refined_map, source.vertices, target.vertices,
-                                       width_x, width_y)
+        isometric = keep_isometric_matches(full_map_xy, *state.refined_map, source.vertices, target.vertices,
+                                           width_x, width_y)
     result = yield from kernel_result(state, full_map_xy, full_map_yx)
     if kept is not None:
-        result.extras["kept_matches"] = kept
+        result.extras.update(kept_matches=kept | isometric, isometric_matches=isometric)
     return result
 
 

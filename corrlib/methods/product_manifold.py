@@ -137,7 +137,7 @@ def refine(fx: pm.Factor, fy: pm.Factor, ix, iy, source_points: np.ndarray, targ
         map_xy, map_yx = _extract(coeffs, fx, fy, params.extraction, token)
         width_x, width_y = kernel_width(params.t_global, fx.unit), kernel_width(params.t_global, fy.unit)
         kept = keep_resolved_matches(map_xy, ix, iy, target_points, width_y)
-        kept |= keep_isometric_matches(map_xy, ix, iy, source_points, target_points, width_x, width_y)
+        isometric = keep_isometric_matches(map_xy, ix, iy, source_points, target_points, width_x, width_y)
     global_map_xy = map_xy.copy()
     band_sizes = []
     match_keys = ix * fy.n + iy
@@ -180,7 +180,7 @@ def refine(fx: pm.Factor, fy: pm.Factor, ix, iy, source_points: np.ndarray, targ
         band_sizes.append(len(pairs))
         t_local *= 0.5
     extras = {"band_sizes": np.asarray(band_sizes), "n_matches": int(ix.size),
-              "global_map_xy": global_map_xy, "kept_matches": kept}
+              "global_map_xy": global_map_xy, "kept_matches": kept | isometric, "isometric_matches": isometric}
     if bands:  # the last band: its product vertices, the density on it and its first harmonics
         extras.update(band_pairs=pairs, band_density=density, band_harmonics=basis[:, :6])
     else:

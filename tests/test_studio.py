@@ -140,6 +140,16 @@ def test_compare_two_methods(qtbot, window):
     assert [r[0] for r in rows] == ["fmap-zoomout", "descriptor-nn"]
     assert all(float(r[3]) >= 0 for r in rows)  # mean errors from the demo ground truth
     assert len(view.figure.axes[0].lines) == 2
+    # a second comparison replaces the grid; the closed one is hidden and kept, never deleted while the studio runs
+    import shiboken6
+
+    first = view.plotter.interactor
+    with qtbot.waitSignal(window.result_ready, timeout=180_000):
+        window.run_compare()
+    qtbot.waitUntil(lambda: not window.runner.is_running("compare"), timeout=180_000)
+    qtbot.wait(50)
+    assert view.plotter.interactor is not first and view.plotter.interactor.isVisible()
+    assert shiboken6.isValid(first) and not first.isVisible() and view.views_box.indexOf(first) == -1
 
 
 def test_compare_shows_mirror_accepted_errors_heat_maps_and_sorts(qtbot, window):

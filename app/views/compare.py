@@ -92,6 +92,7 @@ class CompareView(QWidget, FramedView):
         self.figure = Figure(figsize=(4, 3), layout="constrained")  # fits labels into any size
         self.canvas = FigureCanvasQTAgg(self.figure)
         self.plotter = None
+        self.retired_plotters = []  # closed grids of earlier comparisons (see clear_results)
         self.views_box = QVBoxLayout()
         top = QHBoxLayout()
         top.addWidget(self.methods, 1)
@@ -138,9 +139,12 @@ class CompareView(QWidget, FramedView):
         self.figure.clear()
         self.canvas.draw_idle()
         if self.plotter is not None:
+            # the closed grid is hidden and kept until the window goes: deleting closed VTK widgets is where the
+            # studio's tests crashed now and then (docs/decisions.md, seventeenth session)
             self.views_box.removeWidget(self.plotter.interactor)
             close_plotter(self.plotter)
-            self.plotter.interactor.deleteLater()
+            self.plotter.interactor.hide()
+            self.retired_plotters.append(self.plotter)
             self.plotter = None
         self.inspected = None
         self.captions = {}

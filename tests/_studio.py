@@ -22,15 +22,13 @@ def keep_widget(widget):
     return widget
 
 
-def close_open_widgets() -> int:
-    """Close the running test's widgets and keep them; returns how many were closed."""
-    count = len(OPEN_WIDGETS)
+def close_open_widgets() -> None:
+    """Close the running test's widgets and keep them."""
     while OPEN_WIDGETS:
         widget = OPEN_WIDGETS.pop()
         widget.close()
         widget.hide()
         CLOSED_WIDGETS.append(widget)
-    return count
 
 
 def make_window(qtbot, ini_path, interactive=False, show=True):

@@ -314,19 +314,20 @@ def test_the_kernel_width_is_where_a_diffused_match_falls_to_one_over_e():
 
 def test_matches_moved_by_less_than_the_kernel_width_keep_their_partner():
     """Rows whose refined partner lies within the width of their single input partner get it back; rows
-    moved farther, rows with several input matches and rows without any keep the refined partner."""
-    from corrlib.methods.resolution import keep_resolved_matches
+    with several input matches and rows without any keep the refined partner."""
+    from corrlib.methods.resolution import keep_input_partners
 
     target = np.column_stack([np.arange(10.0), np.zeros(10)])
+    source = target[:5]
     refined = np.array([0, 5, 9, 3, 4])
-    ix = np.array([0, 1, 2, 3, 3])  # row 3 has two input matches, row 4 none
+    ix = np.array([0, 1, 2, 3, 3])  # row 1 moved farther than the width, row 3 has two input matches, row 4 none
     iy = np.array([1, 1, 8, 0, 9])
-    kept = keep_resolved_matches(refined, ix, iy, target, width=1.5)
-    assert refined.tolist() == [1, 5, 8, 3, 4]
-    assert kept.tolist() == [True, False, True, False, False]
+    resolved, _ = keep_input_partners(refined, ix, iy, source, target, 1.5, 1.5)
+    assert refined[[0, 2, 3, 4]].tolist() == [1, 8, 3, 4]
+    assert resolved.tolist() == [True, False, True, False, False]
     unmatched = np.array([-1, 5])  # a row the refinement left unmatched (slack) stays unmatched
-    assert keep_resolved_matches(unmatched, np.array([0, 1]), np.array([0, 5]), target, 1.5).tolist() == [False, True]
-    assert unmatched.tolist() == [-1, 5]
+    resolved, _ = keep_input_partners(unmatched, np.array([0, 1]), np.array([0, 5]), target[:2], target, 1.5, 1.5)
+    assert resolved.tolist() == [False, True] and unmatched.tolist() == [-1, 5]
 
 
 def _line_map():
@@ -339,29 +340,35 @@ def test_a_moved_row_keeps_its_input_partner_where_that_one_is_the_more_isometri
     """Row 5's refined partner (9) is 4 away from its input partner (5), farther than the width: the input
     partner keeps the distances to the neighbours' partners (4 and 6), the refined one does not (brute force:
     |1 - 5| + |1 - 3| against 0)."""
-    from corrlib.methods.resolution import keep_isometric_matches
+    from corrlib.methods.resolution import keep_input_partners
 
     points, refined = _line_map()
     refined[5] = 9
-    back = keep_isometric_matches(refined, np.array([5]), np.array([5]), points, points, 1.5, 1.5)
-    assert refined[5] == 5 and back.tolist() == [i == 5 for i in range(10)]
+    resolved, isometric = keep_input_partners(refined, np.array([5]), np.array([5]), points, points, 1.5, 1.5)
+    assert refined[5] == 5 and not resolved.any() and isometric.tolist() == [i == 5 for i in range(10)]
 
 
 def test_a_moved_row_keeps_its_refined_partner_where_that_one_is_the_more_isometric():
-    """The same row with a wrong input partner (0) keeps the refined partner (5); so do rows moved by less
-    than the width, rows with several input matches and rows the refinement left unmatched."""
-    from corrlib.methods.resolution import keep_isometric_matches
+    """The same row with a wrong input partner (0) keeps the refined partner (5); so do rows with several
+    input matches and rows the refinement left unmatched. Neighbours without a partner are left out of the
+    distortion (read as the last target point, 9, they would make row 5's input partner 9 look better)."""
+    from corrlib.methods.resolution import keep_input_partners
 
     points, refined = _line_map()
     refined[8] = -1
-    ix, iy = np.array([5, 2, 3, 3, 8]), np.array([0, 3, 9, 0, 0])
-    back = keep_isometric_matches(refined, ix, iy, points, points, 1.5, 1.5)
-    assert not back.any() and refined[:8].tolist() == list(range(8)) and refined[8] == -1
+    ix, iy = np.array([5, 3, 3, 8]), np.array([0, 9, 0, 0])
+    resolved, isometric = keep_input_partners(refined, ix, iy, points, points, 1.5, 1.5)
+    assert not resolved.any() and not isometric.any()
+    assert refined[:8].tolist() == list(range(8)) and refined[8] == -1
+    refined = np.arange(10)
+    refined[[4, 6]] = -1  # row 5's neighbours have no partner
+    resolved, isometric = keep_input_partners(refined, np.array([5]), np.array([9]), points, points, 1.5, 1.5)
+    assert refined[5] == 5 and not isometric.any()
 
 
 def test_the_isometric_choice_ignores_rigid_motions_reflections_and_scale():
     """Distances only: the target mirrored, turned and scaled (widths scaled with it) gives the same choice."""
-    from corrlib.methods.resolution import keep_isometric_matches
+    from corrlib.methods.resolution import keep_input_partners
 
     rng = np.random.default_rng(3)
     source = rng.random((60, 3))
@@ -373,11 +380,12 @@ def test_the_isometric_choice_ignores_rigid_motions_reflections_and_scale():
     refined[moved] = rng.permutation(60)[:3]
     ix = np.arange(60)
     iy = truth.copy()
-    iy[[10, 20]] = [50, 51]  # wrong input partners that the refinement corrected
+    for row in (10, 20):  # wrong input partners, the farthest points, that the refinement corrected
+        iy[row] = np.argmax(np.linalg.norm(source - source[row], axis=1))
     decided = []
     for tgt, width_y in ((source, 0.3), (target, 0.75)):
         out = refined.copy()
-        keep_isometric_matches(out, ix, iy, source, tgt, 0.3, width_y)
+        keep_input_partners(out, ix, iy, source, tgt, 0.3, width_y)
         decided.append(out)
     assert np.array_equal(decided[0], decided[1])
     assert np.array_equal(decided[0][moved], truth[moved]) and decided[0][10] == 10 and decided[0][20] == 20

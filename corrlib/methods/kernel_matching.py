@@ -113,7 +113,7 @@ from corrlib.methods.base import InitialMatch, MatchResult, param
 from corrlib.methods.registry import MethodSpec, register
 from corrlib.methods.reorientation import (ShapeParts, mirrored_map, region_agreements, turn_reversed_map,
                                            turn_reversed_parts, turn_reversed_regions)
-from corrlib.methods.resolution import keep_isometric_matches, keep_resolved_matches, kernel_width
+from corrlib.methods.resolution import keep_input_partners, kernel_width
 from corrlib.neighbours import nearest_rows
 from corrlib.progress import Progress, Stopwatch, scaled_progress
 
@@ -1073,9 +1073,8 @@ def kernel_matching(source, target, params: KernelMatchingParams, token, initial
     kept = None
     if state.refined_map is not None:  # below the smallest kernel's width the input map's partners stand
         width_x, width_y = kernel_width(state.taus[-1], source.area), kernel_width(state.taus[-1], target.area)
-        kept = keep_resolved_matches(full_map_xy, *state.refined_map, target.vertices, width_y)
-        isometric = keep_isometric_matches(full_map_xy, *state.refined_map, source.vertices, target.vertices,
-                                           width_x, width_y)
+        kept, isometric = keep_input_partners(full_map_xy, *state.refined_map, source.vertices, target.vertices,
+                                              width_x, width_y)
     result = yield from kernel_result(state, full_map_xy, full_map_yx)
     if kept is not None:
         result.extras.update(kept_matches=kept | isometric, isometric_matches=isometric)

@@ -51,7 +51,7 @@ import numpy as np
 from corrlib.errors import InputError, ParameterError
 from corrlib.geometry import product as pm
 from corrlib.methods.base import MatchResult, param
-from corrlib.methods.resolution import keep_isometric_matches, keep_resolved_matches, kernel_width
+from corrlib.methods.resolution import keep_input_partners, kernel_width
 from corrlib.methods.registry import MethodSpec, register
 from corrlib.progress import Progress, Stopwatch
 
@@ -136,8 +136,7 @@ def refine(fx: pm.Factor, fy: pm.Factor, ix, iy, source_points: np.ndarray, targ
         coeffs = pm.diffuse(_match_density_coeffs(ix, iy, fx, fy), fx, fy, params.t_global)
         map_xy, map_yx = _extract(coeffs, fx, fy, params.extraction, token)
         width_x, width_y = kernel_width(params.t_global, fx.unit), kernel_width(params.t_global, fy.unit)
-        kept = keep_resolved_matches(map_xy, ix, iy, target_points, width_y)
-        isometric = keep_isometric_matches(map_xy, ix, iy, source_points, target_points, width_x, width_y)
+        kept, isometric = keep_input_partners(map_xy, ix, iy, source_points, target_points, width_x, width_y)
     global_map_xy = map_xy.copy()
     band_sizes = []
     match_keys = ix * fy.n + iy

@@ -9,11 +9,11 @@ lie closer than that: moving a match by less than the width is a choice among
 partners the score holds equal (the capacities of an assignment spread the rows of
 a many-to-one input over their neighbours), while a match that disagrees with its
 neighbours' by more than the width is an outlier the refinement corrects.
-:func:`keep_resolved_matches` gives the input partner back to the rows of the
+:func:`keep_input_partners` gives the input partner back to the rows of the
 first kind, so a refinement leaves the input's detail below its own resolution
 alone. A match moved by more than the width is a real change, but not always an
 improvement: the refinement's density follows the majority of the matches around
-it. :func:`keep_isometric_matches` decides those rows by the assumption both
+it. The same function decides those rows by the assumption both
 refiners rest on, that the map is locally an isometry: of the two partners, input
 and refined, the row keeps the one whose distances to its neighbours' partners
 differ less from the distances to those neighbours on the source.
@@ -43,21 +43,22 @@ def kernel_width(t: float, unit: float) -> float:
     return 2.0 * float(np.sqrt(t * unit))
 
 
-def _single_input_rows(map_xy: np.ndarray, ix: np.ndarray, iy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Rows with exactly one input match and a refined partner (not -1), and that input partner."""
-    ix, iy = np.asarray(ix, dtype=np.int64), np.asarray(iy, dtype=np.int64)
-    counts = np.bincount(ix, minlength=map_xy.size)
-    single = (counts[ix] == 1) & (map_xy[ix] >= 0) & (iy >= 0)
-    return ix[single], iy[single]
+def keep_input_partners(map_xy: np.ndarray, ix: np.ndarray, iy: np.ndarray, source_points: np.ndarray,
+                        target_points: np.ndarray, width_x: float, width_y: float) -> tuple[np.ndarray, np.ndarray]:
+    """Give back their input partner to the rows a refinement did not resolve, or did not improve.
 
+    Only rows with exactly one input match and a refined partner (not -1) are considered.
 
-def keep_resolved_matches(map_xy: np.ndarray, ix: np.ndarray, iy: np.ndarray, target_points: np.ndarray,
-                          width: float) -> np.ndarray:
-    """Give back their input partner to the rows that a refinement moved by less than ``width``.
+    * A row moved by less than ``width_y`` gets its input partner back (the refinement cannot tell the two
+      apart). Distances are Euclidean on the target, a lower bound of the geodesic ones, so a partner across
+      a narrow gap (a hand against a hip) can be kept when the refinement moved it to the other side.
+    * A row moved farther keeps the more isometric of its two partners: with the local distortion
 
-    Only rows with exactly one input match and a refined partner (not -1) are considered. Distances are
-    Euclidean on the target, a lower bound of the geodesic ones, so a partner across a narrow gap (a hand
-    against a hip) can be kept when the refinement moved it to the other side.
+        e_i(p) = mean_j | ‖x_i − x_j‖ − ‖y_p − y_m(j)‖ |
+
+      over the source neighbours ``j`` within ``width_x`` of ``i`` that have a partner, ``m`` the refined
+      map, the row gets its input partner back where ``e_i(input) < e_i(refined)``. Within a kernel's width
+      Euclidean distances stand for geodesic ones; all rows are decided against the same neighbours.
 
     Parameters
     ----------
@@ -65,43 +66,6 @@ def keep_resolved_matches(map_xy: np.ndarray, ix: np.ndarray, iy: np.ndarray, ta
         The refined map; changed in place.
     ix, iy : (s,) int
         The input matches (source and target vertices).
-    target_points : (n_Y, d) float
-    width : float
-        :func:`kernel_width`, in the units of ``target_points``.
-
-    Returns
-    -------
-    (n_X,) bool
-        The rows that got their input partner back.
-    """
-    rows, partners = _single_input_rows(map_xy, ix, iy)
-    moved_by = np.linalg.norm(target_points[map_xy[rows]] - target_points[partners], axis=1)
-    close = moved_by < width
-    map_xy[rows[close]] = partners[close]
-    kept = np.zeros(map_xy.size, dtype=bool)
-    kept[rows[close]] = True
-    return kept
-
-
-def keep_isometric_matches(map_xy: np.ndarray, ix: np.ndarray, iy: np.ndarray, source_points: np.ndarray,
-                           target_points: np.ndarray, width_x: float, width_y: float) -> np.ndarray:
-    """Give back their input partner to the moved rows whose input partner is the more isometric one.
-
-    For a row ``i`` moved by at least ``width_y`` (rows with one input match and a refined partner, as in
-    :func:`keep_resolved_matches`), and a candidate partner ``p``, the local distortion is
-
-        e_i(p) = mean_j | ‖x_i − x_j‖ − ‖y_p − y_m(j)‖ |,
-
-    over the source neighbours ``j`` within ``width_x`` of ``i``, ``m`` the refined map. The row keeps the
-    input partner where ``e_i(input) < e_i(refined)``. Within a kernel's width Euclidean distances stand
-    for geodesic ones; all rows are decided against the same refined neighbours (one pass).
-
-    Parameters
-    ----------
-    map_xy : (n_X,) int
-        The refined map (after :func:`keep_resolved_matches`); changed in place.
-    ix, iy : (s,) int
-        The input matches.
     source_points : (n_X, d) float
     target_points : (n_Y, d) float
     width_x, width_y : float
@@ -109,29 +73,41 @@ def keep_isometric_matches(map_xy: np.ndarray, ix: np.ndarray, iy: np.ndarray, s
 
     Returns
     -------
-    (n_X,) bool
-        The rows that got their input partner back.
+    resolved, isometric : (n_X,) bool
+        The rows that got their input partner back by the first rule and by the second.
     """
-    rows, partners = _single_input_rows(map_xy, ix, iy)
-    moved = np.linalg.norm(target_points[map_xy[rows]] - target_points[partners], axis=1) >= width_y
-    rows, partners = rows[moved], partners[moved]
-    back = np.zeros(map_xy.size, dtype=bool)
+    ix, iy = np.asarray(ix, dtype=np.int64), np.asarray(iy, dtype=np.int64)
+    counts = np.bincount(ix, minlength=map_xy.size)
+    single = (counts[ix] == 1) & (map_xy[ix] >= 0) & (iy >= 0)
+    rows, partners = ix[single], iy[single]
+    moved_by = np.linalg.norm(target_points[map_xy[rows]] - target_points[partners], axis=1)
+    close = moved_by < width_y
+    map_xy[rows[close]] = partners[close]
+    resolved = np.zeros(map_xy.size, dtype=bool)
+    resolved[rows[close]] = True
+    far_rows, far_partners = rows[~close], partners[~close]
+    give_back = _input_is_more_isometric(map_xy, far_rows, far_partners, source_points, target_points, width_x)
+    map_xy[far_rows[give_back]] = far_partners[give_back]
+    isometric = np.zeros(map_xy.size, dtype=bool)
+    isometric[far_rows[give_back]] = True
+    return resolved, isometric
+
+
+def _input_is_more_isometric(map_xy, rows, partners, source_points, target_points, width_x) -> np.ndarray:
+    """(r,) bool: ``e_i(partner) < e_i(map_xy[i])`` for each row (see :func:`keep_input_partners`)."""
     if rows.size == 0:
-        return back
+        return np.zeros(0, dtype=bool)
     neighbours = cKDTree(source_points).query_ball_point(source_points[rows], width_x)
     counts = np.fromiter((len(n) for n in neighbours), dtype=np.int64, count=rows.size)
     owner = np.repeat(np.arange(rows.size), counts)
     flat = np.fromiter((j for n in neighbours for j in n), dtype=np.int64, count=int(counts.sum()))
-    other = flat != rows[owner]
-    owner, flat = owner[other], flat[other]
+    usable = (flat != rows[owner]) & (map_xy[flat] >= 0)  # not the row itself, and a neighbour with a partner
+    owner, flat = owner[usable], flat[usable]
     d_source = np.linalg.norm(source_points[rows[owner]] - source_points[flat], axis=1)
     their_partners = target_points[map_xy[flat]]
 
-    def distortion(candidates):
+    def distortion(candidates):  # sums over the same neighbours for both candidates: they compare as means
         d_target = np.linalg.norm(target_points[candidates[owner]] - their_partners, axis=1)
         return np.bincount(owner, np.abs(d_source - d_target), minlength=rows.size)
 
-    give_back = distortion(partners) < distortion(map_xy[rows])  # sums over the same neighbours: means compare
-    map_xy[rows[give_back]] = partners[give_back]
-    back[rows[give_back]] = True
-    return back
+    return distortion(partners) < distortion(map_xy[rows])

@@ -11,10 +11,17 @@ import numpy as np
 
 
 def _pyplot():
-    import matplotlib
+    """matplotlib.pyplot with the off-screen backend and the 3D axes, imported with Ctrl-C and SIGTERM held
+    back (:mod:`corrlib.interrupts`: an interrupt inside a compiled module's initialisation would be lost and
+    the 3D projection with it)."""
+    from corrlib.interrupts import signals_held
 
-    matplotlib.use("Agg", force=False)
-    import matplotlib.pyplot as plt
+    with signals_held():
+        import matplotlib
+
+        matplotlib.use("Agg", force=False)
+        import matplotlib.pyplot as plt
+        import mpl_toolkits.mplot3d  # noqa: F401  (registers the "3d" projection)
 
     return plt
 

@@ -1,0 +1,112 @@
+"""Ctrl-C and SIGTERM held back while a compiled library is imported (corrlib.interrupts)."""
+
+import signal
+import threading
+
+import pytest
+
+from corrlib.interrupts import signals_held
+
+
+class Stop(BaseException):
+    pass
+
+
+def _raise_stop(signum, frame):
+    raise Stop(signum)
+
+
+@pytest.fixture
+def sigterm_raises_stop():
+    previous = signal.signal(signal.SIGTERM, _raise_stop)
+    yield
+    signal.signal(signal.SIGTERM, previous)
+
+
+def _extension_init():
+    """What a compiled module's initialisation does with an exception raised inside it (pybind11)."""
+    try:
+        signal.raise_signal(signal.SIGINT)
+    except BaseException as exc:
+        raise ImportError("initialization failed") from exc
+
+
+def _import_optional_part() -> bool:
+    """What matplotlib does with its 3D axes: an import error means the optional part is missing."""
+    try:
+        _extension_init()
+    except Exception:
+        return False
+    return True
+
+
+def test_without_holding_an_interrupt_inside_an_extensions_init_is_lost():
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+    assert _import_optional_part() is False  # no KeyboardInterrupt reached us, and the part is missing
+
+
+def test_a_held_interrupt_keeps_the_import_and_arrives_after_it():
+    loaded = None
+    with pytest.raises(KeyboardInterrupt):
+        with signals_held():
+            loaded = _import_optional_part()
+    assert loaded is True
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_a_held_sigterm_goes_to_the_previous_python_handler(sigterm_raises_stop):
+    reached_the_end = False
+    with pytest.raises(Stop):
+        with signals_held():
+            signal.raise_signal(signal.SIGTERM)
+            reached_the_end = True
+    assert reached_the_end
+    assert signal.getsignal(signal.SIGTERM) is _raise_stop
+
+
+def test_an_interrupt_wins_over_an_error_of_the_block():
+    with pytest.raises(KeyboardInterrupt) as caught:
+        with signals_held():
+            signal.raise_signal(signal.SIGINT)
+            raise ValueError("the import failed")
+    assert isinstance(caught.value.__context__, ValueError)
+
+
+def test_without_a_signal_nothing_happens_and_the_handlers_are_restored(sigterm_raises_stop):
+    with signals_held():
+        value = 1 + 1
+    assert value == 2
+    assert signal.getsignal(signal.SIGTERM) is _raise_stop
+    assert signal.getsignal(signal.SIGINT) is signal.default_int_handler
+
+
+def test_an_ignored_signal_stays_ignored():
+    previous = signal.signal(signal.SIGTERM, signal.SIG_IGN)
+    try:
+        with signals_held():
+            signal.raise_signal(signal.SIGTERM)
+        assert signal.getsignal(signal.SIGTERM) is signal.SIG_IGN
+    finally:
+        signal.signal(signal.SIGTERM, previous)
+
+
+def test_outside_the_main_thread_it_changes_nothing():
+    seen = []
+
+    def worker():
+        with signals_held():
+            seen.append(signal.getsignal(signal.SIGINT))
+
+    thread = threading.Thread(target=worker)
+    thread.start()
+    thread.join()
+    assert seen == [signal.default_int_handler]
+
+
+def test_the_pictures_import_registers_the_3d_axes():
+    from matplotlib import projections
+
+    from corrlib.plotting import _pyplot
+
+    _pyplot()
+    assert "3d" in projections.get_projection_names()

@@ -8,7 +8,9 @@ exception and reports an ``ImportError`` instead (pybind11 modules do), and
 a library that treats an import error as a missing optional part goes on
 without it. Matplotlib does this for its 3D axes: a Ctrl-C that arrives
 while ``matplotlib.pyplot`` is first imported is lost, and the picture
-written next fails with "'3d' is not a valid value for projection".
+written next fails with "'3d' is not a valid value for projection". Some
+libraries catch ``BaseException`` around their optional imports (trimesh),
+which loses the interrupt outright.
 
 :func:`signals_held` records SIGINT and SIGTERM during such an import and
 delivers them to their previous handlers as soon as it is over.

@@ -292,7 +292,10 @@ def read_mesh_arrays(path) -> tuple[np.ndarray, np.ndarray]:
 
 
 def _read_trimesh(path: Path, *, weld: bool) -> tuple[np.ndarray, np.ndarray]:
-    import trimesh
+    from corrlib.interrupts import signals_held
+
+    with signals_held():  # trimesh's import catches BaseException around its optional parts: a Ctrl-C would be lost
+        import trimesh
 
     try:
         loaded = trimesh.load(str(path), process=False, maintain_order=True, force="mesh")

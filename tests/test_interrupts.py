@@ -110,3 +110,30 @@ def test_the_pictures_import_registers_the_3d_axes():
 
     _pyplot()
     assert "3d" in projections.get_projection_names()
+
+
+def test_a_ctrl_c_while_the_mesh_reader_is_imported_is_not_lost(tmp_path, monkeypatch):
+    """trimesh catches BaseException around its optional imports; a Ctrl-C inside its import would vanish
+    and the file would be read on. A stand-in module does what trimesh's import does with an interrupt."""
+    import sys
+
+    import trimesh  # noqa: F401  (loaded, so that the stand-in is replaced by it again after the test)
+
+    from corrlib.io import load_mesh
+
+    package = tmp_path / "fake" / "trimesh"
+    package.mkdir(parents=True)
+    (package / "__init__.py").write_text(
+        "import signal\n"
+        "try:\n"
+        "    signal.raise_signal(signal.SIGINT)  # a Ctrl-C during the import\n"
+        "except BaseException:\n"
+        "    pass  # what trimesh does around its optional parts\n"
+        "def load(*args, **kwargs):\n"
+        "    raise ValueError('the stand-in reads nothing')\n")
+    monkeypatch.syspath_prepend(str(tmp_path / "fake"))
+    monkeypatch.delitem(sys.modules, "trimesh")
+    mesh_file = tmp_path / "shape.obj"
+    mesh_file.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
+    with pytest.raises(KeyboardInterrupt):
+        load_mesh(mesh_file)

@@ -116,8 +116,10 @@ def staged_output(folder):
     """Write a set of files all-or-nothing into ``folder`` (a generator-based context manager).
 
     Yields a hidden staging folder inside ``folder``; on success its files
-    move into ``folder`` (each move atomic), on any failure or interruption
-    it is removed, so no partial set of outputs is left behind.
+    move into ``folder`` (each move atomic; Ctrl-C and SIGTERM are held
+    until the last one has moved, so an interruption gets the whole set),
+    on any failure or interruption before that it is removed, so no partial
+    set of outputs is left behind.
     """
     folder = ensure_output_folder(folder)
     try:
@@ -126,10 +128,13 @@ def staged_output(folder):
         raise InputError(f"{folder}: cannot write output there ({_os_reason(exc)})") from None
     import shutil
 
+    from corrlib.interrupts import signals_held
+
     try:
         yield stage
-        for entry in sorted(stage.iterdir()):
-            os.replace(entry, folder / entry.name)
+        with signals_held():  # an interrupt during the moves waits until the whole set is in place
+            for entry in sorted(stage.iterdir()):
+                os.replace(entry, folder / entry.name)
     except BaseException as exc:
         shutil.rmtree(stage, ignore_errors=True)
         if isinstance(exc, OSError):

@@ -137,3 +137,27 @@ def test_a_ctrl_c_while_the_mesh_reader_is_imported_is_not_lost(tmp_path, monkey
     mesh_file.write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nf 1 2 3\n")
     with pytest.raises(KeyboardInterrupt):
         load_mesh(mesh_file)
+
+
+def test_an_interrupt_while_the_outputs_move_into_place_leaves_the_whole_set(tmp_path, monkeypatch):
+    """staged_output moves its files one by one: a Ctrl-C between two moves would leave part of the set."""
+    import os
+
+    import corrlib.io as io
+
+    moves = []
+    move = os.replace
+
+    def replace(source, target):
+        moves.append(target)
+        if len(moves) == 2:
+            signal.raise_signal(signal.SIGINT)  # the user presses Ctrl-C between the second and third move
+        move(source, target)
+
+    monkeypatch.setattr(io.os, "replace", replace)
+    out = tmp_path / "out"
+    with pytest.raises(KeyboardInterrupt):
+        with io.staged_output(out) as stage:
+            for name in ("a.txt", "b.txt", "c.txt", "d.txt"):
+                (stage / name).write_text(name)
+    assert sorted(p.name for p in out.iterdir()) == ["a.txt", "b.txt", "c.txt", "d.txt"]

@@ -33,9 +33,9 @@ def signals_held() -> Iterator[None]:
 
     Only the main thread receives signals, so elsewhere this does nothing.
     A held signal is delivered to the handler that was installed before the
-    block, also where the block raised: a Python handler is called (e.g. ``default_int_handler`` raises
-    ``KeyboardInterrupt``), the default action is taken by raising the signal
-    again, an ignored signal stays ignored.
+    block, also where the block raised: a Python handler is called (e.g.
+    ``default_int_handler`` raises ``KeyboardInterrupt``), the default action
+    is taken by raising the signal again, an ignored signal stays ignored.
     """
     if threading.current_thread() is not threading.main_thread():
         yield

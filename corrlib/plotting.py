@@ -11,9 +11,9 @@ import numpy as np
 
 
 def _pyplot():
-    """matplotlib.pyplot with the off-screen backend and the 3D axes, imported with Ctrl-C and SIGTERM held
-    back (:mod:`corrlib.interrupts`: an interrupt inside a compiled module's initialisation would be lost and
-    the 3D projection with it)."""
+    """matplotlib.pyplot with the off-screen backend, imported with Ctrl-C and SIGTERM held back
+    (:mod:`corrlib.interrupts`: an interrupt inside a compiled module's initialisation would be lost, and
+    matplotlib would go on without its 3D axes)."""
     from corrlib.interrupts import signals_held
 
     with signals_held():
@@ -21,7 +21,6 @@ def _pyplot():
 
         matplotlib.use("Agg", force=False)
         import matplotlib.pyplot as plt
-        import mpl_toolkits.mplot3d  # noqa: F401  (registers the "3d" projection)
 
     return plt
 

@@ -134,8 +134,6 @@ def suite_foundation(repeat: int, quick: bool = False) -> None:
 
 def suite_contour3d(repeat: int, quick: bool = False) -> None:
     """Issue 3 targets: global optimum 200 x 5k, time per layered Dijkstra, retrieval over 20 meshes."""
-    from dataclasses import replace
-
     from corrlib.geometry.cyclic_paths import ProductGraph
     from corrlib.geometry.sections import render_silhouette
     from corrlib.io import load_mesh, save_mesh
@@ -143,7 +141,7 @@ def suite_contour3d(repeat: int, quick: bool = False) -> None:
     from corrlib.methods import solve
     from corrlib.progress import run
     from corrlib.resources import resource
-    from corrlib.retrieval import retrieve
+    from corrlib.retrieval import retrieval_params, retrieve
 
     wolf0 = load_mesh(resource("data/tosca/wolf0.off"))
     cat1 = load_mesh(resource("data/tosca/cat1.off"))
@@ -191,7 +189,7 @@ def suite_contour3d(repeat: int, quick: bool = False) -> None:
             files.append(path)
         sizes = [load_mesh(f).n_vertices for f in files]
         print(f"collection: 20 meshes of {min(sizes)}-{max(sizes)} vertices (rotated, vertex order shuffled)")
-        rparams = replace(Contour3DParams(), n_contour=100, eps=0.05)
+        rparams = retrieval_params(eps=0.05)
         for jobs in (2, 1):
             os.environ["CORRLIB_CACHE_DIR"] = os.path.join(tmp, f"cache{jobs}")  # cold spectra cache
             start = time.perf_counter()

@@ -36,10 +36,13 @@ RETRIEVAL_N_CONTOUR = 100
 
 def retrieval_params(**overrides) -> Contour3DParams:
     """The ``contour3d`` parameters a retrieval uses: the method's defaults with
-    :data:`RETRIEVAL_N_CONTOUR` points, then ``overrides`` (named errors for bad values)."""
+    :data:`RETRIEVAL_N_CONTOUR` points and the view decided by the outline alone
+    (``view="outline"``: one reading of the query for every mesh, so that its
+    energies compare; the default ``"auto"`` also asks each mesh), then
+    ``overrides`` (named errors for bad values)."""
     from corrlib.methods.base import make_params
 
-    return make_params(Contour3DParams, **{"n_contour": RETRIEVAL_N_CONTOUR, **overrides})
+    return make_params(Contour3DParams, **{"n_contour": RETRIEVAL_N_CONTOUR, "view": "outline", **overrides})
 
 
 def class_of(path) -> str:

@@ -10,7 +10,7 @@ from scipy.spatial import cKDTree
 from corrlib.descriptors.symmetry import odd_eigenfunction
 from corrlib.errors import InputError
 from corrlib.descriptors.side_view import (edge_orientation, intrinsic_asymmetry, mirror_asymmetry, paired_limbs,
-                                           symmetry_curve_cost)
+                                           seen_from_the_side, symmetry_curve_cost)
 from corrlib.geometry.spectrum import mesh_spectrum
 from corrlib.shapes import TriMesh
 
@@ -200,3 +200,55 @@ def test_the_view_does_not_depend_on_the_matching_settings_or_the_pose_of_the_ou
     moved = Contour2D(3.7 * asymmetric_blob()[::-1] @ rotation.T + 5.0, validate=False, name="moved L")
     assert prepare_query(moved, Contour3DParams(n_contour=40)).intrinsic_asymmetry == pytest.approx(values[0],
                                                                                                    abs=0.02)
+
+
+def _mirrored_cloud(half_axes, normal_axis, n=400, seed=0):
+    """Points of a solid ellipsoid with the given half-axes (x, y, z), symmetric across the coordinate plane
+    whose normal is ``normal_axis``: one half sampled, the other its reflection; the mirror map is known."""
+    rng = np.random.default_rng(seed)
+    half = rng.normal(size=(n, 3))
+    half = half / np.linalg.norm(half, axis=1, keepdims=True) * rng.uniform(0, 1, (n, 1)) ** (1 / 3)
+    half = half * np.asarray(half_axes, dtype=float)
+    half[:, normal_axis] = np.abs(half[:, normal_axis])
+    image = half.copy()
+    image[:, normal_axis] *= -1
+    points = np.vstack([half, image])
+    mirror = np.concatenate([np.arange(n, 2 * n), np.arange(n)])
+    return points, mirror, rng.uniform(0.5, 1.5, 2 * n)
+
+
+@pytest.mark.parametrize("normal_axis, side", [(2, True), (1, False), (0, False)])
+def test_seen_from_the_side_when_thinnest_across_the_plane_of_symmetry(normal_axis, side):
+    """An ellipsoid 3 × 2 × 1 is seen from the side exactly when it is mirrored across the plane normal to its
+    thinnest axis (z), whatever its position, rotation, scale and vertex order."""
+    points, mirror, mass = _mirrored_cloud((3.0, 2.0, 1.0), normal_axis)
+    assert seen_from_the_side(points, mirror, mass) is side
+    rotation, _ = np.linalg.qr(np.random.default_rng(1).normal(size=(3, 3)))
+    order = np.random.default_rng(2).permutation(len(points))
+    inverse = np.argsort(order)
+    moved = (0.01 * points @ rotation.T + 7.0)[order]
+    assert seen_from_the_side(moved, inverse[mirror[order]], mass[order]) is side
+
+
+def test_seen_from_the_side_needs_a_reflection_and_consistent_shapes():
+    points, _, mass = _mirrored_cloud((3.0, 2.0, 1.0), 2)
+    assert seen_from_the_side(points, np.arange(len(points)), mass) is False  # the identity moves nothing
+    with pytest.raises(InputError, match="must be"):
+        seen_from_the_side(points, np.arange(len(points) - 1), mass)
+
+
+@pytest.mark.slow
+def test_animals_are_seen_from_the_side_and_people_from_the_front(cat_pair, wolf_pair, tmp_path):
+    """The bundled cats and wolves (thinnest from side to side) and the capsule people in every pose, arms
+    bent or raised (thinnest from front to back), through the reflection the side-view terms use."""
+    from _humanoid import write_dataset
+
+    from corrlib.io import load_mesh
+    from corrlib.methods.contour3d import Contour3DParams, side_view_terms
+
+    params = Contour3DParams()
+    for mesh in (*cat_pair[:2], *wolf_pair):
+        assert side_view_terms(mesh, params).seen_from_side, mesh.name
+    people = write_dataset(tmp_path / "people")
+    for name in ("human0", "human1", "human2"):
+        assert not side_view_terms(load_mesh(people / f"{name}.off"), params).seen_from_side, name

@@ -246,3 +246,46 @@ def edge_orientation(vertices: np.ndarray, faces: np.ndarray, adjacency: sp.spma
     normal /= np.maximum(np.linalg.norm(normal, axis=1, keepdims=True), 1e-300)
     value = np.einsum("ek,ek->e", np.cross(normal, tangent), 0.5 * (vertex_grad[rows] + vertex_grad[cols])) / scale
     return sp.csr_matrix((value, cols.copy(), pattern.indptr.copy()), shape=(n, n))
+
+
+def seen_from_the_side(vertices: np.ndarray, mirror: np.ndarray, mass: np.ndarray) -> bool:
+    """Whether a shape's natural outline is a side view: it is thinnest across its plane of symmetry.
+
+    An outline is drawn, as a rendered silhouette is taken, along the shape's
+    thinnest direction: the axis of least variance of its area-weighted
+    covariance ``Σ_i m_i (x_i − x̄)(x_i − x̄)ᵀ``. The normal of the plane of
+    symmetry is the dominant direction of the displacements to the mirror
+    images, the top eigenvector of ``Σ_i m_i d_i d_iᵀ`` with
+    ``d_i = x_i − x_S(i)`` (for an exact reflection ``d_i = 2 ((x_i − p) · ν) ν``,
+    so that sum has rank one along the normal ``ν``). The outline crosses the
+    plane of symmetry, and is a side view, where the normal is closest to the
+    least-variance axis of the three principal axes: a quadruped is thinnest
+    from side to side, a person (arms out or not) from front to back. Extrinsic,
+    so it judges the pose the mesh is in, which is the pose its outline shows.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float
+    mirror : (n,) int
+        The reflection ``S`` as a vertex map.
+    mass : (n,) float
+        Vertex areas.
+
+    Returns
+    -------
+    bool
+        False also where the reflection moves no vertex (no plane to speak of).
+    """
+    vertices = np.asarray(vertices, dtype=np.float64)
+    mirror, mass = np.asarray(mirror), np.asarray(mass, dtype=np.float64)
+    if not (vertices.ndim == 2 and vertices.shape[1] == 3 and mirror.shape == mass.shape == vertices.shape[:1]):
+        raise InputError(f"vertices {vertices.shape}, mirror {mirror.shape} and mass {mass.shape} must be "
+                         "(n, 3), (n,) and (n,)")
+    centred = vertices - (mass @ vertices) / mass.sum()
+    _, axes = np.linalg.eigh((centred * mass[:, None]).T @ centred)  # columns by increasing variance
+    displacement = vertices - vertices[mirror]
+    spread, directions = np.linalg.eigh((displacement * mass[:, None]).T @ displacement)
+    if spread[-1] <= 0.0:
+        return False
+    normal = directions[:, -1]
+    return int(np.argmax(np.abs(axes.T @ normal))) == 0

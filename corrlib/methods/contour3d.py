@@ -92,7 +92,14 @@ crosses the curve of symmetry, so it gets neither term: ``view="auto"``
 takes an outline for a side view only if it is neither its own mirror image
 (:func:`~corrlib.descriptors.side_view.mirror_asymmetry`) nor intrinsically
 symmetric (:func:`~corrlib.descriptors.side_view.intrinsic_asymmetry`: a
-front view of a posed person is bent, not stretched). The orientation
+front view of a posed person is bent, not stretched); that is
+``view="outline"``, one reading of a query for every mesh, which is what a
+ranking needs (:mod:`corrlib.retrieval`). Matched to one mesh, ``"auto"``
+asks the mesh as well: a side view is the natural outline only of a shape
+that is thinnest across its plane of symmetry
+(:func:`~corrlib.descriptors.side_view.seen_from_the_side`; a quadruped,
+not a person, whose bent limbs can make a front view asymmetric in both
+senses). The orientation
 cost enters the first-order energies (``paper``, ``ratio``); the
 second-order graphs take the distance cost only.
 
@@ -166,6 +173,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from corrlib.descriptors.side_view import (edge_orientation, intrinsic_asymmetry, mirror_asymmetry, mirror_shift,
+                                           seen_from_the_side,
                                            paired_limbs, symmetry_curve_cost)
 from corrlib.descriptors.spectral import hks, wks
 from corrlib.descriptors.symmetry import K_FINAL, even_spectrum, mesh_reflection, odd_eigenfunction
@@ -251,13 +259,15 @@ class Contour3DParams:
     bending: float = param(1.0, label="Bending weight", low=0.0, high=1e3,
                            help="elastic energy: (1 − cos θ) per turn, in units of the mean node cost times the "
                                 "mean contour step.")
-    view: str = param("auto", label="View", choices=("auto", "side", "front"),
+    view: str = param("auto", label="View", choices=("auto", "outline", "side", "front"),
                       help="side: the outline is seen across the shape's plane of symmetry (an animal from the side, "
                            "or a section through that plane), so it runs along the curve of symmetry except on "
                            "limbs and keeps one half of the shape on one side (the symmetry-curve weight applies); "
                            "front: seen within that plane (a person from the front, an animal from above), no such "
-                           "term; auto: side unless the outline is its own mirror image in 2D or intrinsically "
-                           "symmetric (a posed front view).")
+                           "term; outline: side unless the outline is its own mirror image in 2D or intrinsically "
+                           "symmetric (a posed front view), one reading for every mesh (retrieval's default); "
+                           "auto: side where the outline says so and the mesh is thinnest across its plane of "
+                           "symmetry (a quadruped, not a person).")
     symmetry_weight: float = param(1.0, label="Symmetry-curve weight", low=0.0, high=1e3,
                                    help="Side views: cost of a point's distance to its mirror image (off the limbs) "
                                         "and of walking round the body the wrong way, in units of the mean node cost "
@@ -417,8 +427,9 @@ class PreparedQuery:
         return mirror_shift(self.features)
 
     def is_side_view(self, params: "Contour3DParams") -> bool:
-        """Whether the side-view terms apply: ``view``, or for ``auto`` an outline that is neither its own
-        mirror image nor intrinsically symmetric (see :mod:`corrlib.descriptors.side_view`)."""
+        """Whether the outline is read as a side view: ``view``, or for ``outline`` and ``auto`` an outline that
+        is neither its own mirror image nor intrinsically symmetric (see :mod:`corrlib.descriptors.side_view`;
+        ``auto`` also asks the mesh, in :func:`match_prepared`)."""
         if params.symmetry_weight == 0.0 or params.view == "front":
             return False
         return params.view == "side" or (self.asymmetry > SIDE_VIEW_ASYMMETRY
@@ -583,10 +594,15 @@ class SideViewTerms:
     orientation : (n, n) sparse
         ``(n̂ × t) · ∇g / mean |∇g|`` of every directed edge (``g`` the lowest
         odd eigenfunction): positive where the edge keeps ``g > 0`` on its left.
+    seen_from_side : bool
+        Whether the mesh is thinnest across its plane of symmetry, so that its
+        natural outline is a side view
+        (:func:`~corrlib.descriptors.side_view.seen_from_the_side`).
     """
 
     curve_cost: np.ndarray
     orientation: sp.csr_matrix
+    seen_from_side: bool = True
 
     def wrong_way(self, sign: float) -> sp.csr_matrix:
         """(n, n) sparse ≥ 0: the part of ``sign · orientation`` below zero, per directed edge."""
@@ -618,7 +634,8 @@ def side_view_terms(mesh: TriMesh, params: Contour3DParams) -> SideViewTerms | N
         limbs = paired_limbs(protrusion_parts(spectrum.evals, spectrum.evecs, mesh.adjacency, mesh.area).labels,
                              mirror)
         return SideViewTerms(symmetry_curve_cost(mesh.vertices, mirror, limbs),
-                             edge_orientation(mesh.vertices, mesh.faces, mesh.adjacency, odd))
+                             edge_orientation(mesh.vertices, mesh.faces, mesh.adjacency, odd),
+                             seen_from_the_side(mesh.vertices, mirror, spectrum.mass.diagonal()))
     except (ParameterError, InputError):  # no reflection to speak of
         return None
 
@@ -750,6 +767,8 @@ def match_prepared(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams,
     with watch("features"):
         target = prepare_mesh(mesh, params)
         side = side_view_terms(mesh, params) if query.is_side_view(params) else None
+        if side is not None and params.view == "auto" and not side.seen_from_side:
+            side = None  # the outline of a shape seen from the front (a person in profile is rarely drawn)
         distances = {model: feature_distances(query.model_features(model), feats)
                      for model, feats in target.features.items()}
         labels = label_penalty(query.labels, mesh.labels, params.tau)

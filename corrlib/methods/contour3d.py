@@ -103,7 +103,7 @@ senses). The orientation
 cost enters the first-order energies (``paper``, ``ratio``); the
 second-order graphs take the distance cost only.
 
-Sided front-view curves (``front_curve="sided"``, not the default): a view
+Sided front-view curves (``front_curve="sided"``, the default): a view
 within the plane of symmetry has an outline that is its own intrinsic
 mirror image (:func:`~corrlib.descriptors.side_view.mirror_shift` gives its
 reflection), and the curve it is on the surface crosses the curve of
@@ -113,7 +113,10 @@ down one flank and back up the same one (both halves of the outline and both
 flanks have the same features). With ``"sided"`` the whole model's readings
 forbid every match on the wrong half (:mod:`corrlib.geometry.symmetric_paths`;
 the sign of the lowest odd eigenfunction), both ways round, and the search
-stays exact. See ``docs/decisions.md`` for why it is off by default.
+stays exact. On a shape read as a side view, or where the half model wins
+on energy (the animals' top views), nothing changes; it matters for people
+seen from the front, whose posed outlines the free curve ran down one flank
+and back (see ``docs/decisions.md``).
 
 Part term (the thesis' automatic part features; ``parts="auto"``, not the
 default): the protrusions of the filled silhouette and of the mesh
@@ -279,7 +282,7 @@ class Contour3DParams:
     part_weight: float = param(1.0, label="Part weight", low=0.0, high=1e3,
                                help="Cost of matching points of different parts, in units of the mean feature "
                                     "distance.")
-    front_curve: str = param("free", label="Front-view curve", choices=("free", "sided"),
+    front_curve: str = param("sided", label="Front-view curve", choices=("free", "sided"),
                              help="A view within the plane of symmetry (not a side view) read as the whole surface: "
                                   "sided: each half of the outline (between the crossings of its axis of symmetry) "
                                   "is matched on its own half of the surface, both ways round; free: any closed "

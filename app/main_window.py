@@ -1093,7 +1093,10 @@ def contour_reading(result) -> str:
     line = f"{result.method}: {result.energy_meaning or 'energy'} {result.energy:.6g}"
     extras = result.extras or {}
     if "view" in extras:
+        overruled = extras["view"] == "front" and extras.get("mesh_seen_from_side") is False
         line += (f"; read as a {extras['view']} view (mirror asymmetry {extras.get('asymmetry', float('nan')):.3f}, "
-                 f"intrinsic asymmetry {extras.get('intrinsic_asymmetry', float('nan')):.3f}; the parameter "
-                 f"view=side or view=front forces one)")
+                 f"intrinsic asymmetry {extras.get('intrinsic_asymmetry', float('nan')):.3f}"
+                 + ("; a side view by the outline, but the target is not thinnest across its plane of symmetry"
+                    if overruled else "")
+                 + "; the parameter view=side or view=front forces one)")
     return line

@@ -295,3 +295,22 @@ def test_a_closed_plotter_leaves_no_python_callback_on_its_widget(qtbot):
     assert seen == []
     assert parent.receivers(SIGNAL("destroyed(QObject*)")) == watchers - 1
     close_plotter(plotter)  # closing twice is harmless
+
+
+def test_the_log_says_when_the_target_overruled_a_side_view():
+    """The studio's log line on a 2D-to-3D match names the view and, where the outline alone would have been a
+    side view but the target is not thinnest across its plane of symmetry (a person), says so."""
+    from types import SimpleNamespace
+
+    from app.main_window import contour_reading
+
+    def reading(view, seen_from_side):
+        result = SimpleNamespace(method="contour3d", energy_meaning="paper energy", energy=1.0,
+                                 extras={"view": view, "asymmetry": 0.1, "intrinsic_asymmetry": 0.5,
+                                         "mesh_seen_from_side": seen_from_side})
+        return contour_reading(result)
+
+    assert "not thinnest across its plane of symmetry" in reading("front", False)
+    assert "read as a side view" in reading("side", True)
+    for view, seen in (("side", True), ("front", None), ("front", True)):
+        assert "not thinnest" not in reading(view, seen)

@@ -770,6 +770,8 @@ def match_prepared(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams,
     with watch("features"):
         target = prepare_mesh(mesh, params)
         side = side_view_terms(mesh, params) if query.is_side_view(params) else None
+        # None where the outline alone decided (or no reflection was found)
+        seen_from_side = None if side is None else side.seen_from_side
         if side is not None and params.view == "auto" and not side.seen_from_side:
             side = None  # the outline of a shape seen from the front (a person in profile is rarely drawn)
         distances = {model: feature_distances(query.model_features(model), feats)
@@ -822,7 +824,7 @@ def match_prepared(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams,
     model, signs, near = readings[bb.graph_index]
     extras = {"axis_reversed": bool(signs[0]) if signs else False, "axis_signs": [bool(s) for s in signs],
               "model": model, "view": "side" if side is not None else "front", "asymmetry": query.asymmetry,
-              "intrinsic_asymmetry": query.intrinsic_asymmetry,
+              "intrinsic_asymmetry": query.intrinsic_asymmetry, "mesh_seen_from_side": seen_from_side,
               "near_half": int(near), "sided": sided is not None and model == "whole"}
     yield Progress("done", 1.0, f"energy {bb.energy:.6g} after {bb.iterations} iterations")
     per_length = " per contour length matched to a moving curve" if params.energy.endswith("ratio") else ""

@@ -176,8 +176,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from corrlib.descriptors.side_view import (edge_orientation, intrinsic_asymmetry, mirror_asymmetry, mirror_shift,
-                                           seen_from_the_side,
-                                           paired_limbs, symmetry_curve_cost)
+                                           paired_limbs, seen_from_the_side, symmetry_curve_cost)
 from corrlib.descriptors.spectral import hks, wks
 from corrlib.descriptors.symmetry import K_FINAL, even_spectrum, mesh_reflection, odd_eigenfunction
 from corrlib.errors import ContourError, InputError, ParameterError

@@ -244,11 +244,11 @@ def test_animals_are_seen_from_the_side_and_people_from_the_front(cat_pair, wolf
     from _humanoid import write_dataset
 
     from corrlib.io import load_mesh
-    from corrlib.methods.contour3d import Contour3DParams, side_view_terms
+    from corrlib.methods.contour3d import Contour3DParams, mesh_seen_from_side
 
     params = Contour3DParams()
     for mesh in (*cat_pair[:2], *wolf_pair):
-        assert side_view_terms(mesh, params).seen_from_side, mesh.name
+        assert mesh_seen_from_side(mesh, params) is True, mesh.name
     people = write_dataset(tmp_path / "people")
     for name in ("human0", "human1", "human2"):
-        assert not side_view_terms(load_mesh(people / f"{name}.off"), params).seen_from_side, name
+        assert mesh_seen_from_side(load_mesh(people / f"{name}.off"), params) is False, name

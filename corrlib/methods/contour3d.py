@@ -596,15 +596,10 @@ class SideViewTerms:
     orientation : (n, n) sparse
         ``(n̂ × t) · ∇g / mean |∇g|`` of every directed edge (``g`` the lowest
         odd eigenfunction): positive where the edge keeps ``g > 0`` on its left.
-    seen_from_side : bool
-        Whether the mesh is thinnest across its plane of symmetry, so that its
-        natural outline is a side view
-        (:func:`~corrlib.descriptors.side_view.seen_from_the_side`).
     """
 
     curve_cost: np.ndarray
     orientation: sp.csr_matrix
-    seen_from_side: bool = True
 
     def wrong_way(self, sign: float) -> sp.csr_matrix:
         """(n, n) sparse ≥ 0: the part of ``sign · orientation`` below zero, per directed edge."""
@@ -636,10 +631,20 @@ def side_view_terms(mesh: TriMesh, params: Contour3DParams) -> SideViewTerms | N
         limbs = paired_limbs(protrusion_parts(spectrum.evals, spectrum.evecs, mesh.adjacency, mesh.area).labels,
                              mirror)
         return SideViewTerms(symmetry_curve_cost(mesh.vertices, mirror, limbs),
-                             edge_orientation(mesh.vertices, mesh.faces, mesh.adjacency, odd),
-                             seen_from_the_side(mesh.vertices, mirror, spectrum.mass.diagonal()))
+                             edge_orientation(mesh.vertices, mesh.faces, mesh.adjacency, odd))
     except (ParameterError, InputError):  # no reflection to speak of
         return None
+
+
+def mesh_seen_from_side(mesh: TriMesh, params: Contour3DParams) -> bool | None:
+    """Whether the mesh is thinnest across its plane of symmetry, so that its natural outline is a side view
+    (:func:`~corrlib.descriptors.side_view.seen_from_the_side`), or None where it has no reflection (too coarse
+    for the eigenpairs)."""
+    reflection = _mesh_reflection(mesh, params)
+    if reflection is None:
+        return None
+    spectrum, mirror = reflection
+    return seen_from_the_side(mesh.vertices, mirror, spectrum.mass.diagonal())
 
 
 @dataclass
@@ -768,11 +773,12 @@ def match_prepared(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams,
     yield Progress("mesh features", 0.05)
     with watch("features"):
         target = prepare_mesh(mesh, params)
-        side = side_view_terms(mesh, params) if query.is_side_view(params) else None
-        # None where the outline alone decided (or no reflection was found)
-        seen_from_side = None if side is None else side.seen_from_side
-        if side is not None and params.view == "auto" and not side.seen_from_side:
-            side = None  # the outline of a shape seen from the front (a person in profile is rarely drawn)
+        # view=auto: a side view by the outline is one only on a mesh seen from the side (a person in profile is
+        # rarely drawn); None where the mesh was not asked
+        seen_from_side = (mesh_seen_from_side(mesh, params)
+                          if params.view == "auto" and query.is_side_view(params) else None)
+        side = (side_view_terms(mesh, params)
+                if query.is_side_view(params) and seen_from_side is not False else None)
         distances = {model: feature_distances(query.model_features(model), feats)
                      for model, feats in target.features.items()}
         labels = label_penalty(query.labels, mesh.labels, params.tau)

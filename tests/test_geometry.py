@@ -184,6 +184,87 @@ def test_spectrum_disk_cache(wolf_pair, tmp_path, monkeypatch):
     assert np.allclose(again.evals, first.evals[:20])
 
 
+def _counting_popen(monkeypatch):
+    """Count the second processes :func:`mesh_spectra` starts."""
+    import subprocess
+
+    started = []
+    real = subprocess.Popen
+
+    def popen(*args, **kwargs):
+        started.append(args[0])
+        return real(*args, **kwargs)
+
+    monkeypatch.setattr(subprocess, "Popen", popen)
+    return started
+
+
+def _same_spectrum(a, b):
+    assert np.allclose(a.evals, b.evals, rtol=1e-9, atol=1e-12)
+    # eigenvectors up to sign (no multiplets among the lowest 30 of the wolves)
+    signs = np.sign(np.sum(a.evecs * b.evecs, axis=0))
+    assert np.allclose(a.evecs * signs, b.evecs, atol=1e-7)
+
+
+def test_pair_spectra_in_a_second_process(wolf_pair, tmp_path, monkeypatch):
+    import corrlib.geometry.spectrum as spectrum
+
+    monkeypatch.setenv("CORRLIB_CACHE_DIR", str(tmp_path))
+    monkeypatch.setattr(spectrum, "PARALLEL_MIN_WORK", 0)
+    monkeypatch.setattr(spectrum, "_second_process_allowed", lambda: True)
+    started = _counting_popen(monkeypatch)
+    both = spectrum.mesh_spectra(wolf_pair, (30, 25))
+    assert len(started) == 1 and "corrlib.geometry.spectrum_worker" in started[0]
+    assert [s.k for s in both] == [30, 25]
+    for mesh, got, k in zip(wolf_pair, both, (30, 25)):
+        _same_spectrum(got, mesh_spectrum(mesh, k, use_cache=False))
+    # both went to the cache: asked again, nothing is decomposed and no process starts
+    assert len(list(tmp_path.glob("spectra/*.npz"))) == 2
+    again = spectrum.mesh_spectra(wolf_pair, 20)
+    assert len(started) == 1
+    assert np.array_equal(again[0].evals, both[0].evals[:20])
+
+
+def test_pair_spectra_without_a_second_process(wolf_pair, monkeypatch):
+    """A failing second process, or one not allowed (a pool's worker), leaves the work to this process."""
+    import multiprocessing
+    import sys
+
+    import corrlib.geometry.spectrum as spectrum
+
+    monkeypatch.setenv("CORRLIB_CACHE_DIR", "off")
+    monkeypatch.setattr(spectrum, "PARALLEL_MIN_WORK", 0)
+    started = _counting_popen(monkeypatch)
+    reference = [mesh_spectrum(mesh, 20, use_cache=False) for mesh in wolf_pair]
+    with monkeypatch.context() as patch:
+        patch.setattr(spectrum, "_second_process_allowed", lambda: True)
+        patch.setattr(sys, "executable", "/bin/false")
+        failed = spectrum.mesh_spectra(wolf_pair, 20)
+    assert len(started) == 1
+    with monkeypatch.context() as patch:
+        patch.setattr(multiprocessing, "parent_process", lambda: object())
+        assert not spectrum._second_process_allowed()
+        in_worker = spectrum.mesh_spectra(wolf_pair, 20)
+    assert len(started) == 1
+    for got in (failed, in_worker):
+        for a, b in zip(got, reference):
+            _same_spectrum(a, b)
+
+
+def test_pair_spectra_name_a_disconnected_mesh(wolf_pair, monkeypatch):
+    import corrlib.geometry.spectrum as spectrum
+
+    monkeypatch.setenv("CORRLIB_CACHE_DIR", "off")
+    monkeypatch.setattr(spectrum, "PARALLEL_MIN_WORK", 0)
+    monkeypatch.setattr(spectrum, "_second_process_allowed", lambda: True)
+    a = trimesh.creation.icosphere(subdivisions=3)
+    v = np.vstack([a.vertices, a.vertices + [5.0, 0, 0]])
+    f = np.vstack([a.faces, a.faces + len(a.vertices)])
+    broken = TriMesh(v, f, name="two-spheres", validate=False)  # the solver must still name it
+    with pytest.raises(InputError, match="two-spheres.*disconnected"):
+        spectrum.mesh_spectra([broken, wolf_pair[0]], 20)
+
+
 def test_consistent_mass_generalized_problem():
     s = trimesh.creation.icosphere(subdivisions=3)  # 642 vertices: above the dense limit
     mesh = TriMesh(s.vertices, s.faces)

@@ -311,6 +311,18 @@ def available_eigenpairs(mesh, k: int, what: str = "spectral descriptors") -> in
     return min(int(k), n - 1)
 
 
+def _spectrum_key(mesh, mass: str) -> str:
+    return cache.make_key("spectrum-v1", mesh.content_hash, mass)
+
+
+def _cached_spectrum(mesh, k: int, key: str, stiffness, mass_mat) -> Spectrum | None:
+    """The cached decomposition of ``mesh`` truncated to ``k`` eigenpairs, or ``None``."""
+    entry = cache.load("spectra", key)
+    if entry is not None and entry["evals"].shape[0] >= k and entry["evecs"].shape[0] == mesh.n_vertices:
+        return Spectrum(entry["evals"][:k].copy(), entry["evecs"][:, :k].copy(), stiffness, mass_mat)
+    return None
+
+
 def mesh_spectrum(mesh, k: int, *, mass: str = "lumped", method: str = "auto", use_cache: bool = True) -> Spectrum:
     """Laplacian eigenpairs of a :class:`~corrlib.shapes.TriMesh`, cached on disk by mesh content.
 
@@ -332,15 +344,109 @@ def mesh_spectrum(mesh, k: int, *, mass: str = "lumped", method: str = "auto", u
     from corrlib.geometry.laplacian import mesh_laplacian
 
     stiffness, mass_mat = mesh_laplacian(mesh, mass=mass)
-    key = cache.make_key("spectrum-v1", mesh.content_hash, mass)
+    key = _spectrum_key(mesh, mass)
     if use_cache:
-        entry = cache.load("spectra", key)
-        if entry is not None and entry["evals"].shape[0] >= k and entry["evecs"].shape[0] == mesh.n_vertices:
-            return Spectrum(entry["evals"][:k].copy(), entry["evecs"][:, :k].copy(), stiffness, mass_mat)
+        cached = _cached_spectrum(mesh, k, key, stiffness, mass_mat)
+        if cached is not None:
+            return cached
     evals, evecs = eigenpairs(stiffness, mass_mat, k, method=method, name=mesh.name)
     if use_cache:
         cache.store("spectra", key, {"evals": evals, "evecs": evecs})
     return Spectrum(evals, evecs, stiffness, mass_mat)
+
+
+#: vertices × eigenpairs from which :func:`mesh_spectra` hands a decomposition to a second process: below
+#: it the process's start-up (an interpreter importing SciPy, about 0.7 s) is not paid back
+PARALLEL_MIN_WORK = 1_000_000
+
+
+def _second_process_allowed() -> bool:
+    """Whether a second process may take a core: two or more cores, and this process is not already one of
+    a pool's workers (which share the cores among themselves)."""
+    import multiprocessing
+    import os
+
+    return (os.cpu_count() or 1) >= 2 and multiprocessing.parent_process() is None
+
+
+def mesh_spectra(meshes, k: int, *, mass: str = "lumped", use_cache: bool = True) -> list[Spectrum]:
+    """:func:`mesh_spectrum` of several meshes (a pair, as every pairwise method needs), using two cores.
+
+    Where two or more are not cached and large enough (:data:`PARALLEL_MIN_WORK`), the first of them is
+    decomposed in a second Python process (:mod:`corrlib.geometry.spectrum_worker`) while this one
+    decomposes the others, each with single-threaded BLAS (two multi-threaded BLAS on two cores slow
+    each other down). The results are the same as one at a time: the solver is deterministic (fixed
+    start vectors). If the second process fails for any reason, this one decomposes that mesh itself,
+    so errors are those of :func:`mesh_spectrum`.
+
+    Parameters
+    ----------
+    meshes : sequence of TriMesh
+    k : int or sequence of int
+        Eigenpairs of every mesh, or one number per mesh.
+    mass, use_cache : see :func:`mesh_spectrum`
+
+    Returns
+    -------
+    list of Spectrum
+        In the order of ``meshes``.
+    """
+    import os
+    import subprocess
+    import sys
+    import tempfile
+
+    from corrlib.geometry.laplacian import mesh_laplacian
+
+    meshes = list(meshes)
+    ks = [int(k)] * len(meshes) if np.isscalar(k) else [int(v) for v in k]
+    if len(ks) != len(meshes):
+        raise ParameterError(f"mesh_spectra: {len(ks)} eigenpair counts for {len(meshes)} meshes")
+    spectra: list[Spectrum | None] = [None] * len(meshes)
+    matrices = [mesh_laplacian(mesh, mass=mass) for mesh in meshes]
+    keys = [_spectrum_key(mesh, mass) for mesh in meshes]
+    if use_cache:
+        spectra = [_cached_spectrum(mesh, kk, key, *mats) for mesh, kk, key, mats in zip(meshes, ks, keys, matrices)]
+    todo = [i for i, s in enumerate(spectra) if s is None]
+    big = [i for i in todo if meshes[i].n_vertices * ks[i] >= PARALLEL_MIN_WORK and ks[i] < meshes[i].n_vertices]
+    if len(todo) >= 2 and big and _second_process_allowed():
+        from threadpoolctl import threadpool_limits
+
+        first = big[0]
+        stiffness, mass_mat = matrices[first]
+        with tempfile.TemporaryDirectory(prefix="corrlib-spectrum-") as folder:
+            given, result = os.path.join(folder, "in.npz"), os.path.join(folder, "out.npz")
+            np.savez(given, k=ks[first], name=meshes[first].name,
+                     **{f"{prefix}_{part}": getattr(sp.csr_matrix(m), part)
+                        for prefix, m in (("stiffness", stiffness), ("mass", mass_mat))
+                        for part in ("data", "indices", "indptr")},
+                     stiffness_shape=np.array(stiffness.shape), mass_shape=np.array(mass_mat.shape))
+            package_root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+            env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
+                   "PYTHONPATH": os.pathsep.join(filter(None, [package_root, os.environ.get("PYTHONPATH")]))}
+            child = subprocess.Popen([sys.executable, "-m", "corrlib.geometry.spectrum_worker", given, result],
+                                     stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
+                                     stderr=subprocess.DEVNULL, env=env)
+            try:
+                with threadpool_limits(1):
+                    for i in todo:
+                        if i != first:
+                            spectra[i] = mesh_spectrum(meshes[i], ks[i], mass=mass, use_cache=use_cache)
+                if child.wait() == 0:
+                    with np.load(result, allow_pickle=False) as data:
+                        evals, evecs = data["evals"], data["evecs"]
+                    if evecs.shape == (meshes[first].n_vertices, ks[first]):
+                        if use_cache:
+                            cache.store("spectra", keys[first], {"evals": evals, "evecs": evecs})
+                        spectra[first] = Spectrum(evals, evecs, stiffness, mass_mat)
+            finally:
+                if child.poll() is None:
+                    child.kill()
+                    child.wait()
+    for i, spectrum in enumerate(spectra):
+        if spectrum is None:
+            spectra[i] = mesh_spectrum(meshes[i], ks[i], mass=mass, use_cache=use_cache)
+    return spectra
 
 
 def doubled_spectrum(stiffness: sp.spmatrix, mass: sp.spmatrix, boundary: np.ndarray, k: int, *,

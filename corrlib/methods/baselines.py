@@ -21,7 +21,7 @@ import numpy as np
 from corrlib.descriptors import DESCRIPTOR_KINDS, mesh_descriptors
 from corrlib.descriptors.orientation import orientation_operators
 from corrlib.geometry.fmaps import functional_map, multiplication_operators, resolvent_mask, zoomout
-from corrlib.geometry.spectrum import available_eigenpairs, mesh_spectrum
+from corrlib.geometry.spectrum import available_eigenpairs, mesh_spectra
 from corrlib.methods.base import MatchResult, param
 from corrlib.methods.registry import MethodSpec, register
 from corrlib.neighbours import nearest_rows
@@ -51,8 +51,8 @@ class DescriptorNNParams:
 def _spectra_and_descriptors(source, target, n_eigs: int, descriptor: str, n_scales: int, watch):
     """Laplacian spectra (``n_eigs`` pairs, capped by the vertex counts) and descriptors of both shapes."""
     with watch("eigen"):
-        spec_x = mesh_spectrum(source, available_eigenpairs(source, n_eigs))
-        spec_y = mesh_spectrum(target, available_eigenpairs(target, n_eigs))
+        spec_x, spec_y = mesh_spectra((source, target),
+                                      (available_eigenpairs(source, n_eigs), available_eigenpairs(target, n_eigs)))
     with watch("descriptors"):
         desc_x = mesh_descriptors(source, descriptor, spectrum=spec_x, n_scales=n_scales)
         desc_y = mesh_descriptors(target, descriptor, spectrum=spec_y, n_scales=n_scales)

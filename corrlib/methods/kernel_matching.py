@@ -108,7 +108,7 @@ from corrlib.geometry.sampling import (
     voronoi_bands,
     voronoi_cells,
 )
-from corrlib.geometry.spectrum import Spectrum, mesh_spectrum
+from corrlib.geometry.spectrum import Spectrum, mesh_spectra
 from corrlib.methods.base import InitialMatch, MatchResult, param
 from corrlib.methods.registry import MethodSpec, register
 from corrlib.methods.reorientation import (ShapeParts, mirrored_map, region_agreements, turn_reversed_map,
@@ -714,8 +714,7 @@ def prepare(source, target, params: KernelMatchingParams, token):
     taus = diffusion_times(params)
     yield Progress("eigenpairs", 0.0, f"{k} eigenpairs per shape")
     with watch("eigen"):
-        spec_x = mesh_spectrum(source, k)
-        spec_y = mesh_spectrum(target, k)
+        spec_x, spec_y = mesh_spectra((source, target), k)
     token.raise_if_cancelled()
     with watch("sampling"):
         n_seed = min(params.n_seeds, n_x, n_y)

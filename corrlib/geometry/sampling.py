@@ -72,7 +72,7 @@ def farthest_point_sampling(points, n_samples: int, *, metric: str = "euclidean"
     raise ParameterError(f"unknown metric {metric!r} (use 'euclidean' or 'geodesic')")
 
 
-@numba.njit(cache=True)
+@numba.njit(cache=True, nogil=True)
 def _fps_kernel(coords, n_samples, start):  # pragma: no cover - compiled
     """Greedy farthest points of ``coords`` (dim, n) float64 (coordinate-major: contiguous inner loops)."""
     dim, n = coords.shape

@@ -718,10 +718,12 @@ def prepare(source, target, params: KernelMatchingParams, token):
     token.raise_if_cancelled()
     with watch("sampling"):
         n_seed = min(params.n_seeds, n_x, n_y)
-        seeds_x = surface_farthest_points(source, n_seed)
-        seeds_y = surface_farthest_points(target, n_seed)
-        order_x = _sample_order(source.vertices, n_seed, params.growth)
-        order_y = _sample_order(target.vertices, n_seed, params.growth)
+
+        def samples(mesh):  # the greedy farthest points release the GIL: one shape per thread
+            return surface_farthest_points(mesh, n_seed), _sample_order(mesh.vertices, n_seed, params.growth)
+
+        with ThreadPoolExecutor(2) as pool:
+            (seeds_x, order_x), (seeds_y, order_y) = pool.map(samples, (source, target))
     return KernelState(source, target, params, token, watch, taus, spec_x, spec_y, seeds_x, seeds_y,
                        order_x, order_y, n_seed)
 

@@ -226,9 +226,11 @@ def test_pair_spectra_in_a_second_process(wolf_pair, tmp_path, monkeypatch):
 
 
 def test_pair_spectra_without_a_second_process(wolf_pair, monkeypatch):
-    """A failing second process, or one not allowed (a pool's worker), leaves the work to this process."""
+    """A failing or unstartable second process, or one not allowed (a pool's worker), leaves the work to this
+    process."""
     import multiprocessing
     import sys
+    import tempfile
 
     import corrlib.geometry.spectrum as spectrum
 
@@ -241,12 +243,19 @@ def test_pair_spectra_without_a_second_process(wolf_pair, monkeypatch):
         patch.setattr(sys, "executable", "/bin/false")
         failed = spectrum.mesh_spectra(wolf_pair, 20)
     assert len(started) == 1
+    with monkeypatch.context() as patch:  # no interpreter to start, no writable temporary folder
+        patch.setattr(spectrum, "_second_process_allowed", lambda: True)
+        patch.setattr(sys, "executable", "/nonexistent/python3")
+        unstartable = spectrum.mesh_spectra(wolf_pair, 20)
+        patch.setattr(tempfile, "tempdir", "/nonexistent/tmp")
+        no_tmp = spectrum.mesh_spectra(wolf_pair, 20)
+    assert len(started) == 2  # the unstartable interpreter was tried; without a temporary folder nothing is
     with monkeypatch.context() as patch:
         patch.setattr(multiprocessing, "parent_process", lambda: object())
         assert not spectrum._second_process_allowed()
         in_worker = spectrum.mesh_spectra(wolf_pair, 20)
-    assert len(started) == 1
-    for got in (failed, in_worker):
+    assert len(started) == 2
+    for got in (failed, unstartable, no_tmp, in_worker):
         for a, b in zip(got, reference):
             _same_spectrum(a, b)
 

@@ -349,6 +349,11 @@ def mesh_spectrum(mesh, k: int, *, mass: str = "lumped", method: str = "auto", u
         cached = _cached_spectrum(mesh, k, key, stiffness, mass_mat)
         if cached is not None:
             return cached
+    return _decomposed(mesh, k, key, stiffness, mass_mat, use_cache, method)
+
+
+def _decomposed(mesh, k: int, key: str, stiffness, mass_mat, use_cache: bool, method: str = "auto") -> Spectrum:
+    """Decompose ``mesh`` (its Laplacian given) and store the result in the cache."""
     evals, evecs = eigenpairs(stiffness, mass_mat, k, method=method, name=mesh.name)
     if use_cache:
         cache.store("spectra", key, {"evals": evals, "evecs": evecs})
@@ -367,6 +372,44 @@ def _second_process_allowed() -> bool:
     import os
 
     return (os.cpu_count() or 1) >= 2 and multiprocessing.parent_process() is None
+
+
+def _start_decomposition(mesh, k: int, stiffness, mass_mat, folder: str):
+    """Start :mod:`corrlib.geometry.spectrum_worker` on ``mesh`` in ``folder`` (single-threaded BLAS); None where
+    the process cannot be started (no writable temporary folder, no interpreter): the caller does the work."""
+    import os
+    import subprocess
+    import sys
+
+    given, result = os.path.join(folder, "in.npz"), os.path.join(folder, "out.npz")
+    package_root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
+    env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
+           "PYTHONPATH": os.pathsep.join(filter(None, [package_root, os.environ.get("PYTHONPATH")]))}
+    try:
+        np.savez(given, k=k, name=mesh.name,
+                 **{f"{prefix}_{part}": getattr(sp.csr_matrix(m), part)
+                    for prefix, m in (("stiffness", stiffness), ("mass", mass_mat))
+                    for part in ("data", "indices", "indptr")},
+                 stiffness_shape=np.array(stiffness.shape), mass_shape=np.array(mass_mat.shape))
+        return subprocess.Popen([sys.executable, "-m", "corrlib.geometry.spectrum_worker", given, result],
+                                stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL,
+                                env=env)
+    except OSError:
+        return None
+
+
+def _read_decomposition(folder: str, n: int, k: int):
+    """``(evals, evecs)`` the second process wrote to ``folder``, or ``(None, None)`` if missing or malformed."""
+    import os
+
+    try:
+        with np.load(os.path.join(folder, "out.npz"), allow_pickle=False) as data:
+            evals, evecs = data["evals"], data["evecs"]
+    except (OSError, ValueError, KeyError, EOFError):
+        return None, None
+    if evals.shape != (k,) or evecs.shape != (n, k):
+        return None, None
+    return evals, evecs
 
 
 def mesh_spectra(meshes, k: int, *, mass: str = "lumped", use_cache: bool = True) -> list[Spectrum]:
@@ -391,10 +434,9 @@ def mesh_spectra(meshes, k: int, *, mass: str = "lumped", use_cache: bool = True
     list of Spectrum
         In the order of ``meshes``.
     """
-    import os
-    import subprocess
-    import sys
     import tempfile
+
+    from threadpoolctl import threadpool_limits
 
     from corrlib.geometry.laplacian import mesh_laplacian
 
@@ -410,42 +452,32 @@ def mesh_spectra(meshes, k: int, *, mass: str = "lumped", use_cache: bool = True
     todo = [i for i, s in enumerate(spectra) if s is None]
     big = [i for i in todo if meshes[i].n_vertices * ks[i] >= PARALLEL_MIN_WORK and ks[i] < meshes[i].n_vertices]
     if len(todo) >= 2 and big and _second_process_allowed():
-        from threadpoolctl import threadpool_limits
-
         first = big[0]
-        stiffness, mass_mat = matrices[first]
-        with tempfile.TemporaryDirectory(prefix="corrlib-spectrum-") as folder:
-            given, result = os.path.join(folder, "in.npz"), os.path.join(folder, "out.npz")
-            np.savez(given, k=ks[first], name=meshes[first].name,
-                     **{f"{prefix}_{part}": getattr(sp.csr_matrix(m), part)
-                        for prefix, m in (("stiffness", stiffness), ("mass", mass_mat))
-                        for part in ("data", "indices", "indptr")},
-                     stiffness_shape=np.array(stiffness.shape), mass_shape=np.array(mass_mat.shape))
-            package_root = os.path.dirname(os.path.dirname(os.path.dirname(os.path.abspath(__file__))))
-            env = {**os.environ, "OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1", "MKL_NUM_THREADS": "1",
-                   "PYTHONPATH": os.pathsep.join(filter(None, [package_root, os.environ.get("PYTHONPATH")]))}
-            child = subprocess.Popen([sys.executable, "-m", "corrlib.geometry.spectrum_worker", given, result],
-                                     stdin=subprocess.DEVNULL, stdout=subprocess.DEVNULL,
-                                     stderr=subprocess.DEVNULL, env=env)
-            try:
-                with threadpool_limits(1):
-                    for i in todo:
-                        if i != first:
-                            spectra[i] = mesh_spectrum(meshes[i], ks[i], mass=mass, use_cache=use_cache)
-                if child.wait() == 0:
-                    with np.load(result, allow_pickle=False) as data:
-                        evals, evecs = data["evals"], data["evecs"]
-                    if evecs.shape == (meshes[first].n_vertices, ks[first]):
-                        if use_cache:
-                            cache.store("spectra", keys[first], {"evals": evals, "evecs": evecs})
-                        spectra[first] = Spectrum(evals, evecs, stiffness, mass_mat)
-            finally:
-                if child.poll() is None:
-                    child.kill()
-                    child.wait()
+        try:
+            workspace = tempfile.TemporaryDirectory(prefix="corrlib-spectrum-")
+        except OSError:  # no writable temporary folder: everything is decomposed here
+            workspace = None
+        if workspace is not None:
+            with workspace as folder:
+                child = _start_decomposition(meshes[first], ks[first], *matrices[first], folder)
+                try:
+                    with threadpool_limits(1):
+                        for i in todo:
+                            if i != first:
+                                spectra[i] = _decomposed(meshes[i], ks[i], keys[i], *matrices[i], use_cache)
+                    if child is not None and child.wait() == 0:
+                        evals, evecs = _read_decomposition(folder, meshes[first].n_vertices, ks[first])
+                        if evecs is not None:
+                            if use_cache:
+                                cache.store("spectra", keys[first], {"evals": evals, "evecs": evecs})
+                            spectra[first] = Spectrum(evals, evecs, *matrices[first])
+                finally:
+                    if child is not None and child.poll() is None:
+                        child.kill()
+                        child.wait()
     for i, spectrum in enumerate(spectra):
-        if spectrum is None:
-            spectra[i] = mesh_spectrum(meshes[i], ks[i], mass=mass, use_cache=use_cache)
+        if spectrum is None:  # not handed over, or the second process failed: decomposed here
+            spectra[i] = _decomposed(meshes[i], ks[i], keys[i], *matrices[i], use_cache)
     return spectra
 
 

@@ -9,24 +9,21 @@ from scipy.sparse.csgraph import bellman_ford, dijkstra
 
 from _data import SUMNER, TOSCA
 from corrlib.errors import Cancelled, ContourError, InputError, ParameterError
-from corrlib.geometry.cyclic_paths import ProductGraph, Relaxation, branch_and_bound, minimum_ratio_union
+from corrlib.geometry.cyclic_paths import (GraphTopology, ProductGraph, Relaxation, branch_and_bound,
+                                           minimum_ratio_union)
 from corrlib.geometry.elastic_paths import ElasticProductGraph
 from corrlib.geometry.geodesics import GeodesicSolver
 from corrlib.geometry.sections import plane_section, project_for_silhouette, render_silhouette, rim_vertices
 from corrlib.io import load_mesh
 from corrlib.methods import solve
-from corrlib.methods.contour3d import node_costs
+from corrlib.methods.contour3d import feature_distances, mean_feature_distance, node_costs
 from corrlib.progress import CancelToken, run
 from corrlib.retrieval import average_precision, class_of, mean_average_precision, retrieve
 from corrlib.shapes import Contour2D, TriMesh
 
 
-def explicit_product_optimum(graph: ProductGraph, gain: float = 0.0) -> float:
-    """All-sources shortest paths on the explicitly built product graph: min over s of d((0,s), (m,s)).
-
-    ``gain`` > 0: the ratio energy's parametric problem ``E - gain * D``, every edge advancing along curve and
-    graph credited ``min(a, b)``, independently of the layered kernel (Bellman-Ford, as those edges may be
-    negative; the edges within a layer are not, so there is no negative cycle)."""
+def explicit_product_matrix(graph: ProductGraph, gain: float = 0.0) -> sp.csr_matrix:
+    """The product graph built explicitly: ((m + 1) n, (m + 1) n) edge costs, node ``(i, j)`` at ``i n + j``."""
     m, n = graph.m, graph.n
     node = lambda i, j: i * n + j  # noqa: E731
     adj = graph.adjacency.tocoo()
@@ -47,7 +44,18 @@ def explicit_product_optimum(graph: ProductGraph, gain: float = 0.0) -> float:
             for j in range(n):
                 rows.append(node(i, j)), cols.append(node(i + 1, j))
                 w.append(0.5 * (graph.cost[i, j] + graph.cost[i + 1, j]) * np.sqrt(graph.step2[i]))
-    product = sp.coo_matrix((w, (rows, cols)), shape=((m + 1) * n,) * 2).tocsr()
+    return sp.coo_matrix((w, (rows, cols)), shape=((m + 1) * n,) * 2).tocsr()
+
+
+def explicit_product_optimum(graph: ProductGraph, gain: float = 0.0) -> float:
+    """All-sources shortest paths on the explicitly built product graph: min over s of d((0,s), (m,s)).
+
+    ``gain`` > 0: the ratio energy's parametric problem ``E - gain * D``, every edge advancing along curve and
+    graph credited ``min(a, b)``, independently of the layered kernel (Bellman-Ford, as those edges may be
+    negative; the edges within a layer are not, so there is no negative cycle)."""
+    m, n = graph.m, graph.n
+    node = lambda i, j: i * n + j  # noqa: E731
+    product = explicit_product_matrix(graph, gain)
     shortest = dijkstra if gain == 0 else bellman_ford
     dist = shortest(product, directed=True, indices=np.arange(graph.n_starts))
     return float(min(dist[s, node(m, s + graph.closing_shift)] for s in range(graph.n_starts)))
@@ -96,6 +104,70 @@ def test_closing_detour_is_a_closed_path_whose_energy_is_recomputed_edge_by_edge
         assert root.layers[0] == 0 and root.layers[-1] == graph.m and np.all(np.diff(root.layers) >= 0)
         assert root.energy == pytest.approx(cost, rel=1e-12)
         assert graph.path_energy(root) == pytest.approx(root.energy, rel=1e-12)
+
+
+def test_a_shared_topology_gives_the_same_graph_and_is_checked():
+    """Readings built on one GraphTopology search exactly as graphs that build their own; a topology of another
+    graph, or of the other kind (directed or not), is a named error."""
+    node_cost, curve, points, adjacency = tiny_instance(3, 7, 1)
+    penalty = directed_penalties(3, adjacency)
+    topology = GraphTopology.of(points, adjacency)
+    everything = np.ones(points.shape[0], dtype=bool)
+    own = ProductGraph(node_cost, curve, points, adjacency, edge_penalty=penalty)
+    shared = ProductGraph(node_cost, curve, points, adjacency, edge_penalty=penalty, topology=topology)
+    assert own.shortest(everything, everything) == shared.shortest(everything, everything)
+    own.compute_heuristic(), shared.compute_heuristic()
+    np.testing.assert_array_equal(own.heuristic, shared.heuristic)
+    with pytest.raises(InputError, match="topology"):
+        ProductGraph(node_cost, curve, points, adjacency, directed=True, topology=topology)
+    with pytest.raises(InputError, match="topology"):
+        ProductGraph(node_cost[:, :10], curve, points[:10], adjacency.tocsr()[:10, :10], topology=topology)
+
+
+def test_mean_feature_distance_equals_the_mean_of_the_distance_matrix():
+    """The sorted-sums mean against the full L1 matrix, with repeated values (ties in the sort) and on
+    features of unequal counts."""
+    rng = np.random.default_rng(5)
+    a = rng.random((37, 6))
+    b = rng.random((150, 6))
+    b[:20] = b[20:40]  # repeated rows
+    a[:5, :] = b[:5, :]  # values equal to the mesh's
+    assert mean_feature_distance(a, b) == pytest.approx(feature_distances(a, b).mean(), rel=1e-12)
+    assert mean_feature_distance(b, a) == pytest.approx(feature_distances(b, a).mean(), rel=1e-12)
+    with pytest.raises(InputError, match="feature dimensions"):
+        mean_feature_distance(a, b[:, :4])
+
+
+@pytest.mark.parametrize("metric", ["euclidean", "max"])
+@pytest.mark.parametrize("seed", range(4))
+def test_layered_dijkstra_distances_equal_dijkstra_on_the_explicit_graph(seed, metric):
+    """Every node's distance from a set of starts, as SciPy's Dijkstra finds it on the explicit product graph
+    (directed penalties included); with an exact heuristic and a bound, every node on a path below the bound
+    keeps its exact distance and the rest are never below theirs (the pruning loses no path that matters)."""
+    node_cost, curve, points, adjacency = tiny_instance(seed, 9, 1)
+    rng = np.random.default_rng(300 + seed)
+    node_cost[rng.random(node_cost.shape) < 0.05] = np.inf  # forbidden nodes
+    graph = ProductGraph(node_cost, curve, points, adjacency, metric=metric,
+                         edge_penalty=directed_penalties(seed, adjacency))
+    m, n = graph.m, graph.n
+    sources = rng.random(n) < 0.3
+    sources[rng.integers(n)] = True
+    everything = np.ones(n, dtype=bool)
+    explicit = dijkstra(explicit_product_matrix(graph), directed=True, indices=np.flatnonzero(sources)).min(axis=0)
+    explicit = explicit.reshape(m + 1, n)
+    cost, start, end = graph.shortest(sources, everything)
+    np.testing.assert_allclose(graph.dist, explicit, rtol=1e-12, atol=1e-12)
+    assert cost == pytest.approx(explicit[m].min(), rel=1e-12) and sources[start]
+    # pruned: the exact cost-to-go as heuristic, a bound a little above the optimum
+    graph.compute_heuristic()
+    to_go = graph.heuristic.copy()
+    upper = 1.05 * cost
+    pruned_cost, _, _ = graph.shortest(sources, everything, upper)
+    assert pruned_cost == pytest.approx(cost, rel=1e-12)
+    needed = explicit + to_go < upper
+    assert needed.sum() > m  # the bound leaves more than one path's worth of nodes
+    np.testing.assert_allclose(graph.dist[needed], explicit[needed], rtol=1e-12, atol=1e-12)
+    assert np.all(graph.dist[~needed] >= explicit[~needed] - 1e-12)
 
 
 @pytest.mark.parametrize("metric", ["euclidean", "max"])

@@ -49,6 +49,56 @@ from corrlib.errors import Cancelled, InputError, ParameterError
 from corrlib.progress import CancelToken, Progress
 
 
+@numba.njit(inline="always")
+def _sift_up(keys, heap, position, slot):
+    """Move ``heap[slot]`` up to its place in the binary min-heap ``heap`` (vertex ids) ordered by ``keys``."""
+    vertex = heap[slot]
+    key = keys[vertex]
+    while slot > 0:
+        parent = (slot - 1) >> 1
+        other = heap[parent]
+        if keys[other] <= key:
+            break
+        heap[slot] = other
+        position[other] = slot
+        slot = parent
+    heap[slot] = vertex
+    position[vertex] = slot
+
+
+@numba.njit(inline="always")
+def _sift_down(keys, heap, position, slot, size):
+    """Move ``heap[slot]`` down to its place among the first ``size`` entries of the min-heap."""
+    vertex = heap[slot]
+    key = keys[vertex]
+    while True:
+        child = 2 * slot + 1
+        if child >= size:
+            break
+        if child + 1 < size and keys[heap[child + 1]] < keys[heap[child]]:
+            child += 1
+        other = heap[child]
+        if keys[other] >= key:
+            break
+        heap[slot] = other
+        position[other] = slot
+        slot = child
+    heap[slot] = vertex
+    position[vertex] = slot
+
+
+@numba.njit(inline="always")
+def _improves_a_neighbour(j, d, c, h, upper, indptr, indices, edge_len, extra, stretch):
+    """Whether node ``j`` of a layer lowers a neighbour's distance ``d`` along a within-layer edge (below ``upper``
+    with the heuristic ``h``)."""
+    for e in range(indptr[j], indptr[j + 1]):
+        k = indices[e]
+        through_j = d[j] + (0.5 * (c[j] + c[k]) + stretch) * edge_len[e] + extra[e]
+        if through_j < d[k] and through_j + h[k] < upper:
+            return True
+    return False
+
+
 @numba.njit(cache=True, nogil=True)
 def _layered_dijkstra(cost, step2, graph_points, indptr, indices, edge_len, source_mask, target_mask,
                       upper, heuristic, cancel, dist, pred, origin, stretch, gain, extra, max_metric):
@@ -72,9 +122,17 @@ def _layered_dijkstra(cost, step2, graph_points, indptr, indices, edge_len, sour
     Nodes whose distance plus their ``heuristic`` (L, n; a lower bound of the
     remaining cost to the last layer) reaches ``upper`` are pruned (A*-style). Returns (-2, inf) when cancelled, (-1, inf) when no path
     below ``upper`` exists.
+
+    Within a layer the search is Dijkstra's on an indexed binary heap
+    (decrease-key, no stale entries), seeded only with the nodes that can
+    improve a neighbour at the distance the previous layer gave them: a node
+    that cannot, and is never improved itself, relaxes nothing later either
+    (distances only decrease), so leaving it out changes no distance.
     """
     n_layers, n = cost.shape
     inf = np.inf
+    heap = np.empty(n, dtype=np.int64)  # vertex ids of the current layer's open nodes
+    position = np.full(n, -1, dtype=np.int64)  # slot of every vertex in the heap, -1 outside it
     for i in range(n_layers):
         if cancel[0] != 0:
             return -2, inf
@@ -85,55 +143,67 @@ def _layered_dijkstra(cost, step2, graph_points, indptr, indices, edge_len, sour
         p[:] = -1
         o[:] = -1
         h = heuristic[i]
-        heap = [(0.0, 0)]
-        heap.pop()
+        c = cost[i]
         if i == 0:
             for j in range(n):
                 if source_mask[j] and h[j] < upper:
                     d[j] = 0.0
                     o[j] = j
-                    heap.append((0.0, j))
         else:
             dprev = dist[i - 1]
             oprev = origin[i - 1]
+            cprev = cost[i - 1]
             s2 = step2[i - 1]
             step = np.sqrt(s2)
             for j in range(n):
                 dj = dprev[j]
                 if dj == inf:
                     continue
-                cj = cost[i - 1, j]
-                nd = dj + (0.5 * (cj + cost[i, j]) + stretch) * step
+                cj = cprev[j]
+                nd = dj + (0.5 * (cj + c[j]) + stretch) * step
                 if nd < d[j] and nd + h[j] < upper:
                     d[j] = nd
                     p[j] = n + j
                     o[j] = oprev[j]
                 for e in range(indptr[j], indptr[j + 1]):
                     k = indices[e]
-                    length = max(step, edge_len[e]) if max_metric else np.sqrt(s2 + edge_len[e] * edge_len[e])
-                    nd = (dj + 0.5 * (cj + cost[i, k]) * length
-                          + stretch * abs(edge_len[e] - step) - gain * min(edge_len[e], step) + extra[e])
+                    b = edge_len[e]
+                    length = max(step, b) if max_metric else np.sqrt(s2 + b * b)
+                    nd = (dj + 0.5 * (cj + c[k]) * length
+                          + stretch * abs(b - step) - gain * min(b, step) + extra[e])
                     if nd < d[k] and nd + h[k] < upper:
                         d[k] = nd
                         p[k] = n + j
                         o[k] = oprev[j]
-            for j in range(n):
-                if d[j] < inf:
-                    heap.append((d[j], j))
-        heapq.heapify(heap)
-        while len(heap) > 0:
-            dj, j = heapq.heappop(heap)
-            if dj > d[j]:
-                continue
-            cj = cost[i, j]
+        size = 0
+        for j in range(n):  # the seeds: nodes that improve a neighbour within the layer now
+            if d[j] < inf and _improves_a_neighbour(j, d, c, h, upper, indptr, indices, edge_len, extra, stretch):
+                heap[size] = j
+                position[j] = size
+                size += 1
+        for slot in range((size >> 1) - 1, -1, -1):
+            _sift_down(d, heap, position, slot, size)
+        while size > 0:
+            j = heap[0]
+            position[j] = -1
+            size -= 1
+            if size > 0:
+                heap[0] = heap[size]
+                _sift_down(d, heap, position, 0, size)
+            dj = d[j]
+            cj = c[j]
             for e in range(indptr[j], indptr[j + 1]):
                 k = indices[e]
-                nd = dj + (0.5 * (cj + cost[i, k]) + stretch) * edge_len[e] + extra[e]
+                nd = dj + (0.5 * (cj + c[k]) + stretch) * edge_len[e] + extra[e]
                 if nd < d[k] and nd + h[k] < upper:
                     d[k] = nd
                     p[k] = j
                     o[k] = o[j]
-                    heapq.heappush(heap, (nd, k))
+                    if position[k] < 0:
+                        heap[size] = k
+                        position[k] = size
+                        size += 1
+                    _sift_up(d, heap, position, position[k])
     best = inf
     best_t = -1
     last = dist[n_layers - 1]
@@ -177,6 +247,69 @@ class CyclicPath:
         return out
 
 
+@dataclass(frozen=True)
+class GraphTopology:
+    """The graph of a product graph, in the arrays its searches walk; one per graph, shared by all the
+    product graphs built on it (the readings of one query and mesh differ in their costs only).
+
+    Attributes
+    ----------
+    points : (n, d) float
+        Vertex coordinates.
+    indptr, indices : (n + 1,), (e,) int
+        The directed edges in sorted CSR order.
+    edge_len : (e,) float
+        Length of every edge.
+    reverse : tuple of arrays
+        ``(indptr, indices, edge_len)`` of the transposed graph (the backward search).
+    reverse_order : (e,) int
+        For every edge of the transposed graph in its CSR order, its index in the forward order.
+    adjacency : (n, n) sparse
+        Edge lengths as a matrix.
+    directed : bool
+        Whether the adjacency was taken as given (True) or symmetrised.
+    """
+
+    points: np.ndarray
+    indptr: np.ndarray
+    indices: np.ndarray
+    edge_len: np.ndarray
+    reverse: tuple
+    reverse_order: np.ndarray
+    adjacency: csr_matrix
+    directed: bool
+
+    @property
+    def n(self) -> int:
+        return int(self.points.shape[0])
+
+    @classmethod
+    def of(cls, graph_points, adjacency, directed: bool = False) -> GraphTopology:
+        """The topology of a graph given by its vertices ((n, d) float) and adjacency ((n, n) sparse)."""
+        pts = np.ascontiguousarray(graph_points, dtype=np.float64)
+        n = pts.shape[0]
+        adj = csr_matrix(adjacency)
+        if adj.shape != (n, n):
+            raise InputError(f"the adjacency is {adj.shape}, the graph has {n} vertices")
+        if not directed:
+            adj = (adj + adj.T).tocsr()
+
+        def csr_arrays(matrix):
+            matrix = csr_matrix(matrix)
+            matrix.sort_indices()
+            indptr = matrix.indptr.astype(np.int64)
+            indices = matrix.indices.astype(np.int64)
+            rows = np.repeat(np.arange(n), np.diff(indptr))
+            return indptr, indices, np.ascontiguousarray(np.linalg.norm(pts[indices] - pts[rows], axis=1))
+
+        indptr, indices, edge_len = csr_arrays(adj)
+        edge_ids = csr_matrix((np.arange(1, indices.size + 1, dtype=np.float64), indices, indptr), shape=(n, n))
+        reverse_ids = csr_matrix(edge_ids.T)
+        reverse_ids.sort_indices()
+        return cls(pts, indptr, indices, edge_len, csr_arrays(adj.T), reverse_ids.data.astype(np.int64) - 1,
+                   csr_matrix((edge_len, indices, indptr), shape=(n, n)), bool(directed))
+
+
 class ProductGraph:
     """Implicit product of a closed curve (layers) with a graph.
 
@@ -209,7 +342,7 @@ class ProductGraph:
 
     def __init__(self, node_cost, curve_points, graph_points, adjacency, *, directed: bool = False,
                  closing_shift: int = 0, n_starts: int | None = None, stretch: float = 0.0, edge_penalty=None,
-                 metric: str = "euclidean"):
+                 metric: str = "euclidean", topology: GraphTopology | None = None):
         cost = np.asarray(node_cost, dtype=np.float64)
         curve = np.asarray(curve_points, dtype=np.float64)
         pts = np.asarray(graph_points, dtype=np.float64)
@@ -219,9 +352,13 @@ class ProductGraph:
                              f"{pts.shape[0]} graph vertices")
         if np.any(np.isnan(cost)) or cost.min() < 0 or not np.isfinite(cost).any():
             raise InputError("node costs must be non-negative (inf forbids a node) and not all inf")
-        adj = csr_matrix(adjacency)
-        if not directed:
-            adj = (adj + adj.T).tocsr()
+        if topology is None:
+            topology = GraphTopology.of(pts, adjacency, directed)
+        elif topology.n != n or topology.directed != directed:
+            raise InputError(f"the shared graph topology has {topology.n} vertices "
+                             f"({'directed' if topology.directed else 'undirected'}), the graph {n} "
+                             f"({'directed' if directed else 'undirected'})")
+        self.topology = topology
         self.m, self.n = m, n
         if not (np.isfinite(stretch) and stretch >= 0):
             raise ParameterError(f"stretch must be finite and non-negative, got {stretch}")
@@ -241,27 +378,14 @@ class ProductGraph:
         self.curve_points = curve
         curve_closed = np.vstack([curve, curve[:1]])
         self.step2 = np.ascontiguousarray(np.sum(np.diff(curve_closed, axis=0) ** 2, axis=1))
-        self.graph_points = np.ascontiguousarray(pts)
-
-        def csr_arrays(matrix):
-            matrix = csr_matrix(matrix)
-            matrix.sort_indices()
-            indptr = matrix.indptr.astype(np.int64)
-            indices = matrix.indices.astype(np.int64)
-            rows = np.repeat(np.arange(n), np.diff(indptr))
-            return indptr, indices, np.ascontiguousarray(np.linalg.norm(pts[indices] - pts[rows], axis=1))
-
-        self.indptr, self.indices, self.edge_len = csr_arrays(adj)
+        self.graph_points = topology.points
+        self.indptr, self.indices, self.edge_len = topology.indptr, topology.indices, topology.edge_len
         # the backward search of the heuristic walks the edges in reverse
-        self._reverse = csr_arrays(adj.T)
+        self._reverse = topology.reverse
         # directed extra cost of every graph edge, aligned with the forward and the reversed CSR order
         self.extra = self._edge_extra(edge_penalty, n)
-        edge_ids = csr_matrix((np.arange(1, self.indices.size + 1, dtype=np.float64), self.indices, self.indptr),
-                              shape=(n, n))
-        reverse_ids = csr_matrix(edge_ids.T)
-        reverse_ids.sort_indices()
-        self._reverse_extra = np.ascontiguousarray(self.extra[reverse_ids.data.astype(np.int64) - 1])
-        self.adjacency = csr_matrix((self.edge_len, self.indices, self.indptr), shape=(n, n))
+        self._reverse_extra = np.ascontiguousarray(self.extra[topology.reverse_order])
+        self.adjacency = topology.adjacency
         # admissible heuristic (remaining cost to the last layer); zero until compute_heuristic()
         self.heuristic = np.zeros((m + 1, n))
         #: the cheapest open path, once compute_heuristic() has run
@@ -499,9 +623,9 @@ class ProductGraph:
         cost = members[0].cost[:-1].copy()
         for other in members[1:]:
             np.minimum(cost, other.cost[:-1], out=cost)
-        return cls(cost, first.curve_points, first.graph_points, first.adjacency, directed=True,
+        return cls(cost, first.curve_points, first.graph_points, first.adjacency, directed=first.topology.directed,
                    closing_shift=first.closing_shift, n_starts=first.n_starts,
-                   stretch=min(g.stretch for g in members), metric=first.metric)
+                   stretch=min(g.stretch for g in members), metric=first.metric, topology=first.topology)
 
     def credited_length(self, path: CyclicPath) -> float:
         """The length of the curve a path matches to moving graph vertices: ``Σ min(a, b)`` over its edges.

@@ -36,6 +36,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 import scipy.sparse as sp
 
@@ -74,6 +75,86 @@ def heat_signature(evals: np.ndarray, evecs: np.ndarray, t: float) -> np.ndarray
     return (np.asarray(evecs, dtype=np.float64) ** 2) @ np.exp(-evals * t)
 
 
+@numba.njit(cache=True)
+def _superlevel_protrusions(f, order, indptr, indices, threshold):
+    """The kernel of :func:`persistent_protrusions`: union-find over the vertices in ``order``.
+
+    A component's vertices, while it is *open* (none of its parts has closed
+    yet), are a linked list (``head``, ``tail``, ``following``) so that merging
+    two components and closing one as a part cost O(1). Returns the part of
+    every vertex (-1: body) numbered in the order the parts closed.
+    """
+    n = f.shape[0]
+    parent = np.full(n, -1, dtype=np.int64)
+    peak = np.zeros(n)
+    is_open = np.zeros(n, dtype=np.bool_)
+    head = np.full(n, -1, dtype=np.int64)
+    tail = np.full(n, -1, dtype=np.int64)
+    following = np.full(n, -1, dtype=np.int64)
+    part_of = np.full(n, -1, dtype=np.int64)
+    n_parts = 0
+    roots = np.empty(n, dtype=np.int64)
+    for v in order:
+        n_roots = 0
+        for e in range(indptr[v], indptr[v + 1]):
+            u = indices[e]
+            if parent[u] < 0:
+                continue
+            while parent[u] != u:  # find, with path halving
+                parent[u] = parent[parent[u]]
+                u = parent[u]
+            seen = False
+            for r in range(n_roots):
+                seen = seen or roots[r] == u
+            if not seen:
+                roots[n_roots] = u
+                n_roots += 1
+        parent[v] = v
+        if n_roots == 0:  # a new maximum
+            peak[v] = f[v]
+            is_open[v] = True
+            head[v] = tail[v] = v
+            continue
+        significant = 0
+        for r in range(n_roots):
+            if peak[roots[r]] - f[v] > threshold:
+                significant += 1
+        if significant >= 2:  # two protrusions meet at a saddle: each open one is a part, up to here
+            for r in range(n_roots):
+                root = roots[r]
+                if peak[root] - f[v] > threshold and is_open[root]:
+                    x = head[root]
+                    while x >= 0:
+                        part_of[x] = n_parts
+                        x = following[x]
+                    n_parts += 1
+                    is_open[root] = False
+        top = roots[0]
+        still_open = True
+        for r in range(n_roots):
+            root = roots[r]
+            if peak[root] > peak[top]:
+                top = root
+            still_open = still_open and is_open[root]
+        if still_open:  # one open component: the lists joined, v appended
+            first, last = -1, -1
+            for r in range(n_roots):
+                root = roots[r]
+                if first < 0:
+                    first = head[root]
+                else:
+                    following[last] = head[root]
+                last = tail[root]
+            following[last] = v
+            head[top], tail[top] = first, v
+        for r in range(n_roots):
+            is_open[roots[r]] = False
+            parent[roots[r]] = top
+        parent[v] = top
+        is_open[top] = still_open
+    return part_of, n_parts
+
+
 def persistent_protrusions(signature: np.ndarray, adjacency: sp.spmatrix, persistence: float) -> np.ndarray:
     """Protrusions of a function on a graph by superlevel-set persistence (see the module docstring).
 
@@ -91,48 +172,23 @@ def persistent_protrusions(signature: np.ndarray, adjacency: sp.spmatrix, persis
     (n,) int
         0 on the body, ``1 .. p`` on the protrusions by decreasing peak.
     """
-    f = np.asarray(signature, dtype=np.float64)
-    n = f.shape[0]
+    f = np.ascontiguousarray(signature, dtype=np.float64)
     if not 0.0 <= persistence < 1.0:
         raise ParameterError(f"persistence must be in [0, 1), got {persistence!r}")
     graph = sp.csr_matrix(adjacency)
-    indptr, indices = graph.indptr, graph.indices
     threshold = persistence * float(f.max() - f.min())
-    parent = np.full(n, -1, dtype=np.int64)
-    peak = np.zeros(n)
-    members: dict[int, list[int]] = {}  # vertices of a component that has not yet met a significant other
-    parts: list[list[int]] = []
-
-    def root(x: int) -> int:
-        while parent[x] != x:
-            parent[x] = parent[parent[x]]
-            x = parent[x]
-        return x
-
-    for v in np.argsort(-f, kind="stable"):
-        v = int(v)
-        roots = {root(int(u)) for u in indices[indptr[v]:indptr[v + 1]] if parent[u] >= 0}
-        parent[v] = v
-        if not roots:  # a new maximum
-            peak[v] = f[v]
-            members[v] = [v]
-            continue
-        significant = [r for r in roots if peak[r] - f[v] > threshold]
-        if len(significant) >= 2:  # two protrusions meet at a saddle: each is a part, up to here
-            for r in significant:
-                if r in members:
-                    parts.append(members.pop(r))
-        top = max(roots, key=lambda r: peak[r])
-        still_open = all(r in members for r in roots)
-        merged = [x for r in roots for x in members.pop(r, [])]
-        for r in roots:
-            parent[r] = top
-        parent[v] = top
-        if still_open:
-            members[top] = merged + [v]
-    labels = np.zeros(n, dtype=np.int64)
-    for index, part in enumerate(sorted(parts, key=lambda p: -f[p].max())):
-        labels[part] = index + 1
+    order = np.argsort(-f, kind="stable").astype(np.int64)
+    part_of, n_parts = _superlevel_protrusions(f, order, graph.indptr.astype(np.int64),
+                                               graph.indices.astype(np.int64), threshold)
+    labels = np.zeros(f.shape[0], dtype=np.int64)
+    if n_parts == 0:
+        return labels
+    in_part = part_of >= 0
+    part_peak = np.full(n_parts, -np.inf)
+    np.maximum.at(part_peak, part_of[in_part], f[in_part])
+    rank = np.empty(n_parts, dtype=np.int64)
+    rank[np.argsort(-part_peak, kind="stable")] = np.arange(1, n_parts + 1)
+    labels[in_part] = rank[part_of[in_part]]
     return labels
 
 

@@ -24,6 +24,7 @@ def warm_up() -> None:
     from corrlib.geometry.cyclic_paths import ProductGraph, branch_and_bound
     from corrlib.geometry.geodesics import GeodesicSolver
     from corrlib.geometry.sampling import farthest_point_sampling
+    from corrlib.geometry.segmentation import persistent_protrusions
     from corrlib.methods.contour3d import node_costs
     from corrlib.progress import run
     from corrlib.shapes import TriMesh
@@ -41,6 +42,7 @@ def warm_up() -> None:
     sphere = TriMesh(sphere_v, sphere_f, validate=False)
     shot(sphere.vertices, sphere.faces, radius=2.0, min_neighbors=1)  # a mesh's arrays are read-only
     farthest_point_sampling(rng.random((6, 3)), 3)
+    persistent_protrusions(rng.random(6), adj, 0.1)
     path_graph = sp.diags([-1.0, 2.5, -1.0], [-1, 0, 1], shape=(8, 8), format="csc")
     CholeskySolver(path_graph).solve(rng.random((8, 2)))
     GeodesicSolver(sphere).pair_distances(np.arange(3), np.arange(3, 6))

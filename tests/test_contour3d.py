@@ -5,7 +5,7 @@ import numpy as np
 import pytest
 import scipy.sparse as sp
 import trimesh
-from scipy.sparse.csgraph import bellman_ford, dijkstra
+from scipy.sparse.csgraph import dijkstra, johnson
 
 from _data import SUMNER, TOSCA
 from corrlib.errors import Cancelled, ContourError, InputError, ParameterError
@@ -51,12 +51,12 @@ def explicit_product_optimum(graph: ProductGraph, gain: float = 0.0) -> float:
     """All-sources shortest paths on the explicitly built product graph: min over s of d((0,s), (m,s)).
 
     ``gain`` > 0: the ratio energy's parametric problem ``E - gain * D``, every edge advancing along curve and
-    graph credited ``min(a, b)``, independently of the layered kernel (Bellman-Ford, as those edges may be
-    negative; the edges within a layer are not, so there is no negative cycle)."""
+    graph credited ``min(a, b)``, independently of the layered kernel (Johnson's algorithm, as those edges may
+    be negative; the edges within a layer are not, so there is no negative cycle)."""
     m, n = graph.m, graph.n
     node = lambda i, j: i * n + j  # noqa: E731
     product = explicit_product_matrix(graph, gain)
-    shortest = dijkstra if gain == 0 else bellman_ford
+    shortest = dijkstra if gain == 0 else johnson
     dist = shortest(product, directed=True, indices=np.arange(graph.n_starts))
     return float(min(dist[s, node(m, s + graph.closing_shift)] for s in range(graph.n_starts)))
 

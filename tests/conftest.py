@@ -4,7 +4,13 @@ import gc
 import os
 import sys
 
-import numpy as np
+if os.environ.get("PYTEST_XDIST_WORKER"):
+    # test processes side by side (pytest -n): single-threaded BLAS in each, so that they do not oversubscribe
+    # the cores; numba's threads stay, so the library's threaded code paths are still the ones tested
+    for _variable in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS", "MKL_NUM_THREADS"):
+        os.environ.setdefault(_variable, "1")
+
+import numpy as np  # noqa: E402
 import pytest
 
 from _data import TOSCA

@@ -142,8 +142,14 @@ def test_two_axes_search_every_sign_reading():
 
 
 def capsule_and_ellipse():
+    """An egg-shaped contour and a tapered capsule of elliptic section: no symmetry swaps the capsule's ends, so
+    its left-right reflection (either plane through the long axis) keeps the long axis among the even functions
+    (a capsule of revolution has every plane, and the one swapping the ends would take the axis away)."""
     capsule = trimesh.creation.capsule(height=3.0, radius=0.6, count=[16, 16])
-    mesh = TriMesh(capsule.vertices, capsule.faces, name="capsule")
+    z = capsule.vertices[:, 2] - capsule.vertices[:, 2].mean()
+    taper = 1.0 + 0.25 * z / np.abs(z).max()
+    vertices = capsule.vertices * np.column_stack([taper, 0.8 * taper, np.ones_like(taper)])
+    mesh = TriMesh(vertices, capsule.faces, name="capsule")
     t = np.linspace(0, 2 * np.pi, 80, endpoint=False)
     contour = Contour2D(np.column_stack([2.0 * np.cos(t), 0.5 * np.sin(t) * (1 + 0.4 * np.cos(t))]), name="egg")
     return contour, mesh

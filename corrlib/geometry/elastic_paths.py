@@ -64,6 +64,27 @@ def _turn_cosines(indptr, indices, tail, points):
     return out
 
 
+@numba.njit(inline="always")
+def _state_improves_a_successor(e, d, layer_cost, h, upper, indptr, indices, tail, edge_len, cos_turn, n_edges,
+                                stretch, bend):
+    """Whether state ``e`` lowers a successor's distance ``d`` along a within-layer move (below ``upper`` with
+    the heuristic ``h``). A state that does not, and is never lowered itself, relaxes nothing later either
+    (distances only decrease), so the layer's Dijkstra need not start from it."""
+    memory = e < n_edges
+    j = indices[e] if memory else e - n_edges
+    u = tail[e] if memory else -1
+    for q in range(indptr[j], indptr[j + 1]):
+        k = indices[q]
+        if k == u:
+            continue
+        through_e = d[e] + (0.5 * (layer_cost[j] + layer_cost[k]) + stretch) * edge_len[q]
+        if memory:
+            through_e += bend * (1.0 - cos_turn[e, q - indptr[j]])
+        if through_e < d[q] and through_e + h[k] < upper:
+            return True
+    return False
+
+
 @numba.njit(cache=True, nogil=True)
 def _elastic_layered_dijkstra(cost, step, indptr, indices, tail, edge_len, cos_turn, source_mask, target_mask,
                               upper, heuristic, stretch, bend, cancel, dist, pred, origin, gain):
@@ -135,8 +156,9 @@ def _elastic_layered_dijkstra(cost, step, indptr, indices, tail, edge_len, cos_t
                         d[q] = nd
                         p[q] = n_states + e
                         o[q] = oprev[e]
-            for e in range(n_states):
-                if d[e] < inf:
+            for e in range(n_states):  # seeds: the states that lower a successor within the layer now
+                if d[e] < inf and _state_improves_a_successor(e, d, cost[i], h, upper, indptr, indices, tail,
+                                                              edge_len, cos_turn, n_edges, stretch, bend):
                     heap.append((d[e], e))
         heapq.heapify(heap)
         while len(heap) > 0:

@@ -214,6 +214,25 @@ def _slicing(op: _ShiftInvert, k: int, sigma0: float, slice_size: int):
     return evals[order], evecs[:, order]
 
 
+def _fixed_signs(evecs: np.ndarray, mass: sp.spmatrix) -> np.ndarray:
+    """Eigenvectors ((n, k) float) signed so that their third moment ``Σ_i m_i φ_i³`` is positive.
+
+    An eigensolver returns each eigenvector with an arbitrary sign, which can
+    differ between two decompositions of one mesh (another ``k``, another
+    solver); fixing it by the function itself makes everything computed from
+    a cold cache equal to what a warm one gives. Where the moment vanishes
+    to round-off (a function odd under a symmetry of the shape) no sign is
+    distinguished and the solver's is kept.
+    """
+    moment = mass.diagonal() @ evecs**3
+    scale = np.sqrt(np.mean(evecs**2, axis=0)) ** 3 * mass.diagonal().sum()
+    flip = moment < -1e-6 * scale
+    if np.any(flip):
+        evecs = evecs.copy()
+        evecs[:, flip] *= -1.0
+    return evecs
+
+
 def eigenpairs(stiffness: sp.spmatrix, mass: sp.spmatrix, k: int, *, method: str = "auto",
                name: str = "shape", check_connected: bool = True, tol: float = 0.0) -> tuple[np.ndarray, np.ndarray]:
     """Lowest ``k`` eigenpairs of ``S phi = lambda M phi``.
@@ -284,6 +303,7 @@ def eigenpairs(stiffness: sp.spmatrix, mass: sp.spmatrix, k: int, *, method: str
         evecs = _m_orthonormalize(evecs, mass)
     evals = np.where(np.abs(evals) < 1e-12 * scale, 0.0, evals)
     evals = np.maximum(evals, 0.0)
+    evecs = _fixed_signs(evecs, mass)
     if check_connected and k >= 2 and evals[1] <= 1e-9 * scale:
         n_zero = int(np.sum(evals <= 1e-9 * scale))
         raise InputError(f"{name}: the shape is disconnected ({n_zero} zero eigenvalues of the Laplacian)")
@@ -312,7 +332,7 @@ def available_eigenpairs(mesh, k: int, what: str = "spectral descriptors") -> in
 
 
 def _spectrum_key(mesh, mass: str) -> str:
-    return cache.make_key("spectrum-v1", mesh.content_hash, mass)
+    return cache.make_key("spectrum-v2", mesh.content_hash, mass)
 
 
 def _cached_spectrum(mesh, k: int, key: str, stiffness, mass_mat) -> Spectrum | None:

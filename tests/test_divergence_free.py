@@ -116,7 +116,7 @@ def test_flow_derivative_matches_finite_differences():
     end, jac = flow_with_jacobian(basis, x, coeffs, n_steps=8)
     assert np.allclose(end, flow(basis, x, coeffs, 1.0, 8), atol=1e-12)
     h = 1e-6
-    for k in (0, 1, 2, 17, 44):
+    for k in (0, 1, 2, 17, 40, 42, 44):  # fields of all three kinds d = k mod 3, low and high frequencies
         plus, minus = coeffs.copy(), coeffs.copy()
         plus[k] += h
         minus[k] -= h
@@ -124,6 +124,13 @@ def test_flow_derivative_matches_finite_differences():
         assert np.abs(fd - jac[:, :, k]).max() < 1e-6 * max(1.0, np.abs(jac[:, :, k]).max())
     end32, jac32 = flow_with_jacobian(basis, x, coeffs, n_steps=8, dtype=np.float32)
     assert jac32.dtype == np.float32 and np.allclose(jac32, jac, rtol=1e-4, atol=1e-4 * np.abs(jac).max())
+    # K not a multiple of 3: the last potential's missing field has a zero coefficient and no column
+    shorter = coeffs.copy()
+    shorter[44] = 0.0
+    end44, jac44 = flow_with_jacobian(DivFreeBasis(44), x, shorter[:44], n_steps=8)
+    end45, jac45 = flow_with_jacobian(basis, x, shorter, n_steps=8)
+    assert jac44.shape == (20, 3, 44) and np.allclose(end44, end45, atol=1e-14)
+    assert np.allclose(jac44, jac45[:, :, :44], atol=1e-14)
 
 
 def test_rk2_converges_at_second_order_and_runs_backwards():

@@ -202,14 +202,11 @@ def flow(basis: DivFreeBasis, points, coeffs, t: float = 1.0, n_steps: int = 20)
 
 
 @numba.njit(cache=True, fastmath=True, nogil=True)
-def _eval_point(x, a, freqs, s, c, ss, pairs, vals, vel, jac):
-    """Velocity (3,), its Jacobian (3, 3) and every field's value (3, 3Q) at ``x``.
+def _eval_gradients(x, a, freqs, s, c, ss, pairs, grad, vel, jac):
+    """Velocity (3,), its Jacobian (3, 3) and every potential's gradient ``∇φ_q`` (3, Q) at ``x``.
 
-    Only the non-zero components of the field values are written (component d of the d-th field of a
-    potential is 0): ``vals`` must start as zeros.
-
-    ``pairs`` (6, M, M) is scratch for the products of the first two axes' tables, so every
-    gradient or Hessian entry of a potential costs one multiplication.
+    The fields of potential ``q`` are ``∇φ_q × e_d`` up to sign (module docstring), so the gradients are all
+    the field values carry. ``pairs`` (6, M, M) is scratch for the products of the first two axes' tables.
     """
     n_freq = s.shape[1]
     for d in range(3):
@@ -272,13 +269,9 @@ def _eval_point(x, a, freqs, s, c, ss, pairs, vals, vel, jac):
         j20 += a1 * h11 - a0 * h12
         j21 += a1 * h12 - a0 * h22
         j22 += a1 * h13 - a0 * h23
-        k = 3 * q
-        vals[1, k] = g3
-        vals[2, k] = -g2
-        vals[0, k + 1] = -g3
-        vals[2, k + 1] = g1
-        vals[0, k + 2] = g2
-        vals[1, k + 2] = -g1
+        grad[0, q] = g1
+        grad[1, q] = g2
+        grad[2, q] = g3
     vel[0] = v0
     vel[1] = v1
     vel[2] = v2
@@ -293,57 +286,82 @@ def _eval_point(x, a, freqs, s, c, ss, pairs, vals, vel, jac):
     jac[2, 2] = j22
 
 
-@numba.njit(cache=True, fastmath=True, nogil=True)
-def _sensitivity_step(base, inner, vals, jac, scale, out, coef):
-    """out = base + scale (vals + jac inner), all (3, K): one line of Eq. C.15 (``out`` may be ``base``).
+#: the fields ``3q + d`` as ``curl(φ_q e_d)_i = sign · ∂_j φ_q``: (j, sign) for every (d, i)
+_CURL_TERMS = np.array([[[0, 0], [2, 1], [1, -1]],
+                        [[2, -1], [0, 0], [0, 1]],
+                        [[1, 1], [0, -1], [0, 0]]], dtype=np.int64)
 
-    ``coef`` (4,) is scratch of the arrays' dtype: the scalars are rounded to it first, so that with
-    float32 sensitivities the loop runs in float32 lanes instead of widening every element.
+
+@numba.njit(cache=True, fastmath=True, nogil=True)
+def _sensitivity_rk2(dx, d, grad_x, grad_m, jac_x, jac_m, h, coef):
+    """One RK2 step of Eq. C.15 for the fields ``3q + d`` of every potential, in place.
+
+    ``dx`` (3, Q): ``∂x/∂a_{3q+d}``; ``grad_x``, ``grad_m`` (3, Q): the potentials' gradients at the step's
+    start and midpoint, whose entries make the fields' values (:data:`_CURL_TERMS`). ``m = dx + h/2 (v(x) +
+    J(x) dx)``, then ``dx ← dx + h (v(mid) + J(mid) m)``: both stages per column in registers, one pass over
+    ``dx``. ``coef`` (24,) is scratch of ``dx``'s dtype, so that with float32 sensitivities the loop runs in
+    float32 lanes.
     """
-    n_cols = base.shape[1]
-    coef[3] = scale
-    s = coef[3]
+    half = 0.5 * h
     for i in range(3):
-        coef[0] = jac[i, 0]
-        coef[1] = jac[i, 1]
-        coef[2] = jac[i, 2]
-        j0 = coef[0] * s
-        j1 = coef[1] * s
-        j2 = coef[2] * s
-        for k in range(n_cols):
-            out[i, k] = base[i, k] + s * vals[i, k] + j0 * inner[0, k] + j1 * inner[1, k] + j2 * inner[2, k]
+        for j in range(3):
+            coef[3 * i + j] = jac_x[i, j] * half
+            coef[9 + 3 * i + j] = jac_m[i, j] * h
+        coef[18 + i] = _CURL_TERMS[d, i, 1] * half
+        coef[21 + i] = _CURL_TERMS[d, i, 1] * h
+    x00, x01, x02, x10, x11, x12, x20, x21, x22 = (coef[0], coef[1], coef[2], coef[3], coef[4], coef[5],
+                                                   coef[6], coef[7], coef[8])
+    m00, m01, m02, m10, m11, m12, m20, m21, m22 = (coef[9], coef[10], coef[11], coef[12], coef[13], coef[14],
+                                                   coef[15], coef[16], coef[17])
+    sx0, sx1, sx2, sm0, sm1, sm2 = coef[18], coef[19], coef[20], coef[21], coef[22], coef[23]
+    gx0, gx1, gx2 = grad_x[_CURL_TERMS[d, 0, 0]], grad_x[_CURL_TERMS[d, 1, 0]], grad_x[_CURL_TERMS[d, 2, 0]]
+    gm0, gm1, gm2 = grad_m[_CURL_TERMS[d, 0, 0]], grad_m[_CURL_TERMS[d, 1, 0]], grad_m[_CURL_TERMS[d, 2, 0]]
+    for q in range(dx.shape[1]):
+        d0 = dx[0, q]
+        d1 = dx[1, q]
+        d2 = dx[2, q]
+        e0 = d0 + sx0 * gx0[q] + x00 * d0 + x01 * d1 + x02 * d2
+        e1 = d1 + sx1 * gx1[q] + x10 * d0 + x11 * d1 + x12 * d2
+        e2 = d2 + sx2 * gx2[q] + x20 * d0 + x21 * d1 + x22 * d2
+        dx[0, q] = d0 + sm0 * gm0[q] + m00 * e0 + m01 * e1 + m02 * e2
+        dx[1, q] = d1 + sm1 * gm1[q] + m10 * e0 + m11 * e1 + m12 * e2
+        dx[2, q] = d2 + sm2 * gm2[q] + m20 * e0 + m21 * e1 + m22 * e2
 
 
 @numba.njit(cache=True, parallel=True, fastmath=True, nogil=True)
 def _flow_jacobian_kernel(points, a, freqs, n_freq, steps, h, out_x, out_dx):
-    n_cols = a.shape[0]
+    n_pot = freqs.shape[0]
     n_out = out_dx.shape[2]
     for n in numba.prange(points.shape[0]):
         s = np.empty((3, n_freq))
         c = np.empty((3, n_freq))
         ss = np.empty((3, n_freq))
         pairs = np.empty((6, n_freq, n_freq))
-        vals = np.zeros((3, n_cols), out_dx.dtype)  # the entries _eval_point leaves alone stay 0
-        dx = np.zeros((3, n_cols), out_dx.dtype)
-        dm = np.empty((3, n_cols), out_dx.dtype)
+        grad_x = np.empty((3, n_pot), out_dx.dtype)
+        grad_m = np.empty((3, n_pot), out_dx.dtype)
+        dx = np.zeros((3, 3, n_pot), out_dx.dtype)  # [d]: the fields 3q + d
         vel = np.empty(3)
-        jac = np.empty((3, 3))
-        coef = np.empty(4, out_dx.dtype)
+        jac_x = np.empty((3, 3))
+        jac_m = np.empty((3, 3))
+        coef = np.empty(24, out_dx.dtype)
         x = points[n].copy()
         mid = np.empty(3)
         for _ in range(steps):
-            _eval_point(x, a, freqs, s, c, ss, pairs, vals, vel, jac)
+            _eval_gradients(x, a, freqs, s, c, ss, pairs, grad_x, vel, jac_x)
             for i in range(3):
                 mid[i] = x[i] + 0.5 * h * vel[i]
-            _sensitivity_step(dx, dx, vals, jac, 0.5 * h, dm, coef)
-            _eval_point(mid, a, freqs, s, c, ss, pairs, vals, vel, jac)
+            _eval_gradients(mid, a, freqs, s, c, ss, pairs, grad_m, vel, jac_m)
             for i in range(3):
                 x[i] += h * vel[i]
-            _sensitivity_step(dx, dm, vals, jac, h, dx, coef)
+            for d in range(3):
+                _sensitivity_rk2(dx[d], d, grad_x, grad_m, jac_x, jac_m, h, coef)
         out_x[n] = x
         for i in range(3):
-            for k in range(n_out):
-                out_dx[n, i, k] = dx[i, k]
+            for q in range(n_pot):
+                for d in range(3):
+                    k = 3 * q + d
+                    if k < n_out:
+                        out_dx[n, i, k] = dx[d, i, q]
 
 
 def flow_with_jacobian(basis: DivFreeBasis, points, coeffs, n_steps: int = 20,

@@ -65,6 +65,16 @@ def _turn_cosines(indptr, indices, tail, points):
 
 
 @numba.njit(inline="always")
+def _within_layer_move(e, q, j, memory, layer_cost, indices, indptr, edge_len, cos_turn, stretch, bend):
+    """Cost of the move from state ``e`` (at vertex ``j``) along CSR edge ``q`` within a layer: the node costs
+    and stretching along the edge, and the bending of the turn where ``e`` remembers its incoming edge."""
+    move = (0.5 * (layer_cost[j] + layer_cost[indices[q]]) + stretch) * edge_len[q]
+    if memory:
+        move += bend * (1.0 - cos_turn[e, q - indptr[j]])
+    return move
+
+
+@numba.njit(inline="always")
 def _state_improves_a_successor(e, d, layer_cost, h, upper, indptr, indices, tail, edge_len, cos_turn, n_edges,
                                 stretch, bend):
     """Whether state ``e`` lowers a successor's distance ``d`` along a within-layer move (below ``upper`` with
@@ -77,9 +87,8 @@ def _state_improves_a_successor(e, d, layer_cost, h, upper, indptr, indices, tai
         k = indices[q]
         if k == u:
             continue
-        through_e = d[e] + (0.5 * (layer_cost[j] + layer_cost[k]) + stretch) * edge_len[q]
-        if memory:
-            through_e += bend * (1.0 - cos_turn[e, q - indptr[j]])
+        through_e = d[e] + _within_layer_move(e, q, j, memory, layer_cost, indices, indptr, edge_len, cos_turn,
+                                              stretch, bend)
         if through_e < d[q] and through_e + h[k] < upper:
             return True
     return False
@@ -118,6 +127,7 @@ def _elastic_layered_dijkstra(cost, step, indptr, indices, tail, edge_len, cos_t
         p[:] = -1
         o[:] = -1
         h = heuristic[i]
+        layer_cost = cost[i]
         heap = [(0.0, 0)]
         heap.pop()
         if i == 0:
@@ -157,7 +167,7 @@ def _elastic_layered_dijkstra(cost, step, indptr, indices, tail, edge_len, cos_t
                         p[q] = n_states + e
                         o[q] = oprev[e]
             for e in range(n_states):  # seeds: the states that lower a successor within the layer now
-                if d[e] < inf and _state_improves_a_successor(e, d, cost[i], h, upper, indptr, indices, tail,
+                if d[e] < inf and _state_improves_a_successor(e, d, layer_cost, h, upper, indptr, indices, tail,
                                                               edge_len, cos_turn, n_edges, stretch, bend):
                     heap.append((d[e], e))
         heapq.heapify(heap)
@@ -168,15 +178,12 @@ def _elastic_layered_dijkstra(cost, step, indptr, indices, tail, edge_len, cos_t
             memory = e < n_edges
             j = indices[e] if memory else e - n_edges
             u = tail[e] if memory else -1
-            cj = cost[i, j]
             for q in range(indptr[j], indptr[j + 1]):
                 k = indices[q]
                 if k == u:
                     continue
-                b = edge_len[q]
-                nd = de + (0.5 * (cj + cost[i, k]) + stretch) * b
-                if memory:
-                    nd += bend * (1.0 - cos_turn[e, q - indptr[j]])
+                nd = de + _within_layer_move(e, q, j, memory, layer_cost, indices, indptr, edge_len, cos_turn,
+                                             stretch, bend)
                 if nd < d[q] and nd + h[k] < upper:
                     d[q] = nd
                     p[q] = e

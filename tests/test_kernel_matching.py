@@ -231,6 +231,9 @@ def test_bad_inputs(wolf_pair):
         solve("kernel-matching", *wolf_pair, times="0.1,abc")
     with pytest.raises(InputError, match="initial map has"):
         solve("kernel-matching", *wolf_pair, initial=InitialMatch(map_xy=np.zeros(5, int)))
+    for refiner in ("kernel-matching", "product-manifold", "divergence-free"):  # a plain array is a dense map
+        with pytest.raises(InputError, match="initial map has 5 entries"):
+            solve(refiner, *wolf_pair, initial=np.zeros(5, int))
     with pytest.raises(InputError, match="does not take an initial map"):
         solve("descriptor-nn", *wolf_pair, initial=InitialMatch(map_xy=np.zeros(5, int)))
 

@@ -411,7 +411,7 @@ def test_turned_regions_are_reported():
 def test_region_agreements_are_the_means_over_each_region():
     """A map mirrored on one region and strongly so (the legs of a posed person, crossed) can have a
     negative mean agreement while the other regions are right: the per-region means show it, and the
-    whole-map rule (kernel matching's ``_reoriented``) applies only when all of them are negative."""
+    whole-map rule (kernel matching's ``_reoriented``) reads them (:func:`reversed_on_most`)."""
     from corrlib.methods.reorientation import region_agreements
 
     parts = _toy_parts(np.array([1, 1, 2, 2, 3, 3]))
@@ -423,3 +423,20 @@ def test_region_agreements_are_the_means_over_each_region():
     partial[[0, 5]] = -1  # unmatched vertices are left out
     assert region_agreements(partial, parts, one_strong) == {1: -30.0, 2: 5.0, 3: 5.0}
     assert region_agreements(ident, _toy_parts(np.zeros(6, dtype=int)), one_strong) == {}  # no protrusions
+
+
+def test_the_whole_map_turns_when_the_turn_rights_more_area_than_it_wrongs():
+    """Regions 1–3 of areas 1, 1, 2. Reversed everywhere: turned. One strongly mirrored region (a crossed leg)
+    and the rest right: the turn would wrong more area than it rights, kept. Mirrored everywhere but a weakly
+    positive thin limb (the orientation descriptors are weak there), which the turn makes weakly negative:
+    turned. A region the turn leaves on its side counts for neither. No regions: the mean decides (True)."""
+    from corrlib.methods.reorientation import region_areas, reversed_on_most
+
+    areas = region_areas(_toy_parts(np.array([1, 2, 3, 3, 0])), np.array([1.0, 1.0, 1.0, 1.0, 5.0]))
+    assert areas == {1: 1.0, 2: 1.0, 3: 2.0}  # the body (0) is no region
+    assert reversed_on_most({1: -3.0, 2: -2.0, 3: -4.0}, {1: 3.0, 2: 2.0, 3: 4.0}, areas)
+    assert not reversed_on_most({1: -30.0, 2: 5.0, 3: 6.0}, {1: 30.0, 2: -5.0, 3: -6.0}, areas)
+    assert reversed_on_most({1: 1.8, 2: -4.0, 3: -12.0}, {1: -0.6, 2: 4.0, 3: 13.0}, areas)
+    assert not reversed_on_most({1: -3.0, 2: 1.0, 3: 1.0}, {1: -1.0, 2: 1.0, 3: 1.0}, areas)
+    assert not reversed_on_most({1: -3.0, 2: -1.0, 3: 2.0}, {1: 3.0, 2: 1.0, 3: -2.0}, areas)  # 2 against 2
+    assert reversed_on_most({}, {}, {})

@@ -549,8 +549,6 @@ def _initial_map(source, target, params: DivergenceFreeParams, token, initial, w
 
         with watch("init"):
             initial = InitialMatch(map_xy=(yield from solve_iter(params.init, source, target, token=token)).map_xy)
-    elif not isinstance(initial, InitialMatch):
-        initial = InitialMatch(map_xy=np.asarray(initial))
     ix, iy = initial.pairs(source.n_vertices, target.n_vertices)  # named errors for empty or bad maps
     if ix.size == source.n_vertices:
         return iy

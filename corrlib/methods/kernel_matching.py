@@ -111,8 +111,9 @@ from corrlib.geometry.sampling import (
 from corrlib.geometry.spectrum import Spectrum, mesh_spectra
 from corrlib.methods.base import InitialMatch, MatchResult, param
 from corrlib.methods.registry import MethodSpec, register
-from corrlib.methods.reorientation import (ShapeParts, mirrored_map, region_agreements, turn_reversed_map,
-                                           turn_reversed_parts, turn_reversed_regions)
+from corrlib.methods.reorientation import (ShapeParts, mirrored_map, region_agreements, region_areas,
+                                           reversed_on_most, turn_reversed_map, turn_reversed_parts,
+                                           turn_reversed_regions)
 from corrlib.methods.resolution import keep_input_partners, kernel_width
 from corrlib.neighbours import nearest_rows
 from corrlib.progress import Progress, Stopwatch, scaled_progress
@@ -978,20 +979,23 @@ def multiscale_refinement(state: KernelState):
 
 def _reoriented(state: KernelState, map_xy: np.ndarray, map_yx: np.ndarray):
     """The final map turned by a reflection where it reverses orientation (:mod:`.reorientation`): the whole
-    map by the target's if its agreement is negative on every region, else every region (a protrusion with
+    map by the target's if its mean agreement is negative and the turn rights more of its area than it wrongs
+    (:func:`~.reorientation.reversed_on_most`), else every region (a protrusion with
     its shoulder) whose agreement is negative and turns positive by the better of the two shapes'
     reflections (with its mirror region, or alone where it crosses onto its mirror limb's image), then every
-    protrusion of the source whose image, turned by the target's, fits its shoulder better. A reflection is computed only when one of them is in question. Returns the maps and the three
-    decisions (None: not turned)."""
+    protrusion of the source whose image, turned by the target's, fits its shoulder better. A reflection is
+    computed only when one of them is in question. Returns the maps and the three decisions (None: not
+    turned)."""
     source, target = state.source, state.target
     mirror_x = functools.cache(lambda: mesh_reflection(source, state.spec_x))
     mirror_y = functools.cache(lambda: mesh_reflection(target, state.spec_y))
     parts_x, parts_y = (ShapeParts.of(mesh, spec) for mesh, spec in ((source, state.spec_x), (target, state.spec_y)))
     local = lambda m: _local_agreement(*state.orientation_blocks(), m)  # noqa: E731
     before = region_agreements(map_xy, parts_x, local)
-    turned = None
-    if all(value < 0 for value in before.values()):  # reversed everywhere (or no regions: the mean decides)
-        turned = turn_reversed_map(map_xy, map_yx, mirror_y, lambda m: _agreement(*state.orientation_blocks(), m))
+    turned = turn_reversed_map(map_xy, map_yx, mirror_y, lambda m: _agreement(*state.orientation_blocks(), m))
+    if turned is not None and not reversed_on_most(before, region_agreements(turned.map_xy, parts_x, local),
+                                                   region_areas(parts_x, state.spec_x.mass.diagonal())):
+        turned = None
     if turned is not None:
         map_xy, map_yx = turned.map_xy, turned.map_yx
         before = region_agreements(map_xy, parts_x, local)

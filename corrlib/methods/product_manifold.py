@@ -198,8 +198,6 @@ def solve_product_manifold(source, target, params: ProductManifoldParams, token,
         with watch("init"):
             fm = yield from solve_fmap_zoomout(source, target, FmapZoomOutParams(), token)
         initial = InitialMatch(map_xy=fm.map_xy)
-    if not isinstance(initial, InitialMatch):
-        initial = InitialMatch(map_xy=np.asarray(initial))
     ix, iy = initial.pairs(source.n_vertices, target.n_vertices)
     yield Progress("eigenpairs", 0.0, f"{params.n_eigs} per shape")
     with watch("eigen"):

@@ -21,8 +21,10 @@ from collections.abc import Generator
 from dataclasses import asdict, dataclass
 from typing import Any, Protocol
 
+import numpy as np
+
 from corrlib.errors import InputError, ParameterError
-from corrlib.methods.base import MatchResult, make_params, validate_params
+from corrlib.methods.base import InitialMatch, MatchResult, make_params, validate_params
 from corrlib.progress import CancelToken, Progress, run
 from corrlib.shapes import Contour2D, TriMesh
 
@@ -140,6 +142,8 @@ def solve_iter(method: str | MethodSpec, source, target, params=None, token: Can
     token = token or CancelToken()
     if initial is not None and not spec.refines:
         raise InputError(f"method {spec.name!r} does not take an initial map")
+    if initial is not None and not isinstance(initial, InitialMatch):  # a dense map given as an array
+        initial = InitialMatch(map_xy=np.asarray(initial))
     start = time.perf_counter()
     gen = spec.solve(source, target, params, token, initial=initial) if spec.refines else \
         spec.solve(source, target, params, token)
@@ -163,9 +167,10 @@ def solve(method: str | MethodSpec, source, target, params=None, *, callback=Non
     callback : callable, optional
         Receives every :class:`Progress`.
     token : CancelToken, optional
-    initial : optional
-        Starting point for methods that refine a map (``spec.refines``), e.g.
-        :class:`corrlib.methods.base.InitialMatch`.
+    initial : InitialMatch or (n_source,) int array, optional
+        Starting point for methods that refine a map (``spec.refines``): an
+        :class:`corrlib.methods.base.InitialMatch`, or a dense map (-1: no
+        partner), which is wrapped in one.
 
     Returns
     -------

@@ -57,10 +57,12 @@ mean over a region ``R`` of the source, has as clean a sign there.
 :func:`turn_reversed_regions` splits the source into its protrusions, each
 with its shoulder (a limb with the body beside it), and applies the
 whole-map rule to every region, ``a_R(m) < 0 < a_R(S ∘ m)``, while at least
-one region keeps its orientation (otherwise it is the whole map's case, and
-the whole-map rule applies only then: one strongly mirrored region can make
-the mean negative), and
-turns it together with its mirror region (``S_X(R)``, the other arm; the
+one region keeps its orientation (otherwise it is the whole map's case). The
+whole-map rule itself applies only where the turn rights regions of more
+area than it wrongs (:func:`reversed_on_most`): one strongly mirrored region
+can make the mean negative while the rest is right, and a wholly mirrored
+map can keep a weakly positive agreement on a thin limb. The region rule
+turns a region together with its mirror region (``S_X(R)``, the other arm; the
 head is its own): a mirrored part of a bilaterally symmetric map is closed
 under the reflection, a single limb with a negative agreement is not (that
 is a crossed limb, the parts' case, or noise). A region that is its own
@@ -351,13 +353,48 @@ def mirrored_map(map_xy: np.ndarray, map_yx: np.ndarray | None, mirror_x: np.nda
     return map_xy[mirror_x], turned_yx
 
 
+def reversed_on_most(before: dict[int, float], after: dict[int, float], weights: dict[int, float]) -> bool:
+    """Whether a turn rights more of the shape than it wrongs: the regions whose agreement goes from negative
+    to positive weigh more than those that go from positive to negative.
+
+    The whole map is turned by the target's reflection when it reverses most of the shape, not only when it
+    reverses every region: the orientation descriptors are weak on a thin limb, so a wholly mirrored map can
+    keep a slightly positive agreement there, while a map with one strongly mirrored region (a crossed leg)
+    and the rest right has a negative mean but is wronged on most of the shape by the turn.
+
+    Parameters
+    ----------
+    before, after : dict of int -> float
+        :func:`region_agreements` of the map and of the turned map.
+    weights : dict of int -> float
+        The area of every region of the source.
+
+    Returns
+    -------
+    bool
+        True also for a shape without regions (the mean agreement alone decides then).
+    """
+    if not before:
+        return True
+    righted = sum(weights[r] for r, value in before.items() if value < 0 < after.get(r, value))
+    wronged = sum(weights[r] for r, value in before.items() if after.get(r, value) < 0 < value)
+    return righted > wronged
+
+
+def region_areas(parts: ShapeParts, vertex_areas: np.ndarray) -> dict[int, float]:
+    """The area of every region of a shape (:func:`shoulder_regions`), from its (n,) vertex areas."""
+    regions = shoulder_regions(parts)
+    return {int(r): float(vertex_areas[regions == r].sum()) for r in np.unique(regions) if r > 0}
+
+
 def region_agreements(map_xy: np.ndarray, parts_x: ShapeParts,
                       local_agreement: Callable[[np.ndarray], np.ndarray]) -> dict[int, float]:
     """The mean agreement of the map on every region of the source with matched vertices
     (:func:`shoulder_regions`; empty for a shape without protrusions).
 
-    A map reversed on every region is the whole-map rule's case (:func:`turn_reversed_map`); one reversed on
-    some regions only is :func:`turn_reversed_regions`', however negative its mean."""
+    A map reversed on most of the shape is the whole-map rule's case (:func:`turn_reversed_map`,
+    :func:`reversed_on_most`); one reversed on some regions only is :func:`turn_reversed_regions`', however
+    negative its mean."""
     regions = shoulder_regions(parts_x)
     matched = map_xy >= 0
     values = local_agreement(map_xy)

@@ -88,7 +88,6 @@ Map convention: ``map_xy[i]`` = vertex of Y matched to vertex i of X.
 
 from __future__ import annotations
 
-import functools
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 
@@ -96,9 +95,6 @@ import numpy as np
 
 from corrlib.assignment import area_capacities, linear_assignment
 from corrlib.descriptors import DESCRIPTOR_KINDS, mesh_descriptors
-from corrlib.descriptors.orientation import orientation_descriptors
-from corrlib.descriptors.symmetry import K_FINAL as REFLECTION_EIGENPAIRS
-from corrlib.descriptors.symmetry import mesh_reflection
 from corrlib.errors import ParameterError
 from corrlib.geometry.fmaps import pointwise_to_functional
 from corrlib.geometry.sampling import (
@@ -111,9 +107,8 @@ from corrlib.geometry.sampling import (
 from corrlib.geometry.spectrum import Spectrum, mesh_spectra
 from corrlib.methods.base import InitialMatch, MatchResult, param
 from corrlib.methods.registry import MethodSpec, register
-from corrlib.methods.reorientation import (ShapeParts, mirrored_map, region_agreements, region_areas,
-                                           reversed_on_most, turn_reversed_map, turn_reversed_parts,
-                                           turn_reversed_regions)
+from corrlib.methods.reorientation import (can_reorient, mean_agreement, orientation_blocks, reorient,
+                                           standardised)
 from corrlib.methods.resolution import keep_input_partners, kernel_width
 from corrlib.neighbours import nearest_rows
 from corrlib.progress import Progress, Stopwatch, scaled_progress
@@ -309,23 +304,11 @@ def _descriptor_similarity(f_rows: np.ndarray, f_cols: np.ndarray) -> np.ndarray
     return -d2 / max(float(d2.max()), 1e-30)
 
 
-def _standardised(desc_x: np.ndarray, desc_y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """Both descriptor sets with every dimension divided by its joint standard deviation."""
-    scale = np.concatenate([desc_x, desc_y]).std(axis=0)
-    scale[scale == 0] = 1.0
-    return desc_x / scale, desc_y / scale
-
-
 def _descriptors(source, target, spec_x, spec_y, kind: str):
     """Standardised descriptors of both shapes."""
     desc_x = mesh_descriptors(source, kind, spectrum=spec_x) if kind != "shot" else mesh_descriptors(source, kind)
     desc_y = mesh_descriptors(target, kind, spectrum=spec_y) if kind != "shot" else mesh_descriptors(target, kind)
-    return _standardised(desc_x, desc_y)
-
-
-def _orientation_blocks(source, target, spec_x: Spectrum, spec_y: Spectrum) -> tuple[np.ndarray, np.ndarray]:
-    """The standardised orientation-aware descriptors of both shapes ((n_x, d), (n_y, d))."""
-    return _standardised(orientation_descriptors(source, spec_x), orientation_descriptors(target, spec_y))
+    return standardised(desc_x, desc_y)
 
 
 def _with_orientation(desc_x, desc_y, or_x, or_y, weight: float):
@@ -653,7 +636,7 @@ class KernelState:
     def orientation_blocks(self) -> tuple[np.ndarray, np.ndarray]:
         """The standardised orientation-aware descriptors (computed once: initial assignment and result)."""
         if self.orientation is None:
-            self.orientation = _orientation_blocks(self.source, self.target, self.spec_x, self.spec_y)
+            self.orientation = orientation_blocks(self.source, self.target, self.spec_x, self.spec_y)
         return self.orientation
 
     @property
@@ -977,40 +960,6 @@ def multiscale_refinement(state: KernelState):
     return full_map_xy, cell_map_yx
 
 
-def _reoriented(state: KernelState, map_xy: np.ndarray, map_yx: np.ndarray):
-    """The final map turned by a reflection where it reverses orientation (:mod:`.reorientation`): the whole
-    map by the target's if its mean agreement is negative and the turn rights more of its area than it wrongs
-    (:func:`~.reorientation.reversed_on_most`), else every region (a protrusion with
-    its shoulder) whose agreement is negative and turns positive by the better of the two shapes'
-    reflections (with its mirror region, or alone where it crosses onto its mirror limb's image), then every
-    protrusion of the source whose image, turned by the target's, fits its shoulder better. A reflection is
-    computed only when one of them is in question. Returns the maps and the three decisions (None: not
-    turned)."""
-    source, target = state.source, state.target
-    mirror_x = functools.cache(lambda: mesh_reflection(source, state.spec_x))
-    mirror_y = functools.cache(lambda: mesh_reflection(target, state.spec_y))
-    parts_x, parts_y = (ShapeParts.of(mesh, spec) for mesh, spec in ((source, state.spec_x), (target, state.spec_y)))
-    local = lambda m: _local_agreement(*state.orientation_blocks(), m)  # noqa: E731
-    before = region_agreements(map_xy, parts_x, local)
-    turned = turn_reversed_map(map_xy, map_yx, mirror_y, lambda m: _agreement(*state.orientation_blocks(), m))
-    if turned is not None and not reversed_on_most(before, region_agreements(turned.map_xy, parts_x, local),
-                                                   region_areas(parts_x, state.spec_x.mass.diagonal())):
-        turned = None
-    if turned is not None:
-        map_xy, map_yx = turned.map_xy, turned.map_yx
-        before = region_agreements(map_xy, parts_x, local)
-    turned_regions = turn_reversed_regions(
-        map_xy, map_yx, parts_x, before, lambda m, m_yx: mirrored_map(m, m_yx, mirror_x(), mirror_y(), parts_x,
-                                                                      parts_y), mirror_x, local,
-        parts_y, mirror_y)
-    if turned_regions is not None:
-        map_xy, map_yx = turned_regions.map_xy, turned_regions.map_yx
-    turned_parts = turn_reversed_parts(map_xy, map_yx, parts_x, parts_y, mirror_y)
-    if turned_parts is not None:
-        map_xy, map_yx = turned_parts.map_xy, turned_parts.map_yx
-    return map_xy, map_yx, turned, turned_regions, turned_parts
-
-
 def kernel_result(state: KernelState, full_map_xy: np.ndarray, full_map_yx: np.ndarray):
     """Stage 7: the turns of reversed regions, the final ZoomOut step (:func:`_pointwise_from_basis`), the
     kernel energy ``<Π, K_Y Π K_X>`` of the final map at the smallest time, the :class:`MatchResult`. A
@@ -1023,10 +972,12 @@ def kernel_result(state: KernelState, full_map_xy: np.ndarray, full_map_yx: np.n
     turned = turned_regions = turned_parts = None
     # landmarks fix the orientation themselves; a cut changes a shape's reflection and biharmonic distances
     if params.reorient and state.anchors_x.size == 0 and not params.partial and \
-            state.source.is_closed and state.target.is_closed and state.spec_y.k >= REFLECTION_EIGENPAIRS:
+            can_reorient(state.source, state.target, state.spec_y):
         with watch("orientation"):
-            full_map_xy, full_map_yx, turned, turned_regions, turned_parts = _reoriented(state, full_map_xy,
-                                                                                         full_map_yx)
+            done = reorient(state.source, state.target, state.spec_x, state.spec_y, full_map_xy, full_map_yx,
+                            state.orientation_blocks)
+        full_map_xy, full_map_yx = done.map_xy, done.map_yx
+        turned, turned_regions, turned_parts = done.turned, done.turned_regions, done.turned_parts
     smooth_k = min(params.smooth_k, k) if params.smooth_k >= 0 else min(
         resolved_eigenpairs(state.spec_x.evals, state.source.area, state.taus[-1]),
         resolved_eigenpairs(state.spec_y.evals, state.target.area, state.taus[-1]))
@@ -1038,7 +989,7 @@ def kernel_result(state: KernelState, full_map_xy: np.ndarray, full_map_yx: np.n
     c = _alignment(psi[full_map_xy[full_map_xy >= 0]], phi[full_map_xy >= 0]) + anchor_c
     energy = kernel_energy(c, decay_y, decay_x)
     extras = {
-        "orientation_agreement": _agreement(*state.orientation_blocks(), full_map_xy),
+        "orientation_agreement": mean_agreement(*state.orientation_blocks(), full_map_xy),
         "turned": turned is not None,
         "agreement_before_turn": None if turned is None else turned.agreement_before,
         "turned_regions": 0 if turned_regions is None else len(turned_regions.parts),
@@ -1094,20 +1045,7 @@ def orientation_agreement(source, target, map_xy: np.ndarray, spec_x: Spectrum, 
     keeps left on left and negative for its mirror image — which the kernel energy cannot tell apart, since
     a reflection of a symmetric shape preserves the heat kernels. Unmatched vertices (-1) are left out.
     """
-    return _agreement(*_orientation_blocks(source, target, spec_x, spec_y), map_xy)
-
-
-def _local_agreement(or_x: np.ndarray, or_y: np.ndarray, map_xy: np.ndarray) -> np.ndarray:
-    """(n_X,) float: every source vertex's ``<O_X(x), O_Y(m(x))>`` (0 where unmatched)."""
-    return np.where(map_xy >= 0, np.sum(or_x * or_y[np.maximum(map_xy, 0)], axis=1), 0.0)
-
-
-def _agreement(or_x: np.ndarray, or_y: np.ndarray, map_xy: np.ndarray) -> float:
-    """:func:`orientation_agreement` from the standardised descriptors."""
-    ok = map_xy >= 0
-    if not np.any(ok):
-        return 0.0
-    return float(np.mean(np.sum(or_x[ok] * or_y[map_xy[ok]], axis=1)))
+    return mean_agreement(*orientation_blocks(source, target, spec_x, spec_y), map_xy)
 
 
 def turn_note(extras: dict) -> str | None:

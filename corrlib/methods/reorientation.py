@@ -100,14 +100,17 @@ matching applies them to closed meshes without partial matching only.
 
 from __future__ import annotations
 
+import functools
 from dataclasses import dataclass
 from typing import Callable
 
 import numpy as np
 from scipy.spatial.distance import cdist
 
+from corrlib.descriptors.orientation import orientation_descriptors
 from corrlib.descriptors.spectral import biharmonic_embedding
-from corrlib.descriptors.symmetry import reflection_distortion
+from corrlib.descriptors.symmetry import K_FINAL as REFLECTION_EIGENPAIRS
+from corrlib.descriptors.symmetry import mesh_reflection, reflection_distortion
 
 
 @dataclass(frozen=True)
@@ -496,3 +499,104 @@ def _colliding_regions(map_xy: np.ndarray, parts_x: ShapeParts, parts_y: ShapePa
         if np.mean(values[(regions == r) & matched]) > 0:
             chosen.append(r)
     return chosen
+
+
+# ----------------------------------------------------------------------------- the orientation stage of a refiner
+
+
+def standardised(desc_x: np.ndarray, desc_y: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Both descriptor sets ((n_x, d), (n_y, d)) with every dimension divided by its joint standard deviation."""
+    scale = np.concatenate([desc_x, desc_y]).std(axis=0)
+    scale[scale == 0] = 1.0
+    return desc_x / scale, desc_y / scale
+
+
+def orientation_blocks(source, target, spec_x, spec_y) -> tuple[np.ndarray, np.ndarray]:
+    """The standardised orientation-aware descriptors of both shapes ((n_x, d), (n_y, d);
+    :func:`~corrlib.descriptors.orientation.orientation_descriptors`)."""
+    return standardised(orientation_descriptors(source, spec_x), orientation_descriptors(target, spec_y))
+
+
+def local_agreement(or_x: np.ndarray, or_y: np.ndarray, map_xy: np.ndarray) -> np.ndarray:
+    """(n_X,) float: every source vertex's ``<O_X(x), O_Y(m(x))>`` (0 where unmatched)."""
+    return np.where(map_xy >= 0, np.sum(or_x * or_y[np.maximum(map_xy, 0)], axis=1), 0.0)
+
+
+def mean_agreement(or_x: np.ndarray, or_y: np.ndarray, map_xy: np.ndarray) -> float:
+    """The orientation agreement ``a(m)``: the mean of :func:`local_agreement` over the matched source vertices
+    (0 if none)."""
+    ok = map_xy >= 0
+    if not np.any(ok):
+        return 0.0
+    return float(np.mean(np.sum(or_x[ok] * or_y[map_xy[ok]], axis=1)))
+
+
+@dataclass(frozen=True)
+class Reoriented:
+    """A map after the orientation stage (:func:`reorient`).
+
+    Attributes
+    ----------
+    map_xy : (n_X,) int
+    map_yx : (n_Y,) int or None
+    turned : Turned or None
+        The whole map turned by the target's reflection.
+    turned_regions, turned_parts : TurnedParts or None
+        The regions and the parts turned.
+    """
+
+    map_xy: np.ndarray
+    map_yx: np.ndarray | None
+    turned: Turned | None
+    turned_regions: TurnedParts | None
+    turned_parts: TurnedParts | None
+
+
+def can_reorient(source, target, spec_y) -> bool:
+    """Whether the orientation stage applies: both shapes closed (a cut changes a shape's reflection and its
+    biharmonic distances, see the module docstring) and enough eigenpairs for the target's reflection."""
+    return source.is_closed and target.is_closed and spec_y.k >= REFLECTION_EIGENPAIRS
+
+
+def reorient(source, target, spec_x, spec_y, map_xy: np.ndarray, map_yx: np.ndarray | None,
+             blocks: Callable[[], tuple[np.ndarray, np.ndarray]]) -> Reoriented:
+    """A map turned by a reflection where it reverses orientation (the module docstring): the whole map by
+    the target's if its mean agreement is negative and the turn rights more of its area than it wrongs
+    (:func:`reversed_on_most`), else every region (a protrusion with its shoulder) whose agreement is negative
+    and turns positive by the better of the two shapes' reflections (with its mirror region, or alone where
+    it crosses onto its mirror limb's image), then every protrusion of the source whose image, turned by the
+    target's, fits its shoulder better. A reflection is computed only when one of them is in question.
+
+    Parameters
+    ----------
+    source, target : TriMesh
+    spec_x, spec_y : Spectrum
+        Their eigenpairs (at least :data:`REFLECTION_EIGENPAIRS` of the target, :func:`can_reorient`).
+    map_xy : (n_X,) int
+        -1 where unmatched.
+    map_yx : (n_Y,) int or None
+    blocks : callable
+        Returns :func:`orientation_blocks` of the pair (a refiner that has them already passes them).
+    """
+    mirror_x = functools.cache(lambda: mesh_reflection(source, spec_x))
+    mirror_y = functools.cache(lambda: mesh_reflection(target, spec_y))
+    parts_x, parts_y = ShapeParts.of(source, spec_x), ShapeParts.of(target, spec_y)
+    local = lambda m: local_agreement(*blocks(), m)  # noqa: E731
+    before = region_agreements(map_xy, parts_x, local)
+    turned = turn_reversed_map(map_xy, map_yx, mirror_y, lambda m: mean_agreement(*blocks(), m))
+    if turned is not None and not reversed_on_most(before, region_agreements(turned.map_xy, parts_x, local),
+                                                   region_areas(parts_x, spec_x.mass.diagonal())):
+        turned = None
+    if turned is not None:
+        map_xy, map_yx = turned.map_xy, turned.map_yx
+        before = region_agreements(map_xy, parts_x, local)
+    turned_regions = turn_reversed_regions(
+        map_xy, map_yx, parts_x, before,
+        lambda m, m_yx: mirrored_map(m, m_yx, mirror_x(), mirror_y(), parts_x, parts_y), mirror_x, local,
+        parts_y, mirror_y)
+    if turned_regions is not None:
+        map_xy, map_yx = turned_regions.map_xy, turned_regions.map_yx
+    turned_parts = turn_reversed_parts(map_xy, map_yx, parts_x, parts_y, mirror_y)
+    if turned_parts is not None:
+        map_xy, map_yx = turned_parts.map_xy, turned_parts.map_yx
+    return Reoriented(map_xy, map_yx, turned, turned_regions, turned_parts)

@@ -32,7 +32,7 @@ The stages, each a function below sharing one :class:`KernelState`:
    their input partner (:mod:`.resolution`: the kernel cannot tell such
    partners apart).
 7. :func:`kernel_result` — a map reversed on most of the shape, and limbs
-   matched to their mirror-image limbs, turned by the target's reflection
+   matched to their mirror-image limbs, turned by a reflection
    (:mod:`.reorientation`); final energy, optional pointwise smoothing, result.
 
 Design choices, in brief (the measurements behind them are in
@@ -202,8 +202,8 @@ class KernelMatchingParams:
                                "(a bijection within each cell; better for two meshes of the same connectivity).")
     reorient: bool = param(True, label="Turn a reversed map",
                            help="A final map that sends left to right on most of the shape (negative orientation "
-                                "agreement) is composed with the target's intrinsic reflection when that turns it, "
-                                "and a limb matched to the mirror-image limb is turned when that fits its shoulder "
+                                "agreement) is composed with an intrinsic reflection (the target's or the source's, "
+                                "the better) when that turns it, and a limb matched to the mirror-image limb is turned when that fits its shoulder "
                                 "better (the kernel energy cannot tell either apart). Closed, complete shapes only: "
                                 "a cut changes the reflection and the distances; at least 60 eigenpairs.")
     backend: str = param("auction", label="Assignment backend", choices=("auction", "scipy"),
@@ -1056,7 +1056,7 @@ def turn_note(extras: dict) -> str | None:
     said = []
     if extras.get("turned"):
         said.append(f"the map sent left to right on most of the shape (orientation agreement "
-                    f"{extras['agreement_before_turn']:.2f}); it was composed with the target's intrinsic "
+                    f"{extras['agreement_before_turn']:.2f}); it was composed with an intrinsic "
                     f"reflection (agreement now {extras['orientation_agreement']:.2f})")
     if extras.get("turned_regions"):
         count = extras["turned_regions"]

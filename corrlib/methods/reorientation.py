@@ -1,4 +1,4 @@
-"""The whole-shape left/right decision of a map: a reversed map is turned by the target's reflection.
+"""The whole-shape left/right decision of a map: a reversed map is turned by a shape's reflection.
 
 A bilaterally symmetric target ``Y`` has an intrinsic reflection ``S_Y``, an
 isometry of ``Y`` onto itself that reverses orientation
@@ -20,7 +20,10 @@ for a map that keeps left on left and changes sign under ``S_Y``:
     a(m) < 0 < a(S_Y ∘ m),
 
 i.e. when the map reverses orientation on most of the shape *and* the
-self-map found on the target really turns it. The second condition rejects
+self-map found on the target really turns it. (For an isometry ``S_Y ∘ m =
+m ∘ S_X``; the computed reflections are not equally good, a posed person's
+can be poor where the other pose's is exact, so both turns are tried and the
+one the orientation descriptors agree with more is kept.) The second condition rejects
 a target without a clean reflection (the computed self-map mixes several
 near-symmetries, or there is none): the turned map is then no better oriented
 and the map is left as it is (and reported as reversed). It cannot reject a
@@ -115,14 +118,14 @@ from corrlib.descriptors.symmetry import mesh_reflection, reflection_distortion
 
 @dataclass(frozen=True)
 class Turned:
-    """A map composed with the target's reflection.
+    """A map composed with a reflection.
 
     Attributes
     ----------
     map_xy : (n_X,) int
-        ``S_Y[m(x)]`` (-1 kept).
+        ``S_Y[m(x)]`` or ``m[S_X(x)]`` (-1 kept).
     map_yx : (n_Y,) int or None
-        ``m⁻¹(S_Y(y))``: the backward map composed on its input side (``S_Y`` is an involution).
+        The backward map turned alike (``m⁻¹ ∘ S_Y`` or ``S_X ∘ m⁻¹``; a reflection is an involution).
     agreement_before, agreement : float
         Orientation agreement of the input map and of the turned one.
     """
@@ -133,19 +136,46 @@ class Turned:
     agreement: float
 
 
-def turn_reversed_map(map_xy: np.ndarray, map_yx: np.ndarray | None, mirror_y: Callable[[], np.ndarray],
+def composed_with(mirror_y: np.ndarray) -> Callable[[np.ndarray, np.ndarray | None], tuple]:
+    """The turn by the target's reflection: ``(m, m⁻¹) ↦ (S_Y ∘ m, m⁻¹ ∘ S_Y)`` (-1 kept; ``S_Y`` is an
+    involution, so the backward map is composed on its input side)."""
+    mirror_y = np.asarray(mirror_y, dtype=np.int64)
+
+    def turn(map_xy, map_yx):
+        map_xy = np.asarray(map_xy)
+        turned_yx = None if map_yx is None else np.asarray(map_yx)[mirror_y]
+        return np.where(map_xy >= 0, mirror_y[np.maximum(map_xy, 0)], -1), turned_yx
+
+    return turn
+
+
+def precomposed_with(mirror_x: np.ndarray) -> Callable[[np.ndarray, np.ndarray | None], tuple]:
+    """The turn by the source's reflection: ``(m, m⁻¹) ↦ (m ∘ S_X, S_X ∘ m⁻¹)`` (-1 kept)."""
+    mirror_x = np.asarray(mirror_x, dtype=np.int64)
+
+    def turn(map_xy, map_yx):
+        turned_yx = None if map_yx is None else np.where(np.asarray(map_yx) >= 0,
+                                                          mirror_x[np.maximum(map_yx, 0)], -1)
+        return np.asarray(map_xy)[mirror_x], turned_yx
+
+    return turn
+
+
+def turn_reversed_map(map_xy: np.ndarray, map_yx: np.ndarray | None,
+                      mirror: Callable[[np.ndarray, np.ndarray | None], tuple],
                       agreement: Callable[[np.ndarray], float]) -> Turned | None:
-    """``S_Y ∘ m`` if ``a(m) < 0 < a(S_Y ∘ m)``, else None (see the module docstring).
+    """The turned map if ``a(m) < 0 < a(turned)``, else None (see the module docstring).
 
     Parameters
     ----------
     map_xy : (n_X,) int
         Target vertex of every source vertex, -1 where unmatched.
     map_yx : (n_Y,) int or None
-        The backward map, composed the same way if given.
-    mirror_y : callable returning (n_Y,) int
-        The target's reflection ``S_Y`` (vertex ``y`` goes to ``mirror[y]``); called only for a reversed map,
-        so that a well oriented one costs nothing.
+        The backward map, turned alike if given.
+    mirror : callable
+        ``(map_xy, map_yx) -> (turned_xy, turned_yx)``: the maps turned by a reflection
+        (:func:`composed_with` the target's, or :func:`mirrored_map`, the better of the two shapes'); called
+        only for a reversed map, so that a well oriented one costs nothing.
     agreement : callable
         ``a(map_xy)``, the orientation agreement of a forward map.
 
@@ -156,13 +186,11 @@ def turn_reversed_map(map_xy: np.ndarray, map_yx: np.ndarray | None, mirror_y: C
     before = float(agreement(map_xy))
     if not before < 0:
         return None
-    mirror = np.asarray(mirror_y(), dtype=np.int64)
-    turned_xy = np.where(map_xy >= 0, mirror[np.maximum(map_xy, 0)], -1)
+    turned_xy, turned_yx = mirror(map_xy, map_yx)
     after = float(agreement(turned_xy))
     if not after > 0:
         return None
-    turned_yx = None if map_yx is None else np.asarray(map_yx)[mirror]
-    return Turned(turned_xy, turned_yx, before, after)
+    return Turned(np.asarray(turned_xy), turned_yx, before, after)
 
 
 def part_shoulders(labels: np.ndarray, mesh) -> np.ndarray:
@@ -348,19 +376,14 @@ def mirrored_map(map_xy: np.ndarray, map_yx: np.ndarray | None, mirror_x: np.nda
     if mirror_x is not None:
         candidates.append((reflection_distortion(mirror_x, parts_x.embedding), "x"))
     _, side = min(candidates)
-    map_xy = np.asarray(map_xy)
-    if side == "y":
-        turned_yx = None if map_yx is None else np.asarray(map_yx)[mirror_y]
-        return np.where(map_xy >= 0, mirror_y[np.maximum(map_xy, 0)], -1), turned_yx
-    turned_yx = None if map_yx is None else np.where(map_yx >= 0, mirror_x[np.maximum(map_yx, 0)], -1)
-    return map_xy[mirror_x], turned_yx
+    return (composed_with(mirror_y) if side == "y" else precomposed_with(mirror_x))(map_xy, map_yx)
 
 
 def reversed_on_most(before: dict[int, float], after: dict[int, float], weights: dict[int, float]) -> bool:
     """Whether a turn rights more of the shape than it wrongs: the regions whose agreement goes from negative
     to positive weigh more than those that go from positive to negative.
 
-    The whole map is turned by the target's reflection when it reverses most of the shape, not only when it
+    The whole map is turned by a reflection when it reverses most of the shape, not only when it
     reverses every region: the orientation descriptors are weak on a thin limb, so a wholly mirrored map can
     keep a slightly positive agreement there, while a map with one strongly mirrored region (a crossed leg)
     and the rest right has a negative mean but is wronged on most of the shape by the turn.
@@ -540,7 +563,7 @@ class Reoriented:
     map_xy : (n_X,) int
     map_yx : (n_Y,) int or None
     turned : Turned or None
-        The whole map turned by the target's reflection.
+        The whole map turned by a reflection.
     turned_regions, turned_parts : TurnedParts or None
         The regions and the parts turned.
     """
@@ -560,9 +583,10 @@ def can_reorient(source, target, spec_y) -> bool:
 
 def reorient(source, target, spec_x, spec_y, map_xy: np.ndarray, map_yx: np.ndarray | None,
              blocks: Callable[[], tuple[np.ndarray, np.ndarray]]) -> Reoriented:
-    """A map turned by a reflection where it reverses orientation (the module docstring): the whole map by
-    the target's if its mean agreement is negative and the turn rights more of its area than it wrongs
-    (:func:`reversed_on_most`), else every region (a protrusion with its shoulder) whose agreement is negative
+    """A map turned by a reflection where it reverses orientation (the module docstring): the whole map if
+    its mean agreement is negative and a turn, by the target's reflection or by the source's, makes it
+    positive and rights more of its area than it wrongs (:func:`reversed_on_most`; of two such turns the
+    one with the higher agreement), else every region (a protrusion with its shoulder) whose agreement is negative
     and turns positive by the better of the two shapes' reflections (with its mirror region, or alone where
     it crosses onto its mirror limb's image), then every protrusion of the source whose image, turned by the
     target's, fits its shoulder better. A reflection is computed only when one of them is in question.
@@ -583,10 +607,13 @@ def reorient(source, target, spec_x, spec_y, map_xy: np.ndarray, map_yx: np.ndar
     parts_x, parts_y = ShapeParts.of(source, spec_x), ShapeParts.of(target, spec_y)
     local = lambda m: local_agreement(*blocks(), m)  # noqa: E731
     before = region_agreements(map_xy, parts_x, local)
-    turned = turn_reversed_map(map_xy, map_yx, mirror_y, lambda m: mean_agreement(*blocks(), m))
-    if turned is not None and not reversed_on_most(before, region_agreements(turned.map_xy, parts_x, local),
-                                                   region_areas(parts_x, spec_x.mass.diagonal())):
-        turned = None
+    areas = region_areas(parts_x, spec_x.mass.diagonal())
+    candidates = (turn_reversed_map(map_xy, map_yx, turn, lambda m: mean_agreement(*blocks(), m))
+                  for turn in (lambda m, m_yx: composed_with(mirror_y())(m, m_yx),
+                               lambda m, m_yx: precomposed_with(mirror_x())(m, m_yx)))
+    turned = max((t for t in candidates if t is not None and
+                  reversed_on_most(before, region_agreements(t.map_xy, parts_x, local), areas)),
+                 key=lambda t: t.agreement, default=None)
     if turned is not None:
         map_xy, map_yx = turned.map_xy, turned.map_yx
         before = region_agreements(map_xy, parts_x, local)

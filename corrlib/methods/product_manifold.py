@@ -245,7 +245,8 @@ register(MethodSpec(
     params=ProductManifoldParams, solve=solve_product_manifold, rank=-5, refines=True,
     description="Refines sparse or noisy matches into a dense map: heat diffusion of the matches on the "
                 "product X × Y, then localized (Dirichlet) product harmonics on shrinking bands around the "
-                "current map (thesis §9.4.2)."))
+                "current map (thesis §9.4.2); a map the input sent left to right (whole, or mirrored limbs) is "
+                "turned by a reflection, as in kernel matching."))
 
 
 # ----------------------------------------------------------------------------- basis comparison (Figure 9.6)

@@ -203,9 +203,10 @@ class KernelMatchingParams:
     reorient: bool = param(True, label="Turn a reversed map",
                            help="A final map that sends left to right on most of the shape (negative orientation "
                                 "agreement) is composed with an intrinsic reflection (the target's or the source's, "
-                                "the better) when that turns it, and a limb matched to the mirror-image limb is turned when that fits its shoulder "
-                                "better (the kernel energy cannot tell either apart). Closed, complete shapes only: "
-                                "a cut changes the reflection and the distances; at least 60 eigenpairs.")
+                                "the better) when that turns it, and a limb matched to the mirror-image limb is "
+                                "turned when that fits its shoulder better (the kernel energy cannot tell either "
+                                "apart). Closed, complete shapes only: a cut changes the reflection and the "
+                                "distances; at least 60 eigenpairs.")
     backend: str = param("auction", label="Assignment backend", choices=("auction", "scipy"),
                          help="ε-scaling auction (fast) or scipy's exact solver (slow, for checks).")
 

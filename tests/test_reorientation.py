@@ -387,17 +387,27 @@ def test_kernel_matching_turns_a_crossed_leg_of_a_posed_person():
     leg, where the left leg also lies (measured 0.155 direct, 0.044 mirror-accepted). That leg's region has a
     strongly negative agreement and its mirror region a positive one, so no mirror pair is reversed; the
     collision on one target leg is what shows it, and the target's reflection moves it onto the free leg
-    (measured 0.085)."""
+    (measured 0.082, the turned leg a rough copy: the posed target's computed reflection is inexact). The
+    turned map is then optimised once more (measured 0.020, mirror-accepted 0.020)."""
     from _humanoid import humanoids
     from corrlib.shapes import TriMesh
+
+    from corrlib.methods import solve_iter
+    from corrlib.progress import run
 
     shapes, mirror = humanoids(front=True)
     source, target = (TriMesh(*shapes[name], name=name) for name in ("human1", "human2"))
     ident = np.arange(source.n_vertices)
-    result = solve("kernel-matching", source, target)
+    fractions = []
+    result = run(solve_iter("kernel-matching", source, target),
+                 callback=lambda report: fractions.append(report.fraction))
     summary = geodesic_errors(result.map_xy, target, ident, ident, gt_target_sym=mirror).summary()
-    assert result.extras["turned_regions"] >= 1
-    assert summary["mean"] < 0.11, summary["mean"]
+    assert result.extras["turned_regions"] >= 1 and result.extras["first_pass"]["turned_regions"] >= 1
+    known = [f for f in fractions if f >= 0]  # the second pass continues the progress bar, never back
+    assert known[-1] == 1.0 and np.all(np.diff(known) >= -1e-12)
+    assert summary["mean"] < 0.04 and summary["mean"] <= 1.3 * summary["mean_sym"], summary
+    first = geodesic_errors(result.extras["first_pass_map_xy"], target, ident, ident)
+    assert first.summary()["mean"] > 1.5 * summary["mean"]  # the second pass is what made it right
 
 
 def test_turned_regions_are_reported():

@@ -34,6 +34,9 @@ The stages, each a function below sharing one :class:`KernelState`:
 7. :func:`kernel_result` — a map reversed on most of the shape, and limbs
    matched to their mirror-image limbs, turned by a reflection
    (:mod:`.reorientation`); final energy, optional pointwise smoothing, result.
+8. :func:`reoptimised` — where stage 7 turned anything, stages 2–7 once more
+   from the turned map (a turn by a computed reflection is a start, not an
+   optimum).
 
 Design choices, in brief (the measurements behind them are in
 ``docs/decisions.md``, "Kernel matching: measured design choices"):
@@ -205,8 +208,8 @@ class KernelMatchingParams:
                                 "agreement) is composed with an intrinsic reflection (the target's or the source's, "
                                 "the better) when that turns it, and a limb matched to the mirror-image limb is "
                                 "turned when that fits its shoulder better (the kernel energy cannot tell either "
-                                "apart). Closed, complete shapes only: a cut changes the reflection and the "
-                                "distances; at least 60 eigenpairs.")
+                                "apart); a turned map is then optimised once more. Closed, complete shapes only: a "
+                                "cut changes the reflection and the distances; at least 60 eigenpairs.")
     backend: str = param("auction", label="Assignment backend", choices=("auction", "scipy"),
                          help="ε-scaling auction (fast) or scipy's exact solver (slow, for checks).")
 
@@ -1001,7 +1004,6 @@ def kernel_result(state: KernelState, full_map_xy: np.ndarray, full_map_yx: np.n
         "unmatched_y": int(np.sum(full_map_yx < 0)), "n_eigs": k, "n_seeds": n_seed,
         "seeds_x": seed_vertices_x, "seeds_matched_y": seed_vertices_y,
     }
-    yield Progress("done", 1.0, f"energy {energy:.6g}")
     return MatchResult("kernel-matching", full_map_xy, full_map_yx, energy, watch.times, energy_sense="max",
                        energy_meaning="QAP kernel energy <Π, K_Y Π K_X> at the smallest time (higher is better); "
                                       "energy_trace: the objective after each DC iteration (½ scaled kernel term "
@@ -1016,9 +1018,61 @@ def kernel_matching(source, target, params: KernelMatchingParams, token, initial
     one or two starts and keep the better, continue over the decreasing times, refine on finer scales; a
     refined dense map keeps its partners within the smallest kernel's width, and farther moved ones where they are
     the more isometric partner (:mod:`corrlib.methods.resolution`; ``extras["kept_matches"]``, the latter also
-    in ``extras["isometric_matches"]``).
+    in ``extras["isometric_matches"]``). Where the orientation stage turned anything, the turned map is
+    optimised once more (:func:`reoptimised`).
     """
     state = yield from prepare(source, target, params, token)
+    result = yield from solve_prepared(state, initial)
+    if turned_anything(result.extras):
+        result = yield from reoptimised(state, result)
+    yield Progress("done", 1.0, f"energy {result.energy:.6g}")
+    return result
+
+
+#: the first pass's decisions a re-optimised result keeps (``extras["first_pass"]``)
+FIRST_PASS_EXTRAS = ("turned", "turned_regions", "turned_parts", "agreement_before_turn", "orientation_agreement")
+
+
+def turned_anything(extras: dict) -> bool:
+    """Whether the orientation stage of :func:`kernel_result` changed the map (its ``extras``)."""
+    return bool(extras.get("turned") or extras.get("turned_regions") or extras.get("turned_parts"))
+
+
+def reoptimised(state: KernelState, turned: MatchResult):
+    """The DC iterations and the finer scales run once more from a map the orientation stage turned (a
+    generator; returns the new :class:`MatchResult`).
+
+    ``extras["first_pass"]``: the first pass's decisions (:data:`FIRST_PASS_EXTRAS`);
+    ``extras["first_pass_map_xy"]``: its turned map, (n_x,) int.
+
+    A turn composes the map with a *computed* reflection (:mod:`.reorientation`), which is only as exact as
+    that reflection: a posed person's can be 0.02–0.07 √area off on the limbs, and the turned limbs are then
+    a rough copy of the right ones, not an optimum of the kernel energy. The map is therefore a start, and
+    kernel matching refines it as it refines any given map (``initial``; the partners within the smallest
+    kernel's width are kept, :mod:`corrlib.methods.resolution`). The orientation stage runs again on the
+    result, without a third pass. The prepared spectra, samples and descriptors are reused.
+    """
+    # the first pass reports at most PROGRESS_SMOOTHING: the second fills the rest of the bar, which never goes back
+    yield Progress("re-optimising", PROGRESS_SMOOTHING, "the turned map, refined once more")
+    again = replace(state, anchors_x=np.zeros(0, dtype=np.int64), anchors_y=np.zeros(0, dtype=np.int64),
+                    landmarks_only=False, refined_map=None, confidence=None, seed_map=None, problem=None,
+                    prices=None, trace=[], monotone=True, dc_start="initial map", step=0, seed_vertices_x=None,
+                    seed_vertices_y=None)
+    result = yield from scaled_progress(solve_prepared(again, InitialMatch(map_xy=turned.map_xy)),
+                                        PROGRESS_SMOOTHING, 1.0, "second pass")
+    result.extras["first_pass"] = {key: turned.extras.get(key) for key in FIRST_PASS_EXTRAS}
+    result.extras["first_pass"]["energy"] = float(turned.energy)
+    result.extras["first_pass_map_xy"] = turned.map_xy
+    for key in ("turned", "turned_regions", "turned_parts"):  # what the user is told was turned: either pass
+        result.extras[key] = result.extras[key] or turned.extras[key]
+    if turned.extras.get("agreement_before_turn") is not None and not result.extras.get("agreement_before_turn"):
+        result.extras["agreement_before_turn"] = turned.extras["agreement_before_turn"]
+    return result
+
+
+def solve_prepared(state: KernelState, initial: InitialMatch | None):
+    """Stages 2–7 on a prepared :class:`KernelState` (a generator; returns the :class:`MatchResult`)."""
+    source, target = state.source, state.target
     yield from initial_seed_map(state, initial)
     seed_problem(state)
     yield from choose_start(state)
@@ -1071,7 +1125,8 @@ def turn_note(extras: dict) -> str | None:
                     f"{'were' if count > 1 else 'was'} turned by the target's reflection")
     if not said:
         return None
-    return "; ".join(said) + " (reorient=false keeps the map as found)"
+    again = "; the turned map was then optimised once more" if "first_pass" in extras else ""
+    return "; ".join(said) + again + " (reorient=false keeps the map as found)"
 
 
 def reversal_note(extras: dict) -> str | None:

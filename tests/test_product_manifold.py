@@ -469,3 +469,7 @@ def test_refinement_turns_a_mirrored_input_map_of_a_person():
     direct, sym = errors(turned.map_xy)
     assert direct < 0.03 and direct <= 1.3 * sym, (direct, sym)
     assert turned.extras["orientation_agreement"] > 0
+    # the turned map was refined once more, from the first pass's turned map
+    assert turned.extras["first_pass"]["turned"] or turned.extras["first_pass"]["turned_regions"] >= 2
+    first_direct, _ = errors(turned.extras["first_pass_map_xy"])
+    assert direct <= first_direct + 1e-3, (direct, first_direct)

@@ -111,7 +111,7 @@ from corrlib.geometry.spectrum import Spectrum, mesh_spectra
 from corrlib.methods.base import InitialMatch, MatchResult, param
 from corrlib.methods.registry import MethodSpec, register
 from corrlib.methods.reorientation import (can_reorient, mean_agreement, orientation_blocks, reorient,
-                                           standardised)
+                                           standardised, turned_anything, with_first_pass)
 from corrlib.methods.resolution import keep_input_partners, kernel_width
 from corrlib.neighbours import nearest_rows
 from corrlib.progress import Progress, Stopwatch, scaled_progress
@@ -1029,21 +1029,11 @@ def kernel_matching(source, target, params: KernelMatchingParams, token, initial
     return result
 
 
-#: the first pass's decisions a re-optimised result keeps (``extras["first_pass"]``)
-FIRST_PASS_EXTRAS = ("turned", "turned_regions", "turned_parts", "agreement_before_turn", "orientation_agreement")
-
-
-def turned_anything(extras: dict) -> bool:
-    """Whether the orientation stage of :func:`kernel_result` changed the map (its ``extras``)."""
-    return bool(extras.get("turned") or extras.get("turned_regions") or extras.get("turned_parts"))
-
-
 def reoptimised(state: KernelState, turned: MatchResult):
     """The DC iterations and the finer scales run once more from a map the orientation stage turned (a
     generator; returns the new :class:`MatchResult`).
 
-    ``extras["first_pass"]``: the first pass's decisions (:data:`FIRST_PASS_EXTRAS`);
-    ``extras["first_pass_map_xy"]``: its turned map, (n_x,) int.
+    The first pass's decisions and map go to ``extras`` (:func:`~.reorientation.with_first_pass`).
 
     A turn composes the map with a *computed* reflection (:mod:`.reorientation`), which is only as exact as
     that reflection: a posed person's can be 0.02–0.07 √area off on the limbs, and the turned limbs are then
@@ -1060,13 +1050,7 @@ def reoptimised(state: KernelState, turned: MatchResult):
                     seed_vertices_y=None)
     result = yield from scaled_progress(solve_prepared(again, InitialMatch(map_xy=turned.map_xy)),
                                         PROGRESS_SMOOTHING, 1.0, "second pass")
-    result.extras["first_pass"] = {key: turned.extras.get(key) for key in FIRST_PASS_EXTRAS}
-    result.extras["first_pass"]["energy"] = float(turned.energy)
-    result.extras["first_pass_map_xy"] = turned.map_xy
-    for key in ("turned", "turned_regions", "turned_parts"):  # what the user is told was turned: either pass
-        result.extras[key] = result.extras[key] or turned.extras[key]
-    if turned.extras.get("agreement_before_turn") is not None and not result.extras.get("agreement_before_turn"):
-        result.extras["agreement_before_turn"] = turned.extras["agreement_before_turn"]
+    with_first_pass(result.extras, turned.extras, turned.map_xy, turned.energy)
     return result
 
 

@@ -53,7 +53,7 @@ from corrlib.geometry import product as pm
 from corrlib.methods.base import MatchResult, param
 from corrlib.methods.resolution import keep_input_partners, kernel_width
 from corrlib.methods.registry import MethodSpec, register
-from corrlib.progress import Progress, Stopwatch
+from corrlib.progress import Progress, Stopwatch, scaled_progress
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -193,7 +193,8 @@ def refine(fx: pm.Factor, fy: pm.Factor, ix, iy, source_points: np.ndarray, targ
     return map_xy, map_yx, extras
 
 
-def _reoriented(source, target, fx: pm.Factor, fy: pm.Factor, map_xy, map_yx, extras: dict, watch):
+def _reoriented(source, target, fx: pm.Factor, fy: pm.Factor, map_xy, map_yx, extras: dict, watch,
+                fraction: float = 0.95):
     """The orientation stage of kernel matching (:func:`corrlib.methods.reorientation.reorient`) on the refined
     maps, with the factors' eigenpairs: the density diffuses the input's matches, so a map the input sends
     left to right on most of the shape (or on a mirrored pair of limbs) comes out so, only more consistently.
@@ -205,7 +206,7 @@ def _reoriented(source, target, fx: pm.Factor, fy: pm.Factor, map_xy, map_yx, ex
     spec_x, spec_y = (Spectrum(f.evals, f.evecs, f.stiffness, f.mass) for f in (fx, fy))
     if not can_reorient(source, target, spec_y):
         return map_xy, map_yx
-    yield Progress("orientation", 0.95, "left and right")
+    yield Progress("orientation", fraction, "left and right")
     with watch("orientation"):
         blocks = orientation_blocks(source, target, spec_x, spec_y)
         done = reorient(source, target, spec_x, spec_y, map_xy, map_yx, lambda: blocks)
@@ -215,6 +216,26 @@ def _reoriented(source, target, fx: pm.Factor, fy: pm.Factor, map_xy, map_yx, ex
                   turned_parts=0 if done.turned_parts is None else len(done.turned_parts.parts),
                   orientation_agreement=mean_agreement(*blocks, done.map_xy))
     return done.map_xy, done.map_yx
+
+
+def _refined_again(source, target, fx: pm.Factor, fy: pm.Factor, turned_xy: np.ndarray, first: dict, params,
+                   token, watch):
+    """The refinement once more from a map the orientation stage turned, then the stage again (no third pass).
+
+    As in kernel matching (:func:`corrlib.methods.kernel_matching.reoptimised`): a turn composes the map
+    with a computed reflection, so the turned part is a rough copy of the right one, and the density is
+    diffused again from it. A generator; returns the maps and the extras (with the first pass's decisions,
+    :func:`~corrlib.methods.reorientation.with_first_pass`).
+    """
+    from corrlib.methods.reorientation import with_first_pass
+
+    yield Progress("re-optimising", 0.95, "the turned map, refined once more")
+    keep = np.flatnonzero(turned_xy >= 0)
+    map_xy, map_yx, extras = yield from scaled_progress(
+        refine(fx, fy, keep, turned_xy[keep], source.vertices, target.vertices, params, token, watch),
+        0.95, 0.99, "second pass")
+    map_xy, map_yx = yield from _reoriented(source, target, fx, fy, map_xy, map_yx, extras, watch, fraction=0.995)
+    return map_xy, map_yx, with_first_pass(extras, first, turned_xy)
 
 
 def solve_product_manifold(source, target, params: ProductManifoldParams, token, *, initial=None):
@@ -235,7 +256,12 @@ def solve_product_manifold(source, target, params: ProductManifoldParams, token,
     map_xy, map_yx, extras = yield from refine(fx, fy, ix, iy, source.vertices, target.vertices, params, token,
                                                watch)
     if params.reorient and initial.map_xy is not None:
+        from corrlib.methods.reorientation import turned_anything
+
         map_xy, map_yx = yield from _reoriented(source, target, fx, fy, map_xy, map_yx, extras, watch)
+        if turned_anything(extras):
+            map_xy, map_yx, extras = yield from _refined_again(source, target, fx, fy, map_xy, extras, params,
+                                                               token, watch)
     yield Progress("done", 1.0, f"dense map from {ix.size} matches")
     return MatchResult("product-manifold", map_xy, map_yx, None, watch.times, extras=extras)
 
@@ -246,7 +272,7 @@ register(MethodSpec(
     description="Refines sparse or noisy matches into a dense map: heat diffusion of the matches on the "
                 "product X × Y, then localized (Dirichlet) product harmonics on shrinking bands around the "
                 "current map (thesis §9.4.2); a map the input sent left to right (whole, or mirrored limbs) is "
-                "turned by a reflection, as in kernel matching."))
+                "turned by a reflection and the turned map refined once more, as in kernel matching."))
 
 
 # ----------------------------------------------------------------------------- basis comparison (Figure 9.6)

@@ -627,3 +627,31 @@ def reorient(source, target, spec_x, spec_y, map_xy: np.ndarray, map_yx: np.ndar
     if turned_parts is not None:
         map_xy, map_yx = turned_parts.map_xy, turned_parts.map_yx
     return Reoriented(map_xy, map_yx, turned, turned_regions, turned_parts)
+
+
+#: the first pass's decisions that a result optimised once more after a turn keeps (``extras["first_pass"]``)
+FIRST_PASS_EXTRAS = ("turned", "turned_regions", "turned_parts", "agreement_before_turn", "orientation_agreement")
+
+
+def turned_anything(extras: dict) -> bool:
+    """Whether the orientation stage changed a map, read from a result's ``extras``."""
+    return bool(extras.get("turned") or extras.get("turned_regions") or extras.get("turned_parts"))
+
+
+def with_first_pass(extras: dict, first: dict, first_map_xy: np.ndarray, first_energy: float | None = None) -> dict:
+    """``extras`` of a second pass, run from a turned map, completed with the first pass's decisions.
+
+    ``extras["first_pass"]`` holds the first pass's :data:`FIRST_PASS_EXTRAS` (and its ``energy``),
+    ``extras["first_pass_map_xy"]`` its turned map, (n_x,) int; the turn counts the user is told about are
+    those of either pass. Returns ``extras``, updated in place.
+    """
+    extras["first_pass"] = {key: first.get(key) for key in FIRST_PASS_EXTRAS}
+    if first_energy is not None:
+        extras["first_pass"]["energy"] = float(first_energy)
+    extras["first_pass_map_xy"] = first_map_xy
+    for key in ("turned", "turned_regions", "turned_parts"):
+        extras[key] = extras.get(key) or first.get(key)
+    if first.get("agreement_before_turn") is not None and extras.get("agreement_before_turn") is None:
+        extras["agreement_before_turn"] = first["agreement_before_turn"]
+    return extras
+

@@ -410,6 +410,24 @@ def test_kernel_matching_turns_a_crossed_leg_of_a_posed_person():
     assert first.summary()["mean"] > 1.5 * summary["mean"]  # the second pass is what made it right
 
 
+def test_a_second_pass_keeps_the_first_pass_decisions():
+    """A result optimised once more after a turn says what the first pass turned (its own stage may turn
+    nothing), keeps the first pass's map, and the user's note says the map was optimised again."""
+    from corrlib.methods.kernel_matching import turn_note
+    from corrlib.methods.reorientation import turned_anything, with_first_pass
+
+    first = {"turned": False, "turned_regions": 2, "turned_parts": 0, "agreement_before_turn": None,
+             "orientation_agreement": 3.5}
+    second = {"turned": False, "turned_regions": 0, "turned_parts": 0, "orientation_agreement": 4.0}
+    assert turned_anything(first) and not turned_anything(second) and not turned_anything({})
+    extras = with_first_pass(second, first, np.arange(4), 7.0)
+    assert extras["turned_regions"] == 2 and extras["orientation_agreement"] == 4.0
+    assert extras["first_pass"]["orientation_agreement"] == 3.5 and extras["first_pass"]["energy"] == 7.0
+    np.testing.assert_array_equal(extras["first_pass_map_xy"], np.arange(4))
+    assert "optimised once more" in turn_note(extras)
+    assert "optimised once more" not in turn_note(first)
+
+
 def test_turned_regions_are_reported():
     from corrlib.methods.kernel_matching import turn_note
 

@@ -637,6 +637,14 @@ class KernelState:
     seed_vertices_x: np.ndarray | None = None  # the seeds' matches snapped to vertices (reported)
     seed_vertices_y: np.ndarray | None = None
 
+    def prepared(self) -> "KernelState":
+        """A state as :func:`prepare` left it (spectra, times, seeds, sample orders), with the orientation
+        descriptors kept once computed; every later stage's field at its default."""
+        fresh = KernelState(self.source, self.target, self.params, self.token, self.watch, self.taus, self.spec_x,
+                            self.spec_y, self.seeds_x, self.seeds_y, self.order_x, self.order_y, self.n_seed)
+        fresh.orientation = self.orientation
+        return fresh
+
     def orientation_blocks(self) -> tuple[np.ndarray, np.ndarray]:
         """The standardised orientation-aware descriptors (computed once: initial assignment and result)."""
         if self.orientation is None:
@@ -1044,11 +1052,7 @@ def reoptimised(state: KernelState, turned: MatchResult):
     """
     # the first pass reports at most PROGRESS_SMOOTHING: the second fills the rest of the bar, which never goes back
     yield Progress("re-optimising", PROGRESS_SMOOTHING, "the turned map, refined once more")
-    again = replace(state, anchors_x=np.zeros(0, dtype=np.int64), anchors_y=np.zeros(0, dtype=np.int64),
-                    landmarks_only=False, refined_map=None, confidence=None, seed_map=None, problem=None,
-                    prices=None, trace=[], monotone=True, dc_start="initial map", step=0, seed_vertices_x=None,
-                    seed_vertices_y=None)
-    result = yield from scaled_progress(solve_prepared(again, InitialMatch(map_xy=turned.map_xy)),
+    result = yield from scaled_progress(solve_prepared(state.prepared(), InitialMatch(map_xy=turned.map_xy)),
                                         PROGRESS_SMOOTHING, 1.0, "second pass")
     with_first_pass(result.extras, turned.extras, turned.map_xy, turned.energy)
     return result

@@ -654,4 +654,3 @@ def with_first_pass(extras: dict, first: dict, first_map_xy: np.ndarray, first_e
     if first.get("agreement_before_turn") is not None and extras.get("agreement_before_turn") is None:
         extras["agreement_before_turn"] = first["agreement_before_turn"]
     return extras
-

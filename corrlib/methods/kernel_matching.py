@@ -977,19 +977,21 @@ def kernel_result(state: KernelState, full_map_xy: np.ndarray, full_map_yx: np.n
     kernel energy ``<Π, K_Y Π K_X>`` of the final map at the smallest time, the :class:`MatchResult`. A
     generator."""
     params, k, watch = state.params, state.k, state.watch
-    psi, phi, anchor_c, trace = state.psi, state.phi, state.problem.anchor_c, state.trace
+    psi, phi, trace = state.psi, state.phi, state.trace
     monotone, dc_start, n_seed = state.monotone, state.dc_start, state.n_seed
     seed_vertices_x, seed_vertices_y = state.seed_vertices_x, state.seed_vertices_y
     decay_y, decay_x = state.decays(state.taus[-1])
-    turned = turned_regions = turned_parts = None
+    turned = turned_regions = turned_parts = released = None
+    released_regions = ()
     # landmarks fix the orientation themselves; a cut changes a shape's reflection and biharmonic distances
     if params.reorient and state.anchors_x.size == 0 and not params.partial and \
             can_reorient(state.source, state.target, state.spec_y):
         with watch("orientation"):
             done = reorient(state.source, state.target, state.spec_x, state.spec_y, full_map_xy, full_map_yx,
-                            state.orientation_blocks)
+                            state.orientation_blocks, release=True)
         full_map_xy, full_map_yx = done.map_xy, done.map_yx
         turned, turned_regions, turned_parts = done.turned, done.turned_regions, done.turned_parts
+        released, released_regions = done.released, done.released_regions
     smooth_k = min(params.smooth_k, k) if params.smooth_k >= 0 else min(
         resolved_eigenpairs(state.spec_x.evals, state.source.area, state.taus[-1]),
         resolved_eigenpairs(state.spec_y.evals, state.target.area, state.taus[-1]))
@@ -998,7 +1000,8 @@ def kernel_result(state: KernelState, full_map_xy: np.ndarray, full_map_yx: np.n
         with watch("zoomout"):
             full_map_xy, full_map_yx = _pointwise_from_basis(full_map_xy, full_map_yx, state.spec_x,
                                                              state.spec_y, smooth_k)
-    c = _alignment(psi[full_map_xy[full_map_xy >= 0]], phi[full_map_xy >= 0]) + anchor_c
+    # the map's own energy: landmarks are rows of the dense map already (their anchor term is the solver's)
+    c = _alignment(psi[full_map_xy[full_map_xy >= 0]], phi[full_map_xy >= 0])
     energy = kernel_energy(c, decay_y, decay_x)
     extras = {
         "orientation_agreement": mean_agreement(*state.orientation_blocks(), full_map_xy),
@@ -1006,6 +1009,7 @@ def kernel_result(state: KernelState, full_map_xy: np.ndarray, full_map_yx: np.n
         "agreement_before_turn": None if turned is None else turned.agreement_before,
         "turned_regions": 0 if turned_regions is None else len(turned_regions.parts),
         "turned_parts": 0 if turned_parts is None else len(turned_parts.parts),
+        "released_regions": len(released_regions), "released_x": released,
         "changed_trace": np.array([e["changed"] for e in trace]),
         "tau_trace": np.array([e["tau"] for e in trace]),
         "monotone": monotone, "start": dc_start, "unmatched_x": int(np.sum(full_map_xy < 0)),
@@ -1038,8 +1042,9 @@ def kernel_matching(source, target, params: KernelMatchingParams, token, initial
 
 
 def reoptimised(state: KernelState, turned: MatchResult):
-    """The DC iterations and the finer scales run once more from a map the orientation stage turned (a
-    generator; returns the new :class:`MatchResult`).
+    """The DC iterations and the finer scales run once more from a map the orientation stage turned, or with
+    the rest of the map as landmarks where it found swapped limbs (a generator; returns the new
+    :class:`MatchResult`).
 
     The first pass's decisions and map go to ``extras`` (:func:`~.reorientation.with_first_pass`).
 
@@ -1049,11 +1054,25 @@ def reoptimised(state: KernelState, turned: MatchResult):
     kernel matching refines it as it refines any given map (``initial``; the partners within the smallest
     kernel's width are kept, :mod:`corrlib.methods.resolution`). The orientation stage runs again on the
     result, without a third pass. The prepared spectra, samples and descriptors are reused.
+
+    Swapped limbs (``extras["released_x"]``, :func:`~.reorientation.swapped_pairs`: a mirror pair of limbs, each
+    sent mirror-inverted onto the other's image) are not turned by a reflection: a posed target's reflection
+    is too poor on its limbs to carry them back (measured: the turned legs stay 0.27 √area off). Their
+    matches are dropped, and the rest of the map becomes landmarks (anchors of every stage,
+    :class:`~corrlib.methods.base.InitialMatch`), so the kernel energy places the limbs by their heat-kernel
+    relation to the body, whose left and right the landmarks fix. A landmark run has no orientation stage,
+    so there is no third pass here either.
     """
     # the first pass reports at most PROGRESS_SMOOTHING: the second fills the rest of the bar, which never goes back
     yield Progress("re-optimising", PROGRESS_SMOOTHING, "the turned map, refined once more")
-    result = yield from scaled_progress(solve_prepared(state.prepared(), InitialMatch(map_xy=turned.map_xy)),
-                                        PROGRESS_SMOOTHING, 1.0, "second pass")
+    released = turned.extras.get("released_x")
+    if released is None:
+        start = InitialMatch(map_xy=turned.map_xy)
+    else:  # swapped limbs: re-placed by the kernel energy from the rest of the map, kept as landmarks
+        kept = np.flatnonzero(~released & (turned.map_xy >= 0))
+        start = InitialMatch(landmarks_x=kept, landmarks_y=turned.map_xy[kept])
+    result = yield from scaled_progress(solve_prepared(state.prepared(), start), PROGRESS_SMOOTHING, 1.0,
+                                        "second pass")
     with_first_pass(result.extras, turned.extras, turned.map_xy, turned.energy)
     return result
 
@@ -1111,9 +1130,14 @@ def turn_note(extras: dict) -> str | None:
         count = extras["turned_parts"]
         said.append(f"{count} protrusion{'s' if count > 1 else ''} (limbs) matched to the mirror-image limb "
                     f"{'were' if count > 1 else 'was'} turned by the target's reflection")
+    if extras.get("released_regions"):
+        said.append(f"{extras['released_regions']} regions (a mirror pair of limbs with the body beside them) were "
+                    f"matched swapped, each onto the other's mirror image; they were matched again with the rest "
+                    f"of the map as landmarks")
     if not said:
         return None
-    again = "; the turned map was then optimised once more" if "first_pass" in extras else ""
+    again = "; the turned map was then optimised once more" if "first_pass" in extras and (
+        extras.get("turned") or extras.get("turned_regions") or extras.get("turned_parts")) else ""
     return "; ".join(said) + again + " (reorient=false keeps the map as found)"
 
 

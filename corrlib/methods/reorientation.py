@@ -94,6 +94,23 @@ no turn that leaves two limbs on one target limb: a twist at the hip sends
 a leg's shoulder beside the other leg while the leg itself is right, and
 the shoulder-relative distortion would then move the right leg.
 
+**Swapped limbs.** A mirror pair of limbs can also be swapped, each limb
+(with its hip) sent mirror-inverted onto the other's image: no collision, and
+the descriptors, weak round a thin limb, may read only one of the two
+reversed (measured on a posed person: −25.8 and +4.4). The map's own
+orientation does read both (:func:`map_orientation`, the sign of the map's
+Jacobian on the source's triangles, −0.35 on both legs and +0.5 to +0.8 on
+the rest; +1 and −1 everywhere for the true map and its mirror image), so a
+pair that the descriptors read reversed on one side and the map's own
+orientation on both, sent onto two different limbs, is a swapped pair
+(:func:`swapped_pairs`). It is not turned: a posed target's reflection is too
+poor on the limbs to carry them back (the turned legs stay 0.27 √area off,
+though the map's orientation then reads right). ``reorient(release=True)``
+returns its vertices instead, and kernel matching matches them again with
+the rest of the map as landmarks. The map's own orientation is not used for
+the other rules: near a crossed limb it reads the hip of the *right* leg
+reversed too (twisted by the crossing), where the descriptors do not.
+
 All these decisions assume complete shapes: a cut (a partial scan, the front of an
 animal) changes the intrinsic reflection and the biharmonic distances near
 and far from it (measured: the front 60 % of a wolf against a whole wolf had
@@ -498,6 +515,39 @@ def turn_reversed_regions(map_xy: np.ndarray, map_yx: np.ndarray | None, parts_x
     return TurnedParts(turned_xy, turned_yx, sorted(turned + single))
 
 
+def swapped_pairs(map_xy: np.ndarray, parts_x: ShapeParts, parts_y: ShapeParts, before: dict[int, float],
+                  reading: dict[int, float], mirror_x: Callable[[], np.ndarray]) -> list:
+    """The regions of mirror pairs whose limbs are swapped, each onto the other's image (see the module
+    docstring): the descriptors read one of the pair reversed, the map's own orientation reads both, and the
+    two limbs lie on two different target limbs (a crossed pair shares one). Empty when that would be the whole
+    shape (the whole-map rule's case).
+
+    Parameters
+    ----------
+    map_xy : (n_X,) int
+    parts_x, parts_y : ShapeParts
+    before : dict of int -> float
+        :func:`region_agreements` of the map (the descriptors).
+    reading : dict of int -> float
+        The same with :func:`map_orientation`.
+    mirror_x : callable returning (n_X,) int
+        The source's reflection, which pairs every region with its mirror region.
+    """
+    reversed_ = [r for r, value in before.items() if value < 0]
+    if not reversed_:
+        return []
+    regions = shoulder_regions(parts_x)
+    images = image_limbs(map_xy, parts_x, parts_y)
+    chosen = set()
+    for r in reversed_:
+        p = _majority(regions[np.asarray(mirror_x())[regions == r]])
+        if p == r or images.get(r, 0) in (0, images.get(p, 0)) or images.get(p, 0) == 0:
+            continue
+        if reading[r] < 0 and reading.get(p, 0.0) < 0:
+            chosen |= {r, p}
+    return [] if chosen >= set(reading) else sorted(chosen)
+
+
 def _colliding_regions(map_xy: np.ndarray, parts_x: ShapeParts, parts_y: ShapeParts, mirror_y: Callable,
                        local_agreement: Callable, candidates: list, partner: dict) -> list:
     """The reversed regions whose limb shares its image limb with its mirror limb and is righted, onto the
@@ -545,6 +595,33 @@ def local_agreement(or_x: np.ndarray, or_y: np.ndarray, map_xy: np.ndarray) -> n
     return np.where(map_xy >= 0, np.sum(or_x * or_y[np.maximum(map_xy, 0)], axis=1), 0.0)
 
 
+def map_orientation(source, target, map_xy: np.ndarray) -> np.ndarray:
+    """(n_X,) float in [-1, 1]: the orientation of the map itself around every source vertex.
+
+    A map is orientation-preserving where its Jacobian determinant is positive. For a vertex map this reads,
+    on every source triangle ``(a, b, c)`` (in its winding order), as the sign of
+
+        ⟨(y_b − y_a) × (y_c − y_a), n_Y(m(a)) + n_Y(m(b)) + n_Y(m(c))⟩,   y_v = m(v) on the target,
+
+    positive where the image triangle turns as the target's surface does (both meshes consistently wound), 0
+    where it is degenerate or a corner is unmatched (``map_xy = -1``). Every vertex takes the area-weighted mean
+    over its triangles. Unlike the orientation-aware descriptors, weak round a thin limb where the heat
+    signatures' gradients are nearly parallel, this needs no descriptor: a mirrored limb reads negative however
+    thin it is (see ``docs/decisions.md``).
+    """
+    faces = source.faces
+    images = np.asarray(map_xy)[faces]  # (f, 3)
+    corners = target.vertices[np.maximum(images, 0)]
+    turning = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    normals = target.vertex_normals[np.maximum(images, 0)].sum(axis=1)
+    signs = np.sign(np.einsum("ij,ij->i", turning, normals))
+    signs[np.any(images < 0, axis=1)] = 0.0
+    weights = np.repeat(source.face_areas, 3)
+    total = np.bincount(faces.ravel(), weights=weights, minlength=source.n_vertices)
+    signed = np.bincount(faces.ravel(), weights=weights * np.repeat(signs, 3), minlength=source.n_vertices)
+    return np.divide(signed, total, out=np.zeros(source.n_vertices), where=total > 0)
+
+
 def mean_agreement(or_x: np.ndarray, or_y: np.ndarray, map_xy: np.ndarray) -> float:
     """The orientation agreement ``a(m)``: the mean of :func:`local_agreement` over the matched source vertices
     (0 if none)."""
@@ -566,6 +643,11 @@ class Reoriented:
         The whole map turned by a reflection.
     turned_regions, turned_parts : TurnedParts or None
         The regions and the parts turned.
+    released : (n_X,) bool or None
+        The source vertices of swapped mirror limbs (:func:`swapped_pairs`, with ``release=True``), whose matches
+        a solver re-places from the rest of the map; None when there are none.
+    released_regions : tuple of int
+        Their regions (:func:`shoulder_regions` labels).
     """
 
     map_xy: np.ndarray
@@ -573,6 +655,8 @@ class Reoriented:
     turned: Turned | None
     turned_regions: TurnedParts | None
     turned_parts: TurnedParts | None
+    released: np.ndarray | None = None
+    released_regions: tuple = ()
 
 
 def can_reorient(source, target, spec_y) -> bool:
@@ -582,7 +666,7 @@ def can_reorient(source, target, spec_y) -> bool:
 
 
 def reorient(source, target, spec_x, spec_y, map_xy: np.ndarray, map_yx: np.ndarray | None,
-             blocks: Callable[[], tuple[np.ndarray, np.ndarray]]) -> Reoriented:
+             blocks: Callable[[], tuple[np.ndarray, np.ndarray]], release: bool = False) -> Reoriented:
     """A map turned by a reflection where it reverses orientation (the module docstring): the whole map if
     its mean agreement is negative and a turn, by the target's reflection or by the source's, makes it
     positive and rights more of its area than it wrongs (:func:`reversed_on_most`; of two such turns the
@@ -601,6 +685,9 @@ def reorient(source, target, spec_x, spec_y, map_xy: np.ndarray, map_yx: np.ndar
     map_yx : (n_Y,) int or None
     blocks : callable
         Returns :func:`orientation_blocks` of the pair (a refiner that has them already passes them).
+    release : bool
+        Also find swapped mirror limbs (:func:`swapped_pairs`), which no computed reflection turns reliably,
+        and return their vertices as ``released`` (the map itself is left as it is there).
     """
     mirror_x = functools.cache(lambda: mesh_reflection(source, spec_x))
     mirror_y = functools.cache(lambda: mesh_reflection(target, spec_y))
@@ -626,16 +713,24 @@ def reorient(source, target, spec_x, spec_y, map_xy: np.ndarray, map_yx: np.ndar
     turned_parts = turn_reversed_parts(map_xy, map_yx, parts_x, parts_y, mirror_y)
     if turned_parts is not None:
         map_xy, map_yx = turned_parts.map_xy, turned_parts.map_yx
-    return Reoriented(map_xy, map_yx, turned, turned_regions, turned_parts)
+    released, swapped = None, []
+    if release:
+        own = region_agreements(map_xy, parts_x, lambda m: map_orientation(source, target, m))
+        swapped = swapped_pairs(map_xy, parts_x, parts_y, region_agreements(map_xy, parts_x, local), own, mirror_x)
+        if swapped:
+            released = np.isin(shoulder_regions(parts_x), swapped)
+    return Reoriented(map_xy, map_yx, turned, turned_regions, turned_parts, released, tuple(swapped))
 
 
 #: the first pass's decisions that a result optimised once more after a turn keeps (``extras["first_pass"]``)
-FIRST_PASS_EXTRAS = ("turned", "turned_regions", "turned_parts", "agreement_before_turn", "orientation_agreement")
+FIRST_PASS_EXTRAS = ("turned", "turned_regions", "turned_parts", "released_regions", "agreement_before_turn",
+                     "orientation_agreement")
 
 
 def turned_anything(extras: dict) -> bool:
     """Whether the orientation stage changed a map, read from a result's ``extras``."""
-    return bool(extras.get("turned") or extras.get("turned_regions") or extras.get("turned_parts"))
+    return bool(extras.get("turned") or extras.get("turned_regions") or extras.get("turned_parts")
+                or extras.get("released_regions"))
 
 
 def with_first_pass(extras: dict, first: dict, first_map_xy: np.ndarray, first_energy: float | None = None) -> dict:
@@ -649,7 +744,7 @@ def with_first_pass(extras: dict, first: dict, first_map_xy: np.ndarray, first_e
     if first_energy is not None:
         extras["first_pass"]["energy"] = float(first_energy)
     extras["first_pass_map_xy"] = first_map_xy
-    for key in ("turned", "turned_regions", "turned_parts"):
+    for key in ("turned", "turned_regions", "turned_parts", "released_regions"):
         extras[key] = extras.get(key) or first.get(key)
     if first.get("agreement_before_turn") is not None and extras.get("agreement_before_turn") is None:
         extras["agreement_before_turn"] = first["agreement_before_turn"]

@@ -544,7 +544,8 @@ def test_the_map_orientation_reads_the_sign_of_the_jacobian():
 def test_swapped_limbs_are_released_as_a_pair():
     """Toy of the region tests: regions 1 and 2 a mirror pair of limbs, 3 on the plane. Limb 1 sent onto limb
     2 and limb 2 onto limb 1 (swapped), the descriptors reading only region 1 reversed and the map's own
-    orientation both: the pair is released. Not when the map's orientation reads region 2 right, not when
+    orientation both (opposite to the rest; onto a mirror image the signs are reversed): the pair is released.
+    Not when the map's orientation reads region 2 like the rest, nor all three alike, not when
     both limbs lie on one target limb (a crossed limb, the collision rule's), not when the descriptors read
     nothing reversed, and not when the pair would be the whole shape."""
     from corrlib.methods.reorientation import swapped_pairs
@@ -556,6 +557,9 @@ def test_swapped_limbs_are_released_as_a_pair():
     descriptors = {1: -25.0, 2: 4.0, 3: 5.0}
     own = {1: -0.3, 2: -0.4, 3: 0.8}
     assert swapped_pairs(swapped, parts, parts, descriptors, own, lambda: mirror) == [1, 2]
+    onto_mirror_image = {region: -value for region, value in own.items()}  # the right map reverses orientation
+    assert swapped_pairs(swapped, parts, parts, descriptors, onto_mirror_image, lambda: mirror) == [1, 2]
+    assert swapped_pairs(swapped, parts, parts, descriptors, {1: -0.3, 2: -0.4, 3: -0.8}, lambda: mirror) == []
     assert swapped_pairs(swapped, parts, parts, descriptors, {**own, 2: 0.2}, lambda: mirror) == []
     crossed = np.array([2, 3, 2, 3, 4, 5])
     assert swapped_pairs(crossed, parts, parts, descriptors, own, lambda: mirror) == []

@@ -103,7 +103,9 @@ Jacobian on the source's triangles, −0.35 on both legs and +0.5 to +0.8 on
 the rest; +1 and −1 everywhere for the true map and its mirror image), so a
 pair that the descriptors read reversed on one side and the map's own
 orientation on both, sent onto two different limbs, is a swapped pair
-(:func:`swapped_pairs`). It is not turned: a posed target's reflection is too
+(:func:`swapped_pairs`). "Reversed" is read against the rest of the shape,
+not against +1: onto a mirror image of the source's handedness the right map
+reverses orientation everywhere. It is not turned: a posed target's reflection is too
 poor on the limbs to carry them back (the turned legs stay 0.27 √area off,
 though the map's orientation then reads right). ``reorient(release=True)``
 returns its vertices instead, and kernel matching matches them again with
@@ -518,9 +520,10 @@ def turn_reversed_regions(map_xy: np.ndarray, map_yx: np.ndarray | None, parts_x
 def swapped_pairs(map_xy: np.ndarray, parts_x: ShapeParts, parts_y: ShapeParts, before: dict[int, float],
                   reading: dict[int, float], mirror_x: Callable[[], np.ndarray]) -> list:
     """The regions of mirror pairs whose limbs are swapped, each onto the other's image (see the module
-    docstring): the descriptors read one of the pair reversed, the map's own orientation reads both, and the
-    two limbs lie on two different target limbs (a crossed pair shares one). Empty when that would be the whole
-    shape (the whole-map rule's case).
+    docstring): the descriptors read one of the pair reversed, the map's own orientation reads both opposite
+    to the rest of the shape (its mean sign: negative where the target is a mirror image of the source's
+    handedness, so that the right map reverses orientation), and the two limbs lie on two different target
+    limbs (a crossed pair shares one). Empty when that would be the whole shape (the whole-map rule's case).
 
     Parameters
     ----------
@@ -543,7 +546,9 @@ def swapped_pairs(map_xy: np.ndarray, parts_x: ShapeParts, parts_y: ShapeParts, 
         p = _majority(regions[np.asarray(mirror_x())[regions == r]])
         if p == r or images.get(r, 0) in (0, images.get(p, 0)) or images.get(p, 0) == 0:
             continue
-        if reading[r] < 0 and reading.get(p, 0.0) < 0:
+        rest = [value for region, value in reading.items() if region not in (r, p)]
+        handedness = np.sign(np.mean(rest)) if rest else 0.0  # +1, or -1 onto a mirror image
+        if reading[r] * handedness < 0 and reading.get(p, 0.0) * handedness < 0:
             chosen |= {r, p}
     return [] if chosen >= set(reading) else sorted(chosen)
 

@@ -622,6 +622,7 @@ class KernelState:
     anchors_x: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     anchors_y: np.ndarray = field(default_factory=lambda: np.zeros(0, dtype=np.int64))
     landmarks_only: bool = False
+    descriptor_start: bool = False  # a given map competes with the descriptor assignment (the second start)
     refined_map: tuple | None = None  # the dense map being refined, as (source, target) vertex pairs
     orientation: tuple | None = None  # standardised orientation-aware descriptors of both shapes, once computed
     desc_x: np.ndarray | None = None  # standardised plain descriptors, once computed
@@ -677,8 +678,10 @@ class KernelState:
 
     @property
     def has_second_start(self) -> bool:
-        """A descriptor initialisation with ``init_fraction < 1``, or landmarks."""
-        return (self.confidence is not None and self.params.init_fraction < 1) or self.landmarks_only
+        """A descriptor initialisation with ``init_fraction < 1``, landmarks, or a given map that competes with
+        the descriptor assignment."""
+        return (self.confidence is not None and self.params.init_fraction < 1) or self.landmarks_only or \
+            self.descriptor_start
 
     @property
     def total_steps(self) -> int:
@@ -724,11 +727,14 @@ def prepare(source, target, params: KernelMatchingParams, token):
                        order_x, order_y, n_seed)
 
 
-def initial_seed_map(state: KernelState, initial: InitialMatch | None):
+def initial_seed_map(state: KernelState, initial: InitialMatch | None, compete: bool = True):
     """Stage 2: the seeds' initial assignment (sets ``seed_map``, and ``confidence`` or the anchors).
 
     A given map or landmarks: every source seed follows its nearest matched vertex, whose partner snaps to
-    the nearest target seed (landmarks also become anchors). ``init="fmap"``: the same from the
+    the nearest target seed (landmarks also become anchors). A given map competes with the method's own
+    start, the descriptor assignment (``compete``; :func:`aligned_start`, :func:`choose_start`): a map given
+    to be refined can be far worse than that start (a nearest-neighbour map of a non-isometric pair, 0.64
+    √area), and its refinement then stays in a wrong basin. ``init="fmap"``: the same from the
     functional-maps baseline's map. Otherwise one linear assignment on the descriptor similarity
     (:func:`_descriptor_similarity`, with the orientation block), whose row values are the ``confidence``.
     A generator (yields :class:`Progress`).
@@ -742,6 +748,7 @@ def initial_seed_map(state: KernelState, initial: InitialMatch | None):
         yield Progress("initial map", PROGRESS_DC[0], f"{ix.size} given matches")
         if not state.landmarks_only:
             state.refined_map = (ix, iy)
+            state.descriptor_start = compete
         partner_of = -np.ones(state.n_x, dtype=np.int64)
         partner_of[ix] = iy
         partner = partner_of[ix[_nearest_point(source.vertices[ix], state.seeds_x.points)]]
@@ -761,13 +768,7 @@ def initial_seed_map(state: KernelState, initial: InitialMatch | None):
         with state.watch("descriptors"):
             state.desc_x, state.desc_y = _descriptors(source, target, state.spec_x, state.spec_y,
                                                       params.descriptor)
-            init_x, init_y = _with_orientation(state.desc_x, state.desc_y, *state.orientation_blocks(),
-                                               params.orientation)
-        with state.watch("assignment"):
-            sim = _descriptor_similarity(state.seeds_x.interpolate(source, init_x),
-                                         state.seeds_y.interpolate(target, init_y))
-            state.seed_map = linear_assignment(sim, method=params.backend, cancel=state.cancel)
-            state.confidence = sim[np.arange(state.n_seed), state.seed_map]
+        state.seed_map, state.confidence = descriptor_assignment(state, state.watch)
     state.token.raise_if_cancelled()
 
 
@@ -838,9 +839,14 @@ def aligned_start(state: KernelState, start_map: np.ndarray, watch: Stopwatch) -
     initial matches (``init_fraction`` of them; with landmarks: the anchors alone), i.e. ``G`` of
     :func:`seed_score` with ``C = Ψ_s[start_map[keep]]ᵀ Φ_s[keep] + C_anchors``.
 
+    A given map's second start is instead the descriptor assignment of the descriptor initialisation
+    (:func:`descriptor_assignment`).
+
     Reads ``state`` only (it runs on a thread beside the first start's DC iterations) and times itself on
     ``watch``. Returns the start map (n_seed,) and its auction prices (n_seed,).
     """
+    if state.descriptor_start:
+        return descriptor_assignment(state, watch)[0], np.zeros(state.n_seed)
     problem = state.problem
     keep = np.zeros(0, dtype=np.int64) if state.landmarks_only else \
         most_similar_matches(state.confidence, state.params.init_fraction)
@@ -854,10 +860,28 @@ def aligned_start(state: KernelState, start_map: np.ndarray, watch: Stopwatch) -
     return other_start, prices
 
 
+def descriptor_assignment(state: KernelState, watch: Stopwatch) -> tuple[np.ndarray, np.ndarray]:
+    """The descriptor initialisation's start: one linear assignment of the seeds on the similarity of their
+    descriptors with the orientation block (:func:`_descriptor_similarity`). Returns the seed map (n_seed,)
+    and every match's similarity (n_seed,). Reads ``state`` only (the descriptors of :func:`seed_problem` when
+    it computed them)."""
+    params, source, target = state.params, state.source, state.target
+    with watch("descriptors"):
+        desc_x, desc_y = (state.desc_x, state.desc_y) if state.desc_x is not None else \
+            _descriptors(source, target, state.spec_x, state.spec_y, params.descriptor)
+        init_x, init_y = _with_orientation(desc_x, desc_y, *state.orientation_blocks(), params.orientation)
+    with watch("assignment"):
+        sim = _descriptor_similarity(state.seeds_x.interpolate(source, init_x),
+                                     state.seeds_y.interpolate(target, init_y))
+        seed_map = linear_assignment(sim, method=params.backend, cancel=state.cancel)
+    return seed_map, sim[np.arange(state.n_seed), seed_map]
+
+
 def choose_start(state: KernelState):
     """Stage 4: DC iterations of the first time from the initial map and (descriptor or landmark
-    initialisation) from the :func:`aligned_start`; the start with the higher :func:`dc_objective` goes on
-    (both at the first start's kernel scale). A generator; sets ``seed_map``, ``prices``, ``dc_start``.
+    initialisation, or a given map) from the :func:`aligned_start`; the start with the higher
+    :func:`dc_objective` goes on (both at the first start's kernel scale). A generator; sets ``seed_map``,
+    ``prices``, ``dc_start``.
 
     The aligned start's score and assignment do not depend on the first start's iterations, so they run on
     a thread beside them (the auctions release the GIL; two cores each take one); their time is reported
@@ -872,6 +896,7 @@ def choose_start(state: KernelState):
         dc_start = "initial map"
         if second is not None:
             what = (f"kernel score of the {state.anchors_x.size} landmarks" if state.landmarks_only else
+                    "descriptor assignment, against the given map" if state.descriptor_start else
                     f"kernel score of the most similar {state.params.init_fraction:.0%} of the initial matches")
             yield Progress("initial alignment", PROGRESS_DC[0] + PROGRESS_DC[1] * state.step / state.total_steps, what)
             other_start, other_prices = second.result()
@@ -879,7 +904,8 @@ def choose_start(state: KernelState):
             other = yield from dc_iterations(state, other_start, other_prices, 0, best.kernel_scale,
                                              warm_first=True)
             if other.value > best.value:
-                best, prices, dc_start = other, other_prices, "initial alignment"
+                best, prices = other, other_prices
+                dc_start = "descriptors" if state.descriptor_start else "initial alignment"
     state.seed_map, state.prices, state.dc_start = best.seed_map, prices, dc_start
     state.trace.extend(best.entries)
 
@@ -1071,16 +1097,18 @@ def reoptimised(state: KernelState, turned: MatchResult):
     else:  # swapped limbs: re-placed by the kernel energy from the rest of the map, kept as landmarks
         kept = np.flatnonzero(~released & (turned.map_xy >= 0))
         start = InitialMatch(landmarks_x=kept, landmarks_y=turned.map_xy[kept])
-    result = yield from scaled_progress(solve_prepared(state.prepared(), start), PROGRESS_SMOOTHING, 1.0,
-                                        "second pass")
+    result = yield from scaled_progress(solve_prepared(state.prepared(), start, compete=False),
+                                        PROGRESS_SMOOTHING, 1.0, "second pass")
     with_first_pass(result.extras, turned.extras, turned.map_xy, turned.energy)
     return result
 
 
-def solve_prepared(state: KernelState, initial: InitialMatch | None):
-    """Stages 2–7 on a prepared :class:`KernelState` (a generator; returns the :class:`MatchResult`)."""
+def solve_prepared(state: KernelState, initial: InitialMatch | None, compete: bool = True):
+    """Stages 2–7 on a prepared :class:`KernelState` (a generator; returns the :class:`MatchResult`);
+    ``compete=False``: a given map does not compete with the descriptor start (a second pass, whose first
+    pass had that start already)."""
     source, target = state.source, state.target
-    yield from initial_seed_map(state, initial)
+    yield from initial_seed_map(state, initial, compete)
     seed_problem(state)
     yield from choose_start(state)
     for t_index in range(1, len(state.taus)):

@@ -827,9 +827,10 @@ class MainWindow(QMainWindow):
                                       function=outcome.function, n_unmatched=outcome.n_unmatched)
             if outcome.sequence is not None:
                 self.sequence_view.set_sequence(self.source, *outcome.sequence)
-            from corrlib.methods.kernel_matching import reversal_note, turn_note  # loaded by the method that ran
+            from corrlib.methods.kernel_matching import (  # loaded by the method that ran
+                reversal_note, start_note, turn_note)
 
-            for note in (reversal_note(result.extras), turn_note(result.extras)):
+            for note in (reversal_note(result.extras), turn_note(result.extras), start_note(result.extras)):
                 if note:
                     self.job_panel.write(f"{result.method}: {note}")
         self.result_ready.emit(result)

@@ -343,14 +343,14 @@ def cmd_refine(args) -> int:
 
 def _print_reversal_note(result) -> None:
     """Warn (on stderr) when a mesh-to-mesh map reverses orientation on most of the shape, or was turned."""
-    from corrlib.methods.kernel_matching import reversal_note, turn_note
+    from corrlib.methods.kernel_matching import reversal_note, start_note, turn_note
 
     note = reversal_note(result.extras)
     if note:
         print(f"warning: {note}", file=sys.stderr)
-    turned = turn_note(result.extras)
-    if turned:
-        print(f"note: {turned}", file=sys.stderr)
+    for said in (turn_note(result.extras), start_note(result.extras)):
+        if said:
+            print(f"note: {said}", file=sys.stderr)
 
 
 def _refining_methods():

@@ -313,6 +313,7 @@ def test_a_given_map_competes_with_the_descriptor_start():
     0.063) keeps its own start and its detail (0.039)."""
     from _data import SUMNER
     from corrlib.io import load_mesh
+    from corrlib.methods.kernel_matching import start_note
 
     lion, cat = load_mesh(SUMNER / "lion-00.off"), load_mesh(SUMNER / "cat-00.off")
     truth = np.loadtxt(SUMNER / "lion2cat", dtype=np.int64)
@@ -320,9 +321,11 @@ def test_a_given_map_competes_with_the_descriptor_start():
     nearest = solve("descriptor-nn", lion, cat).map_xy
     refined = solve("kernel-matching", lion, cat, initial=InitialMatch(map_xy=nearest))
     assert error(nearest) > 0.5 and error(refined.map_xy) < 0.15 and refined.extras["start"] == "descriptors"
+    assert "continued from the descriptor assignment" in start_note(refined.extras)
     fmap = solve("fmap-zoomout", lion, cat).map_xy
     from_fmap = solve("kernel-matching", lion, cat, initial=InitialMatch(map_xy=fmap))
     assert from_fmap.extras["start"] == "initial map" and error(from_fmap.map_xy) < error(fmap)
+    assert start_note(from_fmap.extras) is None
 
 
 def test_the_final_zoomout_step_keeps_an_exact_isometry(wolf_pair):

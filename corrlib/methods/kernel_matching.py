@@ -1169,6 +1169,17 @@ def turn_note(extras: dict) -> str | None:
     return "; ".join(said) + again + " (reorient=false keeps the map as found)"
 
 
+def start_note(extras: dict) -> str | None:
+    """What the user is told when a refined map's own start lost to the descriptor assignment
+    (``extras["start"] == "descriptors"``, :func:`choose_start`), else None."""
+    if not extras or extras.get("start") != "descriptors":
+        return None
+    return ("the given map reached a lower kernel objective than the method's own start (the descriptor "
+            "assignment) at the first time, so the refinement continued from the descriptor assignment; the given "
+            "partners stand only where the result lies within the smallest kernel's width of them, or where they are "
+            "the more isometric partner")
+
+
 def reversal_note(extras: dict) -> str | None:
     """A warning when a map reverses orientation on most of the shape (its
     :func:`orientation_agreement`, ``extras["orientation_agreement"]``, is negative: left matched to right), else

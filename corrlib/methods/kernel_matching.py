@@ -1162,6 +1162,10 @@ def turn_note(extras: dict) -> str | None:
         said.append(f"{extras['released_regions']} regions (a mirror pair of limbs with the body beside them) were "
                     f"matched swapped, each onto the other's mirror image; they were matched again with the rest "
                     f"of the map as landmarks")
+    if extras.get("swapped_regions"):
+        said.append(f"{extras['swapped_regions']} regions (a mirror pair of limbs with the body beside them) are "
+                    f"matched swapped, each onto the other's mirror image, and were left as found (kernel matching "
+                    f"matches such limbs again from the rest of the map)")
     if not said:
         return None
     again = "; the turned map was then optimised once more" if "first_pass" in extras and (

@@ -199,7 +199,9 @@ def _reoriented(source, target, fx: pm.Factor, fy: pm.Factor, map_xy, map_yx, ex
     maps, with the factors' eigenpairs: the density diffuses the input's matches, so a map the input sends
     left to right on most of the shape (or on a mirrored pair of limbs) comes out so, only more consistently.
     Records the decisions in ``extras`` as kernel matching does (``turned``, ``turned_regions``,
-    ``turned_parts``, ``orientation_agreement``). A generator; returns the maps."""
+    ``turned_parts``, ``orientation_agreement``), and the swapped limbs it finds (``swapped_regions``): the
+    refinement cannot place them again (its diffusion spreads the body's matches, it does not place limbs),
+    so they are reported and left as found. A generator; returns the maps."""
     from corrlib.geometry.spectrum import Spectrum
     from corrlib.methods.reorientation import can_reorient, mean_agreement, orientation_blocks, reorient
 
@@ -209,8 +211,8 @@ def _reoriented(source, target, fx: pm.Factor, fy: pm.Factor, map_xy, map_yx, ex
     yield Progress("orientation", fraction, "left and right")
     with watch("orientation"):
         blocks = orientation_blocks(source, target, spec_x, spec_y)
-        done = reorient(source, target, spec_x, spec_y, map_xy, map_yx, lambda: blocks)
-    extras.update(turned=done.turned is not None,
+        done = reorient(source, target, spec_x, spec_y, map_xy, map_yx, lambda: blocks, release=True)
+    extras.update(turned=done.turned is not None, swapped_regions=len(done.released_regions),
                   agreement_before_turn=None if done.turned is None else done.turned.agreement_before,
                   turned_regions=0 if done.turned_regions is None else len(done.turned_regions.parts),
                   turned_parts=0 if done.turned_parts is None else len(done.turned_parts.parts),

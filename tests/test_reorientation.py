@@ -591,4 +591,7 @@ def test_kernel_matching_places_swapped_legs_again_from_the_body():
     first = geodesic_errors(result.extras["first_pass_map_xy"], target, ident, ident).summary()["mean"]
     assert first > 3 * summary["mean"]  # the landmark pass is what made it right
     assert "matched again with the rest of the map as landmarks" in turn_note(result.extras)
+    # the landmark pass reports its map's own kernel energy, comparable with the first pass's (the anchors'
+    # alignment added to it once read 1.0e9 against 4.2e8)
+    assert abs(result.energy / result.extras["first_pass"]["energy"] - 1.0) < 0.1
     assert "optimised once more" not in turn_note(result.extras)

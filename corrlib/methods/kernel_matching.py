@@ -1014,7 +1014,7 @@ def kernel_result(state: KernelState, full_map_xy: np.ndarray, full_map_yx: np.n
             can_reorient(state.source, state.target, state.spec_y):
         with watch("orientation"):
             done = reorient(state.source, state.target, state.spec_x, state.spec_y, full_map_xy, full_map_yx,
-                            state.orientation_blocks, release=True)
+                            state.orientation_blocks)
         full_map_xy, full_map_yx = done.map_xy, done.map_yx
         turned, turned_regions, turned_parts = done.turned, done.turned_regions, done.turned_parts
         released, released_regions = done.released, done.released_regions

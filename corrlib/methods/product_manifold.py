@@ -211,7 +211,7 @@ def _reoriented(source, target, fx: pm.Factor, fy: pm.Factor, map_xy, map_yx, ex
     yield Progress("orientation", fraction, "left and right")
     with watch("orientation"):
         blocks = orientation_blocks(source, target, spec_x, spec_y)
-        done = reorient(source, target, spec_x, spec_y, map_xy, map_yx, lambda: blocks, release=True)
+        done = reorient(source, target, spec_x, spec_y, map_xy, map_yx, lambda: blocks)
     extras.update(turned=done.turned is not None, swapped_regions=len(done.released_regions),
                   agreement_before_turn=None if done.turned is None else done.turned.agreement_before,
                   turned_regions=0 if done.turned_regions is None else len(done.turned_regions.parts),

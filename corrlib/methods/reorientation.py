@@ -107,8 +107,8 @@ orientation on both, sent onto two different limbs, is a swapped pair
 not against +1: onto a mirror image of the source's handedness the right map
 reverses orientation everywhere. It is not turned: a posed target's reflection is too
 poor on the limbs to carry them back (the turned legs stay 0.27 √area off,
-though the map's orientation then reads right). ``reorient(release=True)``
-returns its vertices instead, and kernel matching matches them again with
+though the map's orientation then reads right). :func:`reorient` returns
+its vertices instead, and kernel matching matches them again with
 the rest of the map as landmarks. The map's own orientation is not used for
 the other rules: near a crossed limb it reads the hip of the *right* leg
 reversed too (twisted by the crossing), where the descriptors do not.
@@ -286,6 +286,12 @@ class TurnedParts:
 def _majority(values: np.ndarray) -> int:
     """The most frequent non-negative label (ties: the smaller)."""
     return int(np.argmax(np.bincount(values))) if values.size else 0
+
+
+def mirror_region(regions: np.ndarray, mirror_x: np.ndarray, region: int) -> int:
+    """The region that the source's reflection ``mirror_x`` (n_X,) sends most of ``region`` to (its own label
+    for a region on the plane of symmetry)."""
+    return _majority(regions[np.asarray(mirror_x)[regions == region]])
 
 
 def image_limbs(map_xy: np.ndarray, parts_x: ShapeParts, parts_y: ShapeParts) -> dict[int, int]:
@@ -490,7 +496,7 @@ def turn_reversed_regions(map_xy: np.ndarray, map_yx: np.ndarray | None, parts_x
     mirrored_xy = np.asarray(mirrored_xy)
     values = np.where(mirrored_xy >= 0, local_agreement(mirrored_xy), 0.0)
     righted = [r for r in reversed_ if np.mean(values[(regions == r) & matched]) > 0]
-    partner = {r: _majority(regions[np.asarray(mirror_x())[regions == r]]) for r in reversed_}
+    partner = {r: mirror_region(regions, mirror_x(), r) for r in reversed_}
     turned = [r for r in righted if partner[r] in righted]
     if all(partner[r] == r for r in turned):  # none, or no pair of mirror regions among them
         turned = []
@@ -543,7 +549,7 @@ def swapped_pairs(map_xy: np.ndarray, parts_x: ShapeParts, parts_y: ShapeParts, 
     images = image_limbs(map_xy, parts_x, parts_y)
     chosen = set()
     for r in reversed_:
-        p = _majority(regions[np.asarray(mirror_x())[regions == r]])
+        p = mirror_region(regions, mirror_x(), r)
         if p == r or images.get(r, 0) in (0, images.get(p, 0)) or images.get(p, 0) == 0:
             continue
         rest = [value for region, value in reading.items() if region not in (r, p)]
@@ -649,8 +655,8 @@ class Reoriented:
     turned_regions, turned_parts : TurnedParts or None
         The regions and the parts turned.
     released : (n_X,) bool or None
-        The source vertices of swapped mirror limbs (:func:`swapped_pairs`, with ``release=True``), whose matches
-        a solver re-places from the rest of the map; None when there are none.
+        The source vertices of swapped mirror limbs (:func:`swapped_pairs`), whose matches a solver re-places
+        from the rest of the map; None when there are none.
     released_regions : tuple of int
         Their regions (:func:`shoulder_regions` labels).
     """
@@ -671,7 +677,7 @@ def can_reorient(source, target, spec_y) -> bool:
 
 
 def reorient(source, target, spec_x, spec_y, map_xy: np.ndarray, map_yx: np.ndarray | None,
-             blocks: Callable[[], tuple[np.ndarray, np.ndarray]], release: bool = False) -> Reoriented:
+             blocks: Callable[[], tuple[np.ndarray, np.ndarray]]) -> Reoriented:
     """A map turned by a reflection where it reverses orientation (the module docstring): the whole map if
     its mean agreement is negative and a turn, by the target's reflection or by the source's, makes it
     positive and rights more of its area than it wrongs (:func:`reversed_on_most`; of two such turns the
@@ -690,9 +696,10 @@ def reorient(source, target, spec_x, spec_y, map_xy: np.ndarray, map_yx: np.ndar
     map_yx : (n_Y,) int or None
     blocks : callable
         Returns :func:`orientation_blocks` of the pair (a refiner that has them already passes them).
-    release : bool
-        Also find swapped mirror limbs (:func:`swapped_pairs`), which no computed reflection turns reliably,
-        and return their vertices as ``released`` (the map itself is left as it is there).
+
+    Swapped mirror limbs (:func:`swapped_pairs`), which no computed reflection turns reliably, are not turned:
+    their vertices are returned as ``released`` for the caller (kernel matching places them again,
+    product-manifold refinement reports them).
     """
     mirror_x = functools.cache(lambda: mesh_reflection(source, spec_x))
     mirror_y = functools.cache(lambda: mesh_reflection(target, spec_y))
@@ -718,12 +725,9 @@ def reorient(source, target, spec_x, spec_y, map_xy: np.ndarray, map_yx: np.ndar
     turned_parts = turn_reversed_parts(map_xy, map_yx, parts_x, parts_y, mirror_y)
     if turned_parts is not None:
         map_xy, map_yx = turned_parts.map_xy, turned_parts.map_yx
-    released, swapped = None, []
-    if release:
-        own = region_agreements(map_xy, parts_x, lambda m: map_orientation(source, target, m))
-        swapped = swapped_pairs(map_xy, parts_x, parts_y, region_agreements(map_xy, parts_x, local), own, mirror_x)
-        if swapped:
-            released = np.isin(shoulder_regions(parts_x), swapped)
+    own = region_agreements(map_xy, parts_x, lambda m: map_orientation(source, target, m))
+    swapped = swapped_pairs(map_xy, parts_x, parts_y, region_agreements(map_xy, parts_x, local), own, mirror_x)
+    released = np.isin(shoulder_regions(parts_x), swapped) if swapped else None
     return Reoriented(map_xy, map_yx, turned, turned_regions, turned_parts, released, tuple(swapped))
 
 

@@ -111,6 +111,48 @@ def test_slicing_equals_single_shift_invert(cat_pair):
     assert np.all(overlap[simple] > 1 - 1e-6)
 
 
+def test_slicing_wastes_no_shift(monkeypatch):
+    """Every shift-invert run of the slicing reaches back to the last cut: the second shift is placed by the
+    first slice's span (its radius is the whole span, the first slice being one-sided), so 300 eigenpairs in
+    slices of 100 take a first slice of 100 and three of about 80, no run thrown away."""
+    import corrlib.geometry.spectrum as spectrum
+
+    s = trimesh.creation.icosphere(subdivisions=4)
+    mesh = TriMesh(np.asarray(s.vertices) * [3.0, 2.0, 1.0], s.faces)
+    stiff, mass = mesh_laplacian(mesh)
+    runs = []
+    original = spectrum._ShiftInvert.run
+
+    def counted(self, k, sigma, **kwargs):
+        runs.append(sigma)
+        return original(self, k, sigma, **kwargs)
+
+    monkeypatch.setattr(spectrum._ShiftInvert, "run", counted)
+    w, _ = eigenpairs(stiff, mass, 300, method="slicing")
+    assert len(runs) == 4 and np.all(np.diff(runs) > 0)
+    monkeypatch.undo()
+    assert np.allclose(w, eigenpairs(stiff, mass, 300, method="eigsh")[0], rtol=1e-9)
+
+
+@pytest.mark.parametrize("mass_kind", ["lumped", "consistent"])
+def test_symmetric_lu_solves_the_shifted_system(cat_pair, mass_kind):
+    """The shift-invert operator (SuperLU in symmetric mode) solves ``(A − σM) x = b`` for a shift inside the
+    spectrum, next to an eigenvalue, as accurately as partial pivoting does."""
+    import scipy.sparse.linalg as spla
+
+    from corrlib.geometry.spectrum import _ShiftInvert
+
+    stiff, mass = mesh_laplacian(cat_pair[0], mass=mass_kind)
+    op = _ShiftInvert(stiff, mass)
+    w = eigenpairs(stiff, mass, 40, method="eigsh")[0]
+    b = np.random.default_rng(0).standard_normal(op.a.shape[0])
+    for sigma in (0.5 * (w[20] + w[21]), w[30] * (1 + 1e-7)):
+        shifted = (op.a - sigma * (sp.identity(op.a.shape[0]) if op.diag_mass else op.mass)).tocsc()
+        x = op._symmetric_lu(sigma) @ b
+        reference = spla.spsolve(shifted, b)
+        assert np.linalg.norm(x - reference) <= 1e-6 * np.linalg.norm(reference)
+
+
 def test_eigenvector_signs_do_not_depend_on_the_decomposition(cat_pair):
     """Every simple eigenvector with a third moment comes out with Σ m φ³ > 0, whichever solver and k computed
     it, so a cold and a warm spectra cache give the same functions."""

@@ -408,6 +408,8 @@ def test_kernel_matching_turns_a_crossed_leg_of_a_posed_person():
     assert summary["mean"] < 0.04 and summary["mean"] <= 1.3 * summary["mean_sym"], summary
     first = geodesic_errors(result.extras["first_pass_map_xy"], target, ident, ident)
     assert first.summary()["mean"] > 1.5 * summary["mean"]  # the second pass is what made it right
+    taus = result.extras["tau_trace"]  # the second pass: one DC step per time (SECOND_PASS_ITERATIONS)
+    assert taus.size == np.unique(taus).size == 10
 
 
 def test_a_second_pass_keeps_the_first_pass_decisions():

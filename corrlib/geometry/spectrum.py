@@ -45,6 +45,9 @@ DENSE_LIMIT = 600
 #: is as fast on surface meshes up to here, far slower on product bands beyond); method="block"
 #: always does
 CHOLESKY_MIN_ROWS = 10000
+#: SuperLU's diagonal pivot threshold in symmetric mode (:meth:`_ShiftInvert._symmetric_lu`): a diagonal entry
+#: is the pivot if it is at least this fraction of its column's largest (1: partial pivoting, 0: none)
+SYMMETRIC_PIVOT_THRESHOLD = 0.1
 #: vectors per block of the block Lanczos runs: k / 12 within these bounds (a larger block makes the
 #: solves cheaper per vector, a smaller one needs fewer vectors: 16 is best for 200 harmonics on a
 #: 103k-row band, measured)
@@ -143,6 +146,18 @@ class _ShiftInvert:
         shifted = self.a - sigma * (sp.identity(n, format="csc") if self.diag_mass else self.mass)
         return cholesky.CholeskySolver(shifted, blocks=blocks)
 
+    def _symmetric_lu(self, sigma: float) -> spla.LinearOperator:
+        """``(A − σM)⁻¹`` by SuperLU in its symmetric mode: a minimum-degree ordering of ``A + Aᵀ`` and pivots
+        taken from the diagonal where they are at least :data:`SYMMETRIC_PIVOT_THRESHOLD` of their column's
+        largest entry (SuperLU's advice for matrices of symmetric structure). On a mesh Laplacian the factors
+        hold about 40 % fewer entries than with eigsh's own column ordering, and every Lanczos step is one
+        solve."""
+        n = self.a.shape[0]
+        shifted = (self.a - sigma * (sp.identity(n, format="csc") if self.diag_mass else self.mass)).tocsc()
+        lu = spla.splu(shifted, permc_spec="MMD_AT_PLUS_A", diag_pivot_thresh=SYMMETRIC_PIVOT_THRESHOLD,
+                       options={"SymmetricMode": True})
+        return spla.LinearOperator((n, n), matvec=lu.solve, matmat=lu.solve, dtype=np.float64)
+
     def run(self, k: int, sigma: float, ncv: int | None = None, tol: float = 0.0, blocks: bool = False):
         solver = self._cholesky(sigma, blocks)
         n = self.a.shape[0]
@@ -154,12 +169,13 @@ class _ShiftInvert:
             theta, u = block_lanczos(apply, n, k, mass=mass, block=block, tol=tol)
             w = sigma + 1.0 / theta
         else:
-            opinv = None
             if solver is not None:
                 opinv = spla.LinearOperator((n, n), matvec=solver.solve, matmat=solver.solve, dtype=np.float64)
                 # each Lanczos step reorthogonalises against the whole basis: a basis of 1.5k (instead of
                 # ARPACK's 2k) costs a few more solves but less than it saves (measured on product bands)
                 ncv = ncv or min(n - 1, max(int(1.5 * k) + 1, k + 20))
+            else:
+                opinv = self._symmetric_lu(sigma)
             # a fixed start vector makes results reproducible (ARPACK's default one is random)
             v0 = np.random.default_rng(0).standard_normal(n)
             if self.diag_mass:
@@ -204,8 +220,10 @@ def _slicing(op: _ShiftInvert, k: int, sigma0: float, slice_size: int):
         cutoff = 0.5 * (w[take].max() + above.min()) if above.size else upper
         if count >= k or not np.isfinite(cutoff):
             break
-        # place the next shift so its interval reaches ~40 % of a half-width below the cut
-        sigma = cutoff + 0.6 * r
+        # place the next shift so its interval reaches ~40 % of a half-width below the cut; the half-width of
+        # the next slice is half the span of this one's eigenvalues (Weyl: a surface's eigenvalues are about
+        # evenly spaced), not its radius r, which for the first, one-sided slice is the whole span
+        sigma = cutoff + 0.6 * 0.5 * float(w.max() - w.min())
     else:
         raise SolverError("spectrum slicing did not converge (too many shifts)")
     evals = np.concatenate(vals)
@@ -435,12 +453,12 @@ def _read_decomposition(folder: str, n: int, k: int):
 def mesh_spectra(meshes, k: int, *, mass: str = "lumped", use_cache: bool = True) -> list[Spectrum]:
     """:func:`mesh_spectrum` of several meshes (a pair, as every pairwise method needs), using two cores.
 
-    Where two or more are not cached and large enough (:data:`PARALLEL_MIN_WORK`), the first of them is
-    decomposed in a second Python process (:mod:`corrlib.geometry.spectrum_worker`) while this one
-    decomposes the others, each with single-threaded BLAS (two multi-threaded BLAS on two cores slow
-    each other down). The results are the same as one at a time: the solver is deterministic (fixed
-    start vectors). If the second process fails for any reason, this one decomposes that mesh itself,
-    so errors are those of :func:`mesh_spectrum`.
+    Where two or more are not cached and large enough (:data:`PARALLEL_MIN_WORK`), the lightest of them
+    (vertices × eigenpairs; it also pays the second process's start-up) is decomposed in a second Python
+    process (:mod:`corrlib.geometry.spectrum_worker`) while this one decomposes the others, each with
+    single-threaded BLAS (two multi-threaded BLAS on two cores slow each other down). The results are the
+    same as one at a time: the solver is deterministic (fixed start vectors). If the second process fails
+    for any reason, this one decomposes that mesh itself, so errors are those of :func:`mesh_spectrum`.
 
     Parameters
     ----------
@@ -472,7 +490,7 @@ def mesh_spectra(meshes, k: int, *, mass: str = "lumped", use_cache: bool = True
     todo = [i for i, s in enumerate(spectra) if s is None]
     big = [i for i in todo if meshes[i].n_vertices * ks[i] >= PARALLEL_MIN_WORK and ks[i] < meshes[i].n_vertices]
     if len(todo) >= 2 and big and _second_process_allowed():
-        first = big[0]
+        first = min(big, key=lambda i: meshes[i].n_vertices * ks[i])  # the lighter one pays the start-up
         try:
             workspace = tempfile.TemporaryDirectory(prefix="corrlib-spectrum-")
         except OSError:  # no writable temporary folder: everything is decomposed here

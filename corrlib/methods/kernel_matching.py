@@ -464,6 +464,22 @@ def seed_alignment(problem: SeedProblem, seed_map: np.ndarray) -> np.ndarray:
     return _alignment(problem.psi_s[seed_map], problem.phi_s) + problem.anchor_c
 
 
+def updated_alignment(problem: SeedProblem, c: np.ndarray, old_map: np.ndarray, new_map: np.ndarray) -> np.ndarray:
+    """(k, k) float: :func:`seed_alignment` of ``new_map`` from ``c``, that of ``old_map`` (both (n_seed,)).
+
+    ``C`` is a sum over the seeds, so only the changed seeds' terms are exchanged:
+    ``C' = C + (Ψ_s[new_map[ch]] − Ψ_s[old_map[ch]])ᵀ Φ_s[ch]``, at a cost proportional to the changed seeds (the
+    later DC steps change a few per cent). Where half or more changed, ``C'`` is formed afresh. Equal to the
+    direct product up to round-off.
+    """
+    changed = np.flatnonzero(new_map != old_map)
+    if changed.size == 0:
+        return c
+    if 2 * changed.size >= new_map.size:
+        return seed_alignment(problem, new_map)
+    return c + _alignment(problem.psi_s[new_map[changed]] - problem.psi_s[old_map[changed]], problem.phi_s[changed])
+
+
 def dc_objective(seed_map: np.ndarray, c: np.ndarray, kernel_scale: float, decay_y: np.ndarray,
                  decay_x: np.ndarray, desc_block: np.ndarray | None = None, mu: float = 0.0) -> float:
     """The function the DC steps of one time maximise.
@@ -533,7 +549,8 @@ def seed_score(phi_s: np.ndarray, psi_s: np.ndarray, c: np.ndarray, decay_y: np.
 
 @dataclass(frozen=True)
 class DCStep:
-    """One DC step: the new map and the objective before and after (same ``kernel_scale``)."""
+    """One DC step: the new map, its alignment ``C`` (:func:`seed_alignment`) and the objective before and after
+    (same ``kernel_scale``)."""
 
     seed_map: np.ndarray
     before: float
@@ -541,6 +558,7 @@ class DCStep:
     changed: int
     kernel_scale: float
     from_permutation: bool
+    alignment: np.ndarray
 
     @property
     def decreased(self) -> bool:
@@ -551,7 +569,7 @@ class DCStep:
 def dc_step(problem: SeedProblem, seed_map: np.ndarray, decay_y: np.ndarray, decay_x: np.ndarray,
             kernel_scale: float | None = None, *, prices: np.ndarray | None = None,
             eps_start: float | None = None, backend: str = "auction", cancel: np.ndarray | None = None,
-            watch: Stopwatch | None = None) -> DCStep:
+            watch: Stopwatch | None = None, alignment: np.ndarray | None = None) -> DCStep:
     """One DC step (Eq. 8.13): ``Π_{k+1} = argmax_Π <Π, ∇f(Π_k)>``, one linear assignment on :func:`seed_score`.
 
     ``f`` (:func:`dc_objective`) is convex, so ``f(Π_{k+1}) ≥ f(Π_k) + <Π_{k+1} - Π_k, ∇f(Π_k)> ≥ f(Π_k)``
@@ -567,21 +585,24 @@ def dc_step(problem: SeedProblem, seed_map: np.ndarray, decay_y: np.ndarray, dec
         The auction's prices (warm start), updated in place.
     eps_start : float, optional
         The auction's first ε.
+    alignment : (k, k) float, optional
+        ``C`` of ``seed_map`` if known (the previous step's :attr:`DCStep.alignment`); None: formed here.
     """
     watch = Stopwatch() if watch is None else watch
     with watch("kernels"):
-        c = seed_alignment(problem, seed_map)
+        c = seed_alignment(problem, seed_map) if alignment is None else alignment
         g, kernel_scale = seed_score(problem.phi_s, problem.psi_s, c, decay_y, decay_x, kernel_scale,
                                      problem.desc_block, problem.mu)
         before = dc_objective(seed_map, c, kernel_scale, decay_y, decay_x, problem.desc_block, problem.mu)
     with watch("assignment"):
         new_map = linear_assignment(g, method=backend, cancel=cancel, prices=prices, eps_start=eps_start)
     changed = int(np.sum(new_map != seed_map))
-    value = dc_objective(new_map, seed_alignment(problem, new_map), kernel_scale, decay_y, decay_x,
-                         problem.desc_block, problem.mu)
+    with watch("kernels"):
+        c_new = updated_alignment(problem, c, seed_map, new_map)
+    value = dc_objective(new_map, c_new, kernel_scale, decay_y, decay_x, problem.desc_block, problem.mu)
     # the DC guarantee holds from a permutation (a given initial map may map seeds together)
     from_permutation = np.unique(seed_map).size == seed_map.size
-    return DCStep(new_map, before, value, changed, kernel_scale, from_permutation)
+    return DCStep(new_map, before, value, changed, kernel_scale, from_permutation, c_new)
 
 
 def heat_decays(evals: np.ndarray, area: float, tau: float) -> np.ndarray:
@@ -637,6 +658,7 @@ class KernelState:
     trace: list = field(default_factory=list)
     monotone: bool = True
     dc_start: str = "initial map"
+    start_alignment: np.ndarray | None = None  # C of the seed map the first time's DC iterations ended with
     step: int = 0  # DC iterations counted for the progress bar
     seed_vertices_x: np.ndarray | None = None  # the seeds' matches snapped to vertices (reported)
     seed_vertices_y: np.ndarray | None = None
@@ -795,24 +817,26 @@ def seed_problem(state: KernelState) -> SeedProblem:
 
 @dataclass(frozen=True)
 class DCRun:
-    """DC iterations at one time: the last map, the time's kernel scale, one trace entry per iteration and
-    the last objective."""
+    """DC iterations at one time: the last map and its alignment ``C``, the time's kernel scale, one trace
+    entry per iteration and the last objective."""
 
     seed_map: np.ndarray
     kernel_scale: float
     entries: list
     value: float | None
+    alignment: np.ndarray | None = None
 
 
 def dc_iterations(state: KernelState, seed_map: np.ndarray, prices: np.ndarray, t_index: int,
-                  kernel_scale: float | None = None, warm_first: bool = True):
+                  kernel_scale: float | None = None, warm_first: bool = True, alignment: np.ndarray | None = None):
     """Stage 5: up to ``iters_per_time`` :func:`dc_step` at the time ``taus[t_index]``; stops when the map
     no longer changes.
 
     A generator (yields :class:`Progress`); returns a :class:`DCRun`. ``prices`` (the auction's warm start) is
     updated in place; ``kernel_scale`` None: set from the first score; ``warm_first``: the first score is far
-    from the last one (the auction starts at :data:`WARM_EPS_START`). Clears ``state.monotone`` if a step
-    lowers the objective.
+    from the last one (the auction starts at :data:`WARM_EPS_START`); ``alignment``: ``C`` of ``seed_map`` if
+    known (it does not depend on the time, so it is carried from one time to the next). Clears
+    ``state.monotone`` if a step lowers the objective.
     """
     params = state.params
     tau = state.taus[t_index]
@@ -822,8 +846,8 @@ def dc_iterations(state: KernelState, seed_map: np.ndarray, prices: np.ndarray, 
         state.token.raise_if_cancelled()
         step = dc_step(state.problem, seed_map, decay_y, decay_x, kernel_scale, prices=prices,
                        eps_start=WARM_EPS_START if it == 0 and warm_first else None, backend=params.backend,
-                       cancel=state.cancel, watch=state.watch)
-        kernel_scale, value, seed_map = step.kernel_scale, step.value, step.seed_map
+                       cancel=state.cancel, watch=state.watch, alignment=alignment)
+        kernel_scale, value, seed_map, alignment = step.kernel_scale, step.value, step.seed_map, step.alignment
         if step.decreased:
             state.monotone = False
         entries.append({"tau": float(tau), "iteration": it, "energy": value, "changed": step.changed})
@@ -834,7 +858,7 @@ def dc_iterations(state: KernelState, seed_map: np.ndarray, prices: np.ndarray, 
         if step.changed == 0:
             state.step += params.iters_per_time - it - 1
             break
-    return DCRun(seed_map, kernel_scale, entries, value)
+    return DCRun(seed_map, kernel_scale, entries, value, alignment)
 
 
 def aligned_start(state: KernelState, start_map: np.ndarray, watch: Stopwatch) -> tuple[np.ndarray, np.ndarray]:
@@ -910,6 +934,7 @@ def choose_start(state: KernelState):
                 best, prices = other, other_prices
                 dc_start = "descriptors" if state.descriptor_start else "initial alignment"
     state.seed_map, state.prices, state.dc_start = best.seed_map, prices, dc_start
+    state.start_alignment = best.alignment
     state.trace.extend(best.entries)
 
 
@@ -1119,9 +1144,10 @@ def solve_prepared(state: KernelState, initial: InitialMatch | None, compete: bo
     yield from initial_seed_map(state, initial, compete)
     seed_problem(state)
     yield from choose_start(state)
+    alignment = state.start_alignment
     for t_index in range(1, len(state.taus)):
-        run = yield from dc_iterations(state, state.seed_map, state.prices, t_index)
-        state.seed_map = run.seed_map
+        run = yield from dc_iterations(state, state.seed_map, state.prices, t_index, alignment=alignment)
+        state.seed_map, alignment = run.seed_map, run.alignment
         state.trace.extend(run.entries)
     full_map_xy, full_map_yx = yield from multiscale_refinement(state)
     kept = None

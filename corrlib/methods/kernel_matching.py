@@ -294,12 +294,13 @@ DECAY_CUTOFF = 1e-12
 def kernel_score(psi_rows, phi_cols, c, decay_y, decay_x):
     """(r, c) float32 kernel score block ``(Ψ_r D_Y) C (Φ_c D_X)ᵀ``.
 
-    Only the eigenpairs with a decay above :data:`DECAY_CUTOFF` enter. The transposed block is
-    ``kernel_score(phi_cols, psi_rows, c.T, decay_x, decay_y)``.
+    Only the eigenpairs with a decay above :data:`DECAY_CUTOFF` enter. Both products run in float32 (the score
+    is float32 anyway; forming ``Ψ_r D_Y C`` in float64 first changed no map of the battery). The transposed
+    block is ``kernel_score(phi_cols, psi_rows, c.T, decay_x, decay_y)``.
     """
     k_y = max(1, int(np.count_nonzero(decay_y > DECAY_CUTOFF)))
     k_x = max(1, int(np.count_nonzero(decay_x > DECAY_CUTOFF)))
-    left = ((psi_rows[:, :k_y] * decay_y[:k_y]) @ c[:k_y, :k_x]).astype(np.float32)
+    left = (psi_rows[:, :k_y] * decay_y[:k_y]).astype(np.float32) @ c[:k_y, :k_x].astype(np.float32)
     right = (phi_cols[:, :k_x] * decay_x[:k_x]).astype(np.float32)
     return left @ right.T
 

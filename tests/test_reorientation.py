@@ -597,3 +597,6 @@ def test_kernel_matching_places_swapped_legs_again_from_the_body():
     # alignment added to it once read 1.0e9 against 4.2e8)
     assert abs(result.energy / result.extras["first_pass"]["energy"] - 1.0) < 0.1
     assert "optimised once more" not in turn_note(result.extras)
+    # released limbs have no start: their pass is a full one (two DC steps at some time, unlike a turned map's)
+    taus = result.extras["tau_trace"]
+    assert taus.size > np.unique(taus).size

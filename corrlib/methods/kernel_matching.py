@@ -134,8 +134,8 @@ MONOTONE_RTOL = 1e-5
 #: the finer scales' samples are farthest-point prefixes up to ``n_seed × growth ** FPS_SCALES`` vertices
 #: (the first finer scales); the rest, only in the last dense scales, are ordered by distance from the centroid
 FPS_SCALES = 2
-#: DC iterations per time and refinement passes per scale of the second pass (:func:`reoptimised`): its start
-#: went through the whole schedule once already, and its turned regions follow the rest of the map
+#: DC iterations per time and refinement passes per scale of the second pass from a turned map
+#: (:func:`reoptimised`): its start went through the whole schedule once already
 SECOND_PASS_ITERATIONS = SECOND_PASS_PASSES = 1
 #: progress bar layout (start, width): DC iterations on the seeds, then the finer scales (the final ZoomOut
 #: step reports at :data:`PROGRESS_SMOOTHING`, after them)
@@ -1108,9 +1108,10 @@ def reoptimised(state: KernelState, turned: MatchResult):
     a rough copy of the right ones, not an optimum of the kernel energy. The map is therefore a start, and
     kernel matching refines it as it refines any given map (``initial``; the partners within the smallest
     kernel's width are kept, :mod:`corrlib.methods.resolution`). The orientation stage runs again on the
-    result, without a third pass. The prepared spectra, samples and descriptors are reused, and the pass is
-    lighter than the first (:data:`SECOND_PASS_ITERATIONS` DC steps per time, :data:`SECOND_PASS_PASSES`
-    refinement passes per scale): the map it starts from has been through the whole schedule already.
+    result, without a third pass. The prepared spectra, samples and descriptors are reused. From a turned map
+    the pass is lighter than the first (:data:`SECOND_PASS_ITERATIONS` DC steps per time,
+    :data:`SECOND_PASS_PASSES` refinement passes per scale): the map it starts from has been through the whole
+    schedule already. Released limbs (below) have no start at all, so their pass is a full one.
 
     Swapped limbs (``extras["released_x"]``, :func:`~.reorientation.swapped_pairs`: a mirror pair of limbs, each
     sent mirror-inverted onto the other's image) are not turned by a reflection: a posed target's reflection
@@ -1129,8 +1130,9 @@ def reoptimised(state: KernelState, turned: MatchResult):
         kept = np.flatnonzero(~released & (turned.map_xy >= 0))
         start = InitialMatch(landmarks_x=kept, landmarks_y=turned.map_xy[kept])
     fresh = state.prepared()
-    fresh.params = replace(state.params, iters_per_time=min(state.params.iters_per_time, SECOND_PASS_ITERATIONS),
-                           passes=min(state.params.passes, SECOND_PASS_PASSES))
+    if released is None:  # a turned map: every vertex starts from a map that went through the whole schedule
+        fresh.params = replace(state.params, iters_per_time=min(state.params.iters_per_time, SECOND_PASS_ITERATIONS),
+                               passes=min(state.params.passes, SECOND_PASS_PASSES))
     result = yield from scaled_progress(solve_prepared(fresh, start, compete=False),
                                         PROGRESS_SMOOTHING, 1.0, "second pass")
     with_first_pass(result.extras, turned.extras, turned.map_xy, turned.energy)

@@ -294,9 +294,9 @@ DECAY_CUTOFF = 1e-12
 def kernel_score(psi_rows, phi_cols, c, decay_y, decay_x):
     """(r, c) float32 kernel score block ``(Ψ_r D_Y) C (Φ_c D_X)ᵀ``.
 
-    Only the eigenpairs with a decay above :data:`DECAY_CUTOFF` enter. Both products run in float32 (the score
-    is float32 anyway; forming ``Ψ_r D_Y C`` in float64 first changed no map of the battery). The transposed
-    block is ``kernel_score(phi_cols, psi_rows, c.T, decay_x, decay_y)``.
+    Only the eigenpairs with a decay above :data:`DECAY_CUTOFF` enter. Both products run in float32: the score
+    is float32, and the auction resolves it only to that precision. The transposed block is
+    ``kernel_score(phi_cols, psi_rows, c.T, decay_x, decay_y)``.
     """
     k_y = max(1, int(np.count_nonzero(decay_y > DECAY_CUTOFF)))
     k_x = max(1, int(np.count_nonzero(decay_x > DECAY_CUTOFF)))

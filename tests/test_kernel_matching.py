@@ -173,9 +173,22 @@ def test_refinement_of_a_noisy_map_and_of_landmarks(wolf_pair):
     landmarks = rng.choice(wolf0.n_vertices, 15, replace=False)
     from_landmarks = solve("kernel-matching", wolf0, wolf1, initial=InitialMatch(landmarks_x=landmarks,
                                                                                  landmarks_y=landmarks), **fast)
-    # second start from the landmarks' kernel score alone (measured 99.5 %; from the nearest landmarks' partners
+    # the start from the landmarks' kernel score alone (measured 99.5 %; from the nearest landmarks' partners
     # alone: 83 %)
     assert geodesic_errors(from_landmarks.map_xy, wolf1, ident, ident).summary()["within_0.05"] > 0.97
+    # landmarks stay matched (without the final ZoomOut step, which moves every vertex to its nearest partner
+    # in the basis); many of them fix seeds, whose neighbours the assignments place around them
+    many = rng.choice(wolf0.n_vertices, 1500, replace=False)
+    partners = rng.permutation(many)  # wrong on purpose: kept all the same
+    kept = solve("kernel-matching", wolf0, wolf1, initial=InitialMatch(landmarks_x=many, landmarks_y=partners),
+                 smooth_k=0, **fast)
+    np.testing.assert_array_equal(kept.map_xy[many], partners)
+    assert np.all(kept.map_xy >= 0)
+    # right landmarks on 30 % of the vertices: the rest is placed from them
+    rest = np.setdiff1d(ident, many)
+    placed = solve("kernel-matching", wolf0, wolf1, initial=InitialMatch(landmarks_x=many, landmarks_y=many),
+                   smooth_k=0, **fast)
+    assert geodesic_errors(placed.map_xy, wolf1, rest, rest).summary()["within_0.05"] > 0.97
 
 
 @pytest.mark.slow

@@ -12,6 +12,7 @@ from corrlib.methods.kernel_matching import (
     cell_centres,
     dc_objective,
     dc_step,
+    free_assignment,
     heat_decays,
     kernel_energy,
     most_similar_matches,
@@ -195,6 +196,43 @@ def test_dc_linearisation_bounds_the_objective_from_below(pair):
         rows = np.arange(n)
         linear = f_p + float(g[rows, q_map].astype(np.float64).sum() - g[rows, p_map].astype(np.float64).sum())
         assert f_q >= linear - 1e-5 * abs(f_p)
+
+
+def test_dc_step_with_fixed_seeds_is_the_best_permutation_that_keeps_them(pair):
+    """Seeds fixed by landmarks keep their partners; the free ones take the linear assignment's optimum over
+    the permutations that keep the fixed ones (brute force over all 5! of them), so the objective still does
+    not fall."""
+    import itertools
+
+    decay_y, decay_x = pair["y"]["decay_dc"], pair["x"]["decay_dc"]
+    rng = np.random.default_rng(6)
+    n = pair["x"]["mesh"].n_vertices
+    problem = seed_problem_of(pair, 0.05, 1)
+    fixed = rng.choice(n, n - 5, replace=False)
+    free_x = np.setdiff1d(np.arange(n), fixed)
+    seed_map = rng.permutation(n)
+    free_y = np.sort(seed_map[free_x])
+    restricted = SeedProblem(problem.phi_s, problem.psi_s, 0.0, problem.desc_block, 0.05, free_x, free_y)
+    for _ in range(3):
+        c = seed_alignment(problem, seed_map)
+        g, scale = seed_score(problem.phi_s, problem.psi_s, c, decay_y, decay_x, None, problem.desc_block, 0.05)
+        g_free, scale_free = seed_score(*restricted.free_blocks()[:2], c, decay_y, decay_x, None,
+                                        restricted.free_blocks()[2], 0.05)
+        step = dc_step(restricted, seed_map, decay_y, decay_x, scale_free, backend="scipy")
+        np.testing.assert_array_equal(step.seed_map[fixed], seed_map[fixed])
+        assert np.unique(step.seed_map).size == n
+        best = max(itertools.permutations(free_y), key=lambda ys: float(
+            sum(g_free[i, np.searchsorted(free_y, yj)] for i, yj in enumerate(ys))))
+        np.testing.assert_array_equal(step.seed_map[free_x], best)
+        assert step.value >= step.before - MONOTONE_RTOL * abs(step.before)
+        # the free block is the whole score's block (up to the scale, the free rows' own maximum)
+        np.testing.assert_allclose((g_free - 0.05 * problem.desc_block[np.ix_(free_x, free_y)]) * scale_free,
+                                   (g[np.ix_(free_x, free_y)] - 0.05 * problem.desc_block[np.ix_(free_x, free_y)])
+                                   * scale, rtol=0, atol=1e-5 * scale)
+        seed_map = step.seed_map
+    # nothing free: the map stays as it is, without an assignment
+    none_free = SeedProblem(problem.phi_s, problem.psi_s, 0.0, None, 0.0, np.zeros(0, np.int64), np.zeros(0, np.int64))
+    np.testing.assert_array_equal(free_assignment(none_free, seed_map, np.zeros((0, 0))), seed_map)
 
 
 def test_dc_step_from_a_non_permutation_is_not_checked(pair):

@@ -22,7 +22,8 @@ The stages, each a function below sharing one :class:`KernelState`:
    anchors' alignment at the seeds (:class:`SeedProblem`).
 4. :func:`choose_start` — DC iterations of the first (largest) time from the
    initial map and from the aligned start (:func:`aligned_start`, formed on a
-   thread beside the first start's iterations); the higher objective goes on.
+   thread beside the first start's iterations); the higher objective goes on
+   (landmarks: the aligned start alone).
 5. :func:`dc_iterations` — DC iterations at one diffusion time, each one
    :func:`dc_step` (objective :func:`dc_objective`, score :func:`seed_score`);
    run over the decreasing time schedule (coarse, global alignment first).
@@ -50,11 +51,15 @@ Design choices, in brief (the measurements behind them are in
   assignment; the μ term of the iterations uses the plain descriptor (their
   local noise costs accuracy there).
 * A second start is formed from the kernel score of only the most similar
-  initial matches (``init_fraction``; with landmarks: the landmarks alone),
-  which spreads their alignment over the shape where the initial assignment
-  is a coin flip (thin parts). Both starts run the first time's DC iterations
-  and the higher objective goes on: a multi-start of the same DC problem, no
-  start is trusted blindly.
+  initial matches (``init_fraction``), which spreads their alignment over the
+  shape where the initial assignment is a coin flip (thin parts). Both starts
+  run the first time's DC iterations and the higher objective goes on: a
+  multi-start of the same DC problem, no start is trusted blindly.
+* Landmarks stay matched: the seeds and vertices at landmarks keep their
+  partners (:func:`fixed_seeds`), every assignment places the others only, and
+  the one start is the landmarks' kernel score (the other seeds have no
+  partner of their own). A release pass (stage 8) thereby solves the released
+  limbs only.
 * Seeds are farthest points of the surfaces, not of their vertices
   (:func:`~corrlib.geometry.sampling.surface_farthest_points`): independently
   remeshed shapes differ in vertex density, and a bijection of vertex seeds
@@ -451,6 +456,9 @@ class SeedProblem:
         Descriptor similarity ``F_Y F_Xᵀ`` as (seed x, seed y), scaled to [-1, 0]; None without μ term.
     mu : float
         Weight μ of the descriptor term.
+    free_x, free_y : (f,) int and (g,) int, or None
+        With landmarks: the x seeds the assignments place (the others are fixed at a landmark's partner,
+        :func:`fixed_seeds`) and the y seeds not taken by a fixed one, ``f ≤ g``; None: every seed.
     """
 
     phi_s: np.ndarray
@@ -458,6 +466,33 @@ class SeedProblem:
     anchor_c: np.ndarray | float
     desc_block: np.ndarray | None
     mu: float
+    free_x: np.ndarray | None = None
+    free_y: np.ndarray | None = None
+
+    def free_blocks(self) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
+        """``Φ_s``, ``Ψ_s`` and the descriptor block on the free seeds only (the assignment's rows and
+        columns): views of the whole problem's arrays when every seed is free."""
+        if self.free_x is None:
+            return self.phi_s, self.psi_s, self.desc_block
+        desc = None if self.desc_block is None else self.desc_block[np.ix_(self.free_x, self.free_y)]
+        return self.phi_s[self.free_x], self.psi_s[self.free_y], desc
+
+    @property
+    def n_columns(self) -> int:
+        """Columns of the seed assignment (the size of its auction prices)."""
+        return self.psi_s.shape[0] if self.free_y is None else self.free_y.size
+
+
+def free_assignment(problem: SeedProblem, seed_map: np.ndarray, score: np.ndarray, **auction) -> np.ndarray:
+    """(n_seed,) int: ``seed_map`` with its free seeds placed by one linear assignment on ``score`` (free x seeds,
+    free y seeds), :func:`~corrlib.assignment.linear_assignment` with ``auction``'s arguments; the whole map
+    when every seed is free."""
+    if problem.free_x is None:
+        return linear_assignment(score, **auction)
+    placed = seed_map.copy()
+    if problem.free_x.size:
+        placed[problem.free_x] = problem.free_y[linear_assignment(score, **auction)]
+    return placed
 
 
 def seed_alignment(problem: SeedProblem, seed_map: np.ndarray) -> np.ndarray:
@@ -542,7 +577,7 @@ def seed_score(phi_s: np.ndarray, psi_s: np.ndarray, c: np.ndarray, decay_y: np.
     """
     g = kernel_score(phi_s, psi_s, c.T, decay_x, decay_y)  # the assignment's rows are the x seeds
     if kernel_scale is None:
-        kernel_scale = max(float(np.abs(g).max()), 1e-30)
+        kernel_scale = max(float(np.abs(g).max(initial=0.0)), 1e-30)
     if desc_block is not None:
         g = g / np.float32(kernel_scale) + np.float32(mu) * desc_block
     return g, kernel_scale
@@ -574,7 +609,9 @@ def dc_step(problem: SeedProblem, seed_map: np.ndarray, decay_y: np.ndarray, dec
     """One DC step (Eq. 8.13): ``Π_{k+1} = argmax_Π <Π, ∇f(Π_k)>``, one linear assignment on :func:`seed_score`.
 
     ``f`` (:func:`dc_objective`) is convex, so ``f(Π_{k+1}) ≥ f(Π_k) + <Π_{k+1} - Π_k, ∇f(Π_k)> ≥ f(Π_k)``
-    when ``Π_k`` is a permutation (the assignment's optimum is at least the score of ``Π_k`` itself).
+    when ``Π_k`` is a permutation (the assignment's optimum is at least the score of ``Π_k`` itself). With
+    seeds fixed by landmarks, the assignment places the free seeds only (:meth:`SeedProblem.free_blocks`): the
+    maximum over the permutations that keep the fixed ones, among which ``Π_k`` is, so the same holds.
 
     Parameters
     ----------
@@ -582,8 +619,8 @@ def dc_step(problem: SeedProblem, seed_map: np.ndarray, decay_y: np.ndarray, dec
         ``Π_k``, seed x -> seed y.
     kernel_scale : float, optional
         ``s`` of the time; None: from this step's score.
-    prices : (n_seed,) float, optional
-        The auction's prices (warm start), updated in place.
+    prices : (n_columns,) float, optional
+        The auction's prices (warm start, :attr:`SeedProblem.n_columns`), updated in place.
     eps_start : float, optional
         The auction's first ε.
     alignment : (k, k) float, optional
@@ -592,11 +629,12 @@ def dc_step(problem: SeedProblem, seed_map: np.ndarray, decay_y: np.ndarray, dec
     watch = Stopwatch() if watch is None else watch
     with watch("kernels"):
         c = seed_alignment(problem, seed_map) if alignment is None else alignment
-        g, kernel_scale = seed_score(problem.phi_s, problem.psi_s, c, decay_y, decay_x, kernel_scale,
-                                     problem.desc_block, problem.mu)
+        phi_rows, psi_cols, desc = problem.free_blocks()
+        g, kernel_scale = seed_score(phi_rows, psi_cols, c, decay_y, decay_x, kernel_scale, desc, problem.mu)
         before = dc_objective(seed_map, c, kernel_scale, decay_y, decay_x, problem.desc_block, problem.mu)
     with watch("assignment"):
-        new_map = linear_assignment(g, method=backend, cancel=cancel, prices=prices, eps_start=eps_start)
+        new_map = free_assignment(problem, seed_map, g, method=backend, cancel=cancel, prices=prices,
+                                  eps_start=eps_start)
     changed = int(np.sum(new_map != seed_map))
     with watch("kernels"):
         c_new = updated_alignment(problem, c, seed_map, new_map)
@@ -654,6 +692,8 @@ class KernelState:
     desc_y: np.ndarray | None = None
     confidence: np.ndarray | None = None  # (n_seed,) similarity of every initial descriptor match
     seed_map: np.ndarray | None = None  # (n_seed,) seed x -> seed y
+    free_x: np.ndarray | None = None  # with landmarks: the seeds the assignments place (:func:`fixed_seeds`)
+    free_y: np.ndarray | None = None
     problem: SeedProblem | None = None
     prices: np.ndarray | None = None
     trace: list = field(default_factory=list)
@@ -704,10 +744,9 @@ class KernelState:
 
     @property
     def has_second_start(self) -> bool:
-        """A descriptor initialisation with ``init_fraction < 1``, landmarks, or a given map that competes with
-        the descriptor assignment."""
-        return (self.confidence is not None and self.params.init_fraction < 1) or self.landmarks_only or \
-            self.descriptor_start
+        """A descriptor initialisation with ``init_fraction < 1``, or a given map that competes with the
+        descriptor assignment (landmarks have one start, :func:`choose_start`)."""
+        return (self.confidence is not None and self.params.init_fraction < 1) or self.descriptor_start
 
     @property
     def total_steps(self) -> int:
@@ -777,8 +816,11 @@ def initial_seed_map(state: KernelState, initial: InitialMatch | None, compete: 
             state.descriptor_start = compete
         partner_of = -np.ones(state.n_x, dtype=np.int64)
         partner_of[ix] = iy
-        partner = partner_of[ix[_nearest_point(source.vertices[ix], state.seeds_x.points)]]
-        state.seed_map = _nearest_point(state.seeds_y.points, target.vertices[partner])
+        if state.landmarks_only:
+            state.seed_map, state.free_x, state.free_y = fixed_seeds(state, partner_of)
+        else:
+            partner = partner_of[ix[_nearest_point(source.vertices[ix], state.seeds_x.points)]]
+            state.seed_map = _nearest_point(state.seeds_y.points, target.vertices[partner])
     elif params.init == "fmap":
         from corrlib.methods.baselines import FmapZoomOutParams, solve_fmap_zoomout
         from corrlib.progress import run
@@ -798,6 +840,38 @@ def initial_seed_map(state: KernelState, initial: InitialMatch | None, compete: 
     state.token.raise_if_cancelled()
 
 
+def fixed_seeds(state: KernelState, partner_of: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The seeds that landmarks fix: every x seed whose nearest vertex is a landmark is matched to the y seed
+    nearest to that landmark's partner (of several x seeds that snap to one y seed, the first keeps it).
+
+    Landmarks stay matched (:class:`~corrlib.methods.base.InitialMatch`), so the assignments only place the
+    other seeds, on the y seeds the fixed ones leave (the placed seeds of a release pass are the released
+    limbs: the problem shrinks to them).
+
+    Parameters
+    ----------
+    partner_of : (n_x,) int
+        The landmark partner of every source vertex, -1 where it is no landmark.
+
+    Returns
+    -------
+    seed_map : (n_seed,) int
+        The fixed seeds' partners, -1 for the free ones.
+    free_x, free_y : (f,) int
+        The free x seeds and the y seeds no fixed seed takes (as many).
+    """
+    source, target = state.source, state.target
+    partner = partner_of[state.seeds_x.nearest_corners(source)]
+    fixed = np.flatnonzero(partner >= 0)
+    snapped = _nearest_point(state.seeds_y.points, target.vertices[partner[fixed]])
+    _, first = np.unique(snapped, return_index=True)
+    seed_map = -np.ones(state.n_seed, dtype=np.int64)
+    seed_map[fixed[first]] = snapped[first]
+    taken = np.zeros(state.n_seed, dtype=bool)
+    taken[seed_map[seed_map >= 0]] = True
+    return seed_map, np.flatnonzero(seed_map < 0), np.flatnonzero(~taken)
+
+
 def seed_problem(state: KernelState) -> SeedProblem:
     """Stage 3: the :class:`SeedProblem` — eigenfunctions interpolated at the seeds, ``F_Y F_Xᵀ`` of the plain
     descriptor (the orientation block only decides the initial orientation), the anchors' ``C``."""
@@ -812,7 +886,7 @@ def seed_problem(state: KernelState) -> SeedProblem:
         desc_block = _descriptor_similarity(state.seeds_x.interpolate(source, state.desc_x),
                                             state.seeds_y.interpolate(target, state.desc_y))  # (seed x, seed y)
     anchor_c = _alignment(state.psi[state.anchors_y], state.phi[state.anchors_x]) if state.anchors_x.size else 0.0
-    state.problem = SeedProblem(phi_s, psi_s, anchor_c, desc_block, params.mu)
+    state.problem = SeedProblem(phi_s, psi_s, anchor_c, desc_block, params.mu, state.free_x, state.free_y)
     return state.problem
 
 
@@ -871,7 +945,8 @@ def aligned_start(state: KernelState, start_map: np.ndarray, watch: Stopwatch) -
     (:func:`descriptor_assignment`).
 
     Reads ``state`` only (it runs on a thread beside the first start's DC iterations) and times itself on
-    ``watch``. Returns the start map (n_seed,) and its auction prices (n_seed,).
+    ``watch``. Returns the start map (n_seed,) and its auction prices (:attr:`SeedProblem.n_columns`,).
+    With landmarks it is the only start (:func:`choose_start`) and places the free seeds only.
     """
     if state.descriptor_start:
         return descriptor_assignment(state, watch)[0], np.zeros(state.n_seed)
@@ -880,11 +955,12 @@ def aligned_start(state: KernelState, start_map: np.ndarray, watch: Stopwatch) -
         most_similar_matches(state.confidence, state.params.init_fraction)
     with watch("kernels"):
         c = _alignment(problem.psi_s[start_map[keep]], problem.phi_s[keep]) + problem.anchor_c
-        g, _ = seed_score(problem.phi_s, problem.psi_s, c, *state.decays(state.taus[0]), None,
-                          problem.desc_block, problem.mu)
-    prices = np.zeros(state.n_seed)
+        phi_rows, psi_cols, desc = problem.free_blocks()
+        g, _ = seed_score(phi_rows, psi_cols, c, *state.decays(state.taus[0]), None, desc, problem.mu)
+    prices = np.zeros(problem.n_columns)
     with watch("assignment"):
-        other_start = linear_assignment(g, method=state.params.backend, cancel=state.cancel, prices=prices)
+        other_start = free_assignment(problem, start_map, g, method=state.params.backend, cancel=state.cancel,
+                                      prices=prices)
     return other_start, prices
 
 
@@ -906,16 +982,26 @@ def descriptor_assignment(state: KernelState, watch: Stopwatch) -> tuple[np.ndar
 
 
 def choose_start(state: KernelState):
-    """Stage 4: DC iterations of the first time from the initial map and (descriptor or landmark
-    initialisation, or a given map) from the :func:`aligned_start`; the start with the higher
-    :func:`dc_objective` goes on (both at the first start's kernel scale). A generator; sets ``seed_map``,
-    ``prices``, ``dc_start``.
+    """Stage 4: DC iterations of the first time from the initial map and (descriptor initialisation, or a
+    given map) from the :func:`aligned_start`; the start with the higher :func:`dc_objective` goes on (both at
+    the first start's kernel scale). A generator; sets ``seed_map``, ``prices``, ``dc_start``.
 
     The aligned start's score and assignment do not depend on the first start's iterations, so they run on
     a thread beside them (the auctions release the GIL; two cores each take one); their time is reported
     as ``"second start (concurrent)"``.
+
+    Landmarks have the aligned start only (the kernel score of the landmarks alone): the seeds they do not fix
+    have no partner of their own to start from (:func:`fixed_seeds`).
     """
-    prices = np.zeros(state.n_seed)  # auction prices carried from one assignment to the next (warm start)
+    if state.landmarks_only:
+        yield Progress("initial alignment", PROGRESS_DC[0], f"kernel score of the {state.anchors_x.size} landmarks")
+        start_map, prices = aligned_start(state, state.seed_map, state.watch)
+        best = yield from dc_iterations(state, start_map, prices, 0, None, warm_first=True)
+        state.seed_map, state.prices, state.dc_start = best.seed_map, prices, "initial alignment"
+        state.start_alignment = best.alignment
+        state.trace.extend(best.entries)
+        return
+    prices = np.zeros(state.problem.n_columns)  # auction prices carried from one assignment to the next
     start_map = state.seed_map
     with ThreadPoolExecutor(max_workers=1) as pool:
         second_watch = Stopwatch()
@@ -923,8 +1009,7 @@ def choose_start(state: KernelState):
         best = yield from dc_iterations(state, start_map, prices, 0, None, warm_first=False)
         dc_start = "initial map"
         if second is not None:
-            what = (f"kernel score of the {state.anchors_x.size} landmarks" if state.landmarks_only else
-                    "descriptor assignment, against the given map" if state.descriptor_start else
+            what = ("descriptor assignment, against the given map" if state.descriptor_start else
                     f"kernel score of the most similar {state.params.init_fraction:.0%} of the initial matches")
             yield Progress("initial alignment", PROGRESS_DC[0] + PROGRESS_DC[1] * state.step / state.total_steps, what)
             other_start, other_prices = second.result()
@@ -984,8 +1069,9 @@ def multiscale_refinement(state: KernelState):
     :func:`transferred_cells`, :func:`_solve_cells`) at the smallest time with all current matches as anchors.
 
     There is always at least one finer scale (the seeds are surface points); its first pass takes the seeds'
-    matches (interpolated eigenfunctions) as anchors. A generator; returns ``map_xy`` (n_x,) and ``map_yx``
-    (n_y,) of the last pass (-1: unmatched).
+    matches (interpolated eigenfunctions) as anchors. Landmarks stay matched: their vertices and partners are
+    left out of the cells (and the cells are centred on the other matches). A generator; returns ``map_xy``
+    (n_x,) and ``map_yx`` (n_y,) of the last pass (-1: unmatched).
     """
     params, source, target, watch = state.params, state.source, state.target, state.watch
     n_x, n_y, psi, phi = state.n_x, state.n_y, state.psi, state.phi
@@ -995,11 +1081,17 @@ def multiscale_refinement(state: KernelState):
     state.seed_vertices_x, state.seed_vertices_y = matched_x.copy(), matched_y.copy()
     decay_y, decay_x = state.decays(state.taus[-1])
     mass_y = state.spec_y.mass.diagonal()
+    landmark_x, landmark_y = np.zeros(n_x, dtype=bool), np.zeros(n_y, dtype=bool)
+    landmark_x[state.anchors_x], landmark_y[state.anchors_y] = True, True
     size, last = state.n_seed, False
+    keys, cell_map, cell_map_yx = np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), -np.ones(n_y, np.int64)
     while not last:
         size = int(min(max(n_x, n_y), np.ceil(size * params.growth)))
         last = size >= max(n_x, n_y)
         x_idx, y_idx = state.order_x[:size], state.order_y[:size]
+        x_idx, y_idx = x_idx[~landmark_x[x_idx]], y_idx[~landmark_y[y_idx]]
+        if x_idx.size == 0 or y_idx.size == 0 or landmark_x[matched_x].all():
+            continue
         capacity_y = None
         if params.capacity == "area":
             capacity_y = np.ones(n_y, dtype=np.int64)
@@ -1009,7 +1101,8 @@ def multiscale_refinement(state: KernelState):
             with watch("kernels"):
                 c = _alignment(rows_y, rows_x) + state.problem.anchor_c
             n_cells = max(1, int(np.ceil(x_idx.size / (CELL_FILL * params.max_cell))))
-            centres_x, centres_y = cell_centres(source.vertices, matched_x, matched_y, n_cells, p)
+            free = ~landmark_x[matched_x]
+            centres_x, centres_y = cell_centres(source.vertices, matched_x[free], matched_y[free], n_cells, p)
             with watch("cells"):
                 x_cells, y_cells = transferred_cells(source, target, centres_x, centres_y, x_idx, y_idx,
                                                      params.cell_overlap)
@@ -1024,6 +1117,8 @@ def multiscale_refinement(state: KernelState):
                            f"{size} samples, pass {p + 1}/{params.passes}: {centres_x.size} cells")
     full_map_xy = -np.ones(n_x, dtype=np.int64)
     full_map_xy[keys] = cell_map
+    full_map_xy[state.anchors_x] = state.anchors_y
+    cell_map_yx[state.anchors_y] = state.anchors_x
     return full_map_xy, cell_map_yx
 
 
@@ -1116,7 +1211,7 @@ def reoptimised(state: KernelState, turned: MatchResult):
     Swapped limbs (``extras["released_x"]``, :func:`~.reorientation.swapped_pairs`: a mirror pair of limbs, each
     sent mirror-inverted onto the other's image) are not turned by a reflection: a posed target's reflection
     is too poor on its limbs to carry them back (measured: the turned legs stay 0.27 √area off). Their
-    matches are dropped, and the rest of the map becomes landmarks (anchors of every stage,
+    matches are dropped, and the rest of the map becomes landmarks (anchors of every stage, kept as they are,
     :class:`~corrlib.methods.base.InitialMatch`), so the kernel energy places the limbs by their heat-kernel
     relation to the body, whose left and right the landmarks fix. A landmark run has no orientation stage,
     so there is no third pass here either.

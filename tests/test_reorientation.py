@@ -555,21 +555,51 @@ def test_swapped_limbs_are_released_as_a_pair():
     regions = np.array([1, 1, 2, 2, 3, 3])
     mirror = np.array([2, 3, 0, 1, 5, 4])
     parts = _toy_parts(regions)
+    areas = {1: 1.0, 2: 1.0, 3: 1.0}
     swapped = np.array([2, 3, 0, 1, 4, 5])
     descriptors = {1: -25.0, 2: 4.0, 3: 5.0}
     own = {1: -0.3, 2: -0.4, 3: 0.8}
-    assert swapped_pairs(swapped, parts, parts, descriptors, own, lambda: mirror) == [1, 2]
+    assert swapped_pairs(swapped, parts, parts, descriptors, own, lambda: mirror, areas) == [1, 2]
     onto_mirror_image = {region: -value for region, value in own.items()}  # the right map reverses orientation
-    assert swapped_pairs(swapped, parts, parts, descriptors, onto_mirror_image, lambda: mirror) == [1, 2]
-    assert swapped_pairs(swapped, parts, parts, descriptors, {1: -0.3, 2: -0.4, 3: -0.8}, lambda: mirror) == []
-    assert swapped_pairs(swapped, parts, parts, descriptors, {**own, 2: 0.2}, lambda: mirror) == []
+    assert swapped_pairs(swapped, parts, parts, descriptors, onto_mirror_image, lambda: mirror, areas) == [1, 2]
+    assert swapped_pairs(swapped, parts, parts, descriptors, {1: -0.3, 2: -0.4, 3: -0.8}, lambda: mirror,
+                         areas) == []
+    assert swapped_pairs(swapped, parts, parts, descriptors, {**own, 2: 0.2}, lambda: mirror, areas) == []
     crossed = np.array([2, 3, 2, 3, 4, 5])
-    assert swapped_pairs(crossed, parts, parts, descriptors, own, lambda: mirror) == []
-    assert swapped_pairs(swapped, parts, parts, {1: 1.0, 2: 4.0, 3: 5.0}, own, lambda: mirror) == []
+    assert swapped_pairs(crossed, parts, parts, descriptors, own, lambda: mirror, areas) == []
+    assert swapped_pairs(swapped, parts, parts, {1: 1.0, 2: 4.0, 3: 5.0}, own, lambda: mirror, areas) == []
     two = _toy_parts(np.array([1, 1, 2, 2, 2, 1]))
     mirror_two = np.array([2, 3, 0, 1, 5, 4])
     assert swapped_pairs(np.array([2, 3, 0, 1, 5, 4]), two, two, {1: -3.0, 2: 1.0}, {1: -0.5, 2: -0.5},
-                         lambda: mirror_two) == []
+                         lambda: mirror_two, {1: 1.0, 2: 1.0}) == []
+    # a pair larger than the rest, clearly reversed: the whole shape's mean reads reversed too, so keeping
+    # everything is consistent as well, but the rest alone reads its handedness more clearly: released
+    large = {1: 2.0, 2: 2.0, 3: 1.0}
+    assert swapped_pairs(swapped, parts, parts, descriptors, {1: -0.8, 2: -0.8, 3: 0.8}, lambda: mirror,
+                         large) == [1, 2]
+
+
+def test_two_swapped_pairs_are_not_judged_against_each_other():
+    """Two mirror pairs (arms 1, 2 and legs 3, 4) and a head (5), every limb on a different target limb and
+    the descriptors reading one of each pair reversed. The arms read reversed, the legs right and more
+    clearly, the head a little reversed: each pair reads opposite to a rest that holds the other pair (the
+    former rule released both, 83 % of a subdivided person, keeping only the head). Consistent sets: the
+    arms (the rest reads right) or the legs (the rest, arms and head, reads reversed); the legs and head
+    read their handedness more clearly, so the arms are released."""
+    from corrlib.methods.reorientation import swapped_pairs
+
+    regions = np.repeat([1, 2, 3, 4, 5], 2)
+    mirror = np.array([2, 3, 0, 1, 6, 7, 4, 5, 9, 8])  # 1 <-> 2, 3 <-> 4, 5 onto itself
+    parts = _toy_parts(regions)
+    onto = np.array([2, 3, 0, 1, 6, 7, 4, 5, 8, 9])  # the arms onto each other's limb, the legs too
+    areas = {1: 0.16, 2: 0.16, 3: 0.25, 4: 0.26, 5: 0.17}
+    descriptors = {1: -7.1, 2: -4.2, 3: 14.6, 4: -2.9, 5: 0.5}
+    reading = {1: -0.18, 2: -0.39, 3: 0.58, 4: 0.28, 5: -0.09}  # measured on the subdivided person
+    assert swapped_pairs(onto, parts, parts, descriptors, reading, lambda: mirror, areas) == [1, 2]
+    # the legs reversed as well: every region reads alike, nothing is opposite to the whole (a reversal of
+    # the whole map is the whole-map rule's)
+    assert swapped_pairs(onto, parts, parts, descriptors, {**reading, 3: -0.5, 4: -0.5}, lambda: mirror,
+                         areas) == []
 
 
 @pytest.mark.slow

@@ -103,9 +103,11 @@ Jacobian on the source's triangles, −0.35 on both legs and +0.5 to +0.8 on
 the rest; +1 and −1 everywhere for the true map and its mirror image), so a
 pair that the descriptors read reversed on one side and the map's own
 orientation on both, sent onto two different limbs, is a swapped pair
-(:func:`swapped_pairs`). "Reversed" is read against the rest of the shape,
-not against +1: onto a mirror image of the source's handedness the right map
-reverses orientation everywhere. It is not turned: a posed target's reflection is too
+(:func:`swapped_pairs`). "Reversed" is read against the regions kept, not
+against +1: onto a mirror image of the source's handedness the right map
+reverses orientation everywhere; and where two pairs each read opposite to
+a rest that holds the other, only the smaller set of pairs that is
+consistent with what it keeps is released. It is not turned: a posed target's reflection is too
 poor on the limbs to carry them back (the turned legs stay 0.27 √area off,
 though the map's orientation then reads right). :func:`reorient` returns
 its vertices instead, and kernel matching matches them again with
@@ -123,6 +125,7 @@ matching applies them to closed meshes without partial matching only.
 from __future__ import annotations
 
 import functools
+import itertools
 from dataclasses import dataclass
 from typing import Callable
 
@@ -524,12 +527,20 @@ def turn_reversed_regions(map_xy: np.ndarray, map_yx: np.ndarray | None, parts_x
 
 
 def swapped_pairs(map_xy: np.ndarray, parts_x: ShapeParts, parts_y: ShapeParts, before: dict[int, float],
-                  reading: dict[int, float], mirror_x: Callable[[], np.ndarray]) -> list:
+                  reading: dict[int, float], mirror_x: Callable[[], np.ndarray], areas: dict[int, float]) -> list:
     """The regions of mirror pairs whose limbs are swapped, each onto the other's image (see the module
-    docstring): the descriptors read one of the pair reversed, the map's own orientation reads both opposite
-    to the rest of the shape (its mean sign: negative where the target is a mirror image of the source's
-    handedness, so that the right map reverses orientation), and the two limbs lie on two different target
-    limbs (a crossed pair shares one). Empty when that would be the whole shape (the whole-map rule's case).
+    docstring).
+
+    A candidate is a mirror pair whose limbs lie on two different target limbs (a crossed pair shares one)
+    and one of which the descriptors read reversed. A set ``S`` of candidates is *consistent* when exactly
+    its pairs read, by the map's own orientation, opposite on both regions to the handedness of the regions
+    kept (the sign of their area-weighted mean reading: negative where the target is a mirror image of the
+    source's handedness, so that the right map reverses orientation). Each pair is thus judged against what
+    is kept, never against another pair that is released too (two pairs, each opposite to a rest that holds
+    the other, contradict each other). Of the consistent sets, the one whose kept regions read their
+    handedness most clearly (the largest magnitude of that mean) is released: the kept regions become the
+    landmarks that place the released ones. Empty when no set is consistent or the regions would all be
+    released (the whole-map rule's case).
 
     Parameters
     ----------
@@ -541,22 +552,36 @@ def swapped_pairs(map_xy: np.ndarray, parts_x: ShapeParts, parts_y: ShapeParts, 
         The same with :func:`map_orientation`.
     mirror_x : callable returning (n_X,) int
         The source's reflection, which pairs every region with its mirror region.
+    areas : dict of int -> float
+        :func:`region_areas` of the source.
     """
-    reversed_ = [r for r, value in before.items() if value < 0]
-    if not reversed_:
-        return []
     regions = shoulder_regions(parts_x)
     images = image_limbs(map_xy, parts_x, parts_y)
-    chosen = set()
-    for r in reversed_:
+    candidates = []
+    for r in (r for r, value in before.items() if value < 0):
         p = mirror_region(regions, mirror_x(), r)
         if p == r or images.get(r, 0) in (0, images.get(p, 0)) or images.get(p, 0) == 0:
             continue
-        rest = [value for region, value in reading.items() if region not in (r, p)]
-        handedness = np.sign(np.mean(rest)) if rest else 0.0  # +1, or -1 onto a mirror image
-        if reading[r] * handedness < 0 and reading.get(p, 0.0) * handedness < 0:
-            chosen |= {r, p}
-    return [] if chosen >= set(reading) else sorted(chosen)
+        if tuple(sorted((r, p))) not in candidates:
+            candidates.append(tuple(sorted((r, p))))
+
+    def kept_reading(released: set) -> float:
+        """The area-weighted mean reading of the regions kept (0 if none)."""
+        kept = [r for r in reading if r not in released]
+        total = sum(areas.get(r, 0.0) for r in kept)
+        return sum(areas.get(r, 0.0) * reading[r] for r in kept) / total if total > 0 else 0.0
+
+    best = None
+    for size in range(len(candidates) + 1):
+        for chosen in itertools.combinations(candidates, size):
+            released = {r for pair in chosen for r in pair}
+            kept = kept_reading(released)
+            opposite = {pair for pair in candidates if all(reading.get(r, 0.0) * kept < 0 for r in pair)}
+            if kept == 0 or opposite != set(chosen):
+                continue
+            if best is None or abs(kept) > best[0]:
+                best = (abs(kept), sorted(released))
+    return [] if best is None else best[1]
 
 
 def _colliding_regions(map_xy: np.ndarray, parts_x: ShapeParts, parts_y: ShapeParts, mirror_y: Callable,
@@ -726,7 +751,8 @@ def reorient(source, target, spec_x, spec_y, map_xy: np.ndarray, map_yx: np.ndar
     if turned_parts is not None:
         map_xy, map_yx = turned_parts.map_xy, turned_parts.map_yx
     own = region_agreements(map_xy, parts_x, lambda m: map_orientation(source, target, m))
-    swapped = swapped_pairs(map_xy, parts_x, parts_y, region_agreements(map_xy, parts_x, local), own, mirror_x)
+    swapped = swapped_pairs(map_xy, parts_x, parts_y, region_agreements(map_xy, parts_x, local), own, mirror_x,
+                            areas)
     released = np.isin(shoulder_regions(parts_x), swapped) if swapped else None
     return Reoriented(map_xy, map_yx, turned, turned_regions, turned_parts, released, tuple(swapped))
 

@@ -18,6 +18,7 @@ from corrlib.methods.kernel_matching import (
     most_similar_matches,
     seed_alignment,
     seed_score,
+    split_large_cells,
     updated_alignment,
 )
 from corrlib.shapes import TriMesh
@@ -263,3 +264,29 @@ def test_cell_centres_are_distinct_and_move_between_passes():
         lookup = dict(zip(matched_x, matched_y))
         assert all(lookup[cx] == cy for cx, cy in zip(centres_x, centres_y))
     assert set(passes[0][0]) != set(passes[1][0])
+
+
+def test_large_cells_are_split_until_none_exceeds_the_limit():
+    """A bundled person cut by farthest points of its matched vertices: the first centres go to the
+    extremities and leave the trunk to one cell; the split adds centres (matched pairs, distinct on both
+    sides) until no cell holds more than the limit, and changes nothing where no cell does."""
+    from corrlib.geometry.sampling import voronoi_cells
+    from corrlib.io import load_mesh
+    from corrlib.resources import resource
+
+    mesh = load_mesh(resource("people/human0.off"))
+    rng = np.random.default_rng(7)
+    matched_x = np.arange(mesh.n_vertices)
+    matched_y = rng.permutation(mesh.n_vertices)
+    centres_x, centres_y = cell_centres(mesh.vertices, matched_x, matched_y, 5, 0)
+    labels, _ = voronoi_cells(mesh, centres_x)
+    limit = 1000
+    assert np.bincount(labels).max() > 2 * limit  # not vacuous: the trunk is one cell
+    split_x, split_y = split_large_cells(mesh, centres_x, centres_y, matched_x, matched_y, matched_x, limit)
+    labels, _ = voronoi_cells(mesh, split_x)
+    assert np.bincount(labels).max() <= limit
+    np.testing.assert_array_equal(split_x[:centres_x.size], centres_x)
+    assert np.unique(split_x).size == split_x.size and np.unique(split_y).size == split_y.size
+    np.testing.assert_array_equal(matched_y[split_x], split_y)  # every centre is a matched pair
+    same_x, same_y = split_large_cells(mesh, split_x, split_y, matched_x, matched_y, matched_x, limit)
+    np.testing.assert_array_equal(same_x, split_x)

@@ -66,10 +66,11 @@ Design choices, in brief (the measurements behind them are in
   must slide matches to absorb it, which the kernel energy hardly penalises.
 * Multiscale (§8.3.2): after the seeds, a vertex sample grows by ``growth``
   per scale until every vertex is included. Each pass splits the source
-  sample into geodesic Voronoi cells around matched centres, transfers them
-  through the current map and widens the target cells by ``cell_overlap`` (a
-  vertex near a border can reach its partner beyond it); every cell is an
-  independent partial assignment scored with all current matches as anchors.
+  sample into geodesic Voronoi cells around matched centres (farthest points,
+  and more inside any cell above ``max_cell``), transfers them through the
+  current map and widens the target cells by ``cell_overlap`` (a vertex near a
+  border can reach its partner beyond it); every cell is an independent
+  partial assignment scored with all current matches as anchors.
 * Area capacities (``capacity="area"``): at the finer scales a target sample
   of area ``m_y`` may take up to ``ceil(n_x · m_y / A_Y)`` source samples, a
   transportation problem that couples the area measures instead of the
@@ -190,8 +191,9 @@ class KernelMatchingParams:
     growth: float = param(3.0, label="Growth factor", low=1.5, high=100.0,
                           help="Sample growth per scale until every vertex is matched.")
     max_cell: int = param(1000, label="Max cell size", low=50, high=20_000,
-                          help="Planned cell size at the finer scales: each pass uses enough Voronoi cells that an "
-                               "average one holds 0.7 of it (the cells are uneven; one may exceed it).")
+                          help="Cell size at the finer scales: each pass uses enough Voronoi cells that an average "
+                               "one holds 0.7 of it, and more where a cell would hold more than this many source "
+                               "samples (the cells of farthest points are uneven on a shape with many limbs).")
     cell_overlap: float = param(0.1, label="Cell overlap", low=0.0, high=10.0,
                                 help="Target cells are widened across their borders by about half this "
                                      "length (relative to √area) so that cells overlap; 0: disjoint cells.")
@@ -1048,6 +1050,32 @@ def cell_centres(vertices: np.ndarray, matched_x: np.ndarray, matched_y: np.ndar
     return matched_x[centres_pos], matched_y[centres_pos]
 
 
+def split_large_cells(source, centres_x: np.ndarray, centres_y: np.ndarray, matched_x: np.ndarray,
+                      matched_y: np.ndarray, x_idx: np.ndarray, max_cell: int) -> tuple[np.ndarray, np.ndarray]:
+    """More centres until no geodesic Voronoi cell holds more than ``max_cell`` of the sample ``x_idx``: the
+    largest cell gets a new centre at its matched vertex farthest from its centre (a farthest-point step
+    inside that cell).
+
+    Farthest points of the whole shape go to its extremities first, so on a shape with many protrusions a
+    few centres leave the trunk to one cell (half a lion), and an assignment's cost grows faster than its
+    size. Returns the centres with the added ones at the end, (c',) each, distinct on both sides.
+    """
+    centres_x, centres_y = list(centres_x), list(centres_y)
+    while True:
+        labels, distances = voronoi_cells(source, np.asarray(centres_x))
+        sizes = np.bincount(labels[x_idx], minlength=len(centres_x))
+        largest = int(np.argmax(sizes))
+        if sizes[largest] <= max_cell:
+            break
+        inside = (labels[matched_x] == largest) & ~np.isin(matched_x, centres_x) & ~np.isin(matched_y, centres_y)
+        if not inside.any():
+            break
+        far = np.flatnonzero(inside)[np.argmax(distances[matched_x[inside]])]
+        centres_x.append(int(matched_x[far]))
+        centres_y.append(int(matched_y[far]))
+    return np.asarray(centres_x, dtype=np.int64), np.asarray(centres_y, dtype=np.int64)
+
+
 def transferred_cells(source, target, centres_x, centres_y, x_idx, y_idx, overlap: float):
     """Geodesic Voronoi cells of the source sample ``x_idx`` around ``centres_x``, and the target cells: the
     Voronoi cells of the sample ``y_idx`` around the centres' images ``centres_y``, widened across their
@@ -1066,7 +1094,8 @@ def transferred_cells(source, target, centres_x, centres_y, x_idx, y_idx, overla
 def multiscale_refinement(state: KernelState):
     """Stage 6 (§8.3.2): grow the vertex sample by ``growth`` per scale until every vertex is included; at
     each scale run ``passes`` refinement passes, each solving Voronoi cells (:func:`cell_centres`,
-    :func:`transferred_cells`, :func:`_solve_cells`) at the smallest time with all current matches as anchors.
+    :func:`split_large_cells`, :func:`transferred_cells`, :func:`_solve_cells`) at the smallest time with all
+    current matches as anchors.
 
     There is always at least one finer scale (the seeds are surface points); its first pass takes the seeds'
     matches (interpolated eigenfunctions) as anchors. Landmarks stay matched: their vertices and partners are
@@ -1103,6 +1132,8 @@ def multiscale_refinement(state: KernelState):
             n_cells = max(1, int(np.ceil(x_idx.size / (CELL_FILL * params.max_cell))))
             free = ~landmark_x[matched_x]
             centres_x, centres_y = cell_centres(source.vertices, matched_x[free], matched_y[free], n_cells, p)
+            centres_x, centres_y = split_large_cells(source, centres_x, centres_y, matched_x[free],
+                                                     matched_y[free], x_idx, params.max_cell)
             with watch("cells"):
                 x_cells, y_cells = transferred_cells(source, target, centres_x, centres_y, x_idx, y_idx,
                                                      params.cell_overlap)

@@ -132,7 +132,9 @@ class InitialMatch:
 
     Either a dense map (``map_xy``, -1 allowed) or sparse landmarks
     (``landmarks_x``, ``landmarks_y``). Landmarks are kept as anchors in every
-    score, so they stay matched.
+    score, so they stay matched (kernel matching does not reassign them; its
+    final ZoomOut step, if on, moves every vertex to its nearest partner in
+    the basis).
     """
 
     map_xy: np.ndarray | None = None

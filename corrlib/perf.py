@@ -239,6 +239,7 @@ def suite_kernel(repeat: int, quick: bool = False) -> None:
         pairs = [(tosca / "cat0.off", tosca / "cat1.off"), (tosca / "cat1.off", tosca / "cat0.off"),
                  (tosca / "wolf0.off", tosca / "wolf1.off"),
                  (resource("people/human1.off"), resource("people/human2.off")),
+                 (resource("people/human2.off"), resource("people/human1.off")),
                  (sumner / "lion-00.off", sumner / "cat-00.off")]
         _cli_walls("kernel-matching", pairs, warm_too=True)
     # the assignment backends on kernel scores of the coarse scale

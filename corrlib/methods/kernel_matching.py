@@ -1057,7 +1057,7 @@ def split_large_cells(source, centres_x: np.ndarray, centres_y: np.ndarray, matc
     inside that cell).
 
     Farthest points of the whole shape go to its extremities first, so on a shape with many protrusions a
-    few centres leave the trunk to one cell (half a lion), and an assignment's cost grows faster than its
+    few centres leave the trunk to one cell, and an assignment's cost grows faster than its
     size. Returns the centres with the added ones at the end, (c',) each, distinct on both sides.
     """
     centres_x, centres_y = list(centres_x), list(centres_y)

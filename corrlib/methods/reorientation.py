@@ -106,8 +106,8 @@ orientation on both, sent onto two different limbs, is a swapped pair
 (:func:`swapped_pairs`). "Reversed" is read against the regions kept, not
 against +1: onto a mirror image of the source's handedness the right map
 reverses orientation everywhere; and where two pairs each read opposite to
-a rest that holds the other, only the smaller set of pairs that is
-consistent with what it keeps is released. It is not turned: a posed target's reflection is too
+a rest that holds the other, only a set of pairs consistent with what it
+keeps is released (of several, the one whose kept part reads clearest). It is not turned: a posed target's reflection is too
 poor on the limbs to carry them back (the turned legs stay 0.27 √area off,
 though the map's orientation then reads right). :func:`reorient` returns
 its vertices instead, and kernel matching matches them again with

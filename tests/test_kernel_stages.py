@@ -217,8 +217,8 @@ def test_dc_step_with_fixed_seeds_is_the_best_permutation_that_keeps_them(pair):
     for _ in range(3):
         c = seed_alignment(problem, seed_map)
         g, scale = seed_score(problem.phi_s, problem.psi_s, c, decay_y, decay_x, None, problem.desc_block, 0.05)
-        g_free, scale_free = seed_score(*restricted.free_blocks()[:2], c, decay_y, decay_x, None,
-                                        restricted.free_blocks()[2], 0.05)
+        g_free, scale_free = seed_score(*restricted.free_blocks[:2], c, decay_y, decay_x, None,
+                                        restricted.free_blocks[2], 0.05)
         step = dc_step(restricted, seed_map, decay_y, decay_x, scale_free, backend="scipy")
         np.testing.assert_array_equal(step.seed_map[fixed], seed_map[fixed])
         assert np.unique(step.seed_map).size == n

@@ -97,6 +97,7 @@ Map convention: ``map_xy[i]`` = vertex of Y matched to vertex i of X.
 
 from __future__ import annotations
 
+import functools
 from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 
@@ -471,9 +472,10 @@ class SeedProblem:
     free_x: np.ndarray | None = None
     free_y: np.ndarray | None = None
 
+    @functools.cached_property
     def free_blocks(self) -> tuple[np.ndarray, np.ndarray, np.ndarray | None]:
         """``Φ_s``, ``Ψ_s`` and the descriptor block on the free seeds only (the assignment's rows and
-        columns): views of the whole problem's arrays when every seed is free."""
+        columns), formed once per problem: the whole problem's arrays when every seed is free."""
         if self.free_x is None:
             return self.phi_s, self.psi_s, self.desc_block
         desc = None if self.desc_block is None else self.desc_block[np.ix_(self.free_x, self.free_y)]
@@ -612,7 +614,7 @@ def dc_step(problem: SeedProblem, seed_map: np.ndarray, decay_y: np.ndarray, dec
 
     ``f`` (:func:`dc_objective`) is convex, so ``f(Π_{k+1}) ≥ f(Π_k) + <Π_{k+1} - Π_k, ∇f(Π_k)> ≥ f(Π_k)``
     when ``Π_k`` is a permutation (the assignment's optimum is at least the score of ``Π_k`` itself). With
-    seeds fixed by landmarks, the assignment places the free seeds only (:meth:`SeedProblem.free_blocks`): the
+    seeds fixed by landmarks, the assignment places the free seeds only (:attr:`SeedProblem.free_blocks`): the
     maximum over the permutations that keep the fixed ones, among which ``Π_k`` is, so the same holds.
 
     Parameters
@@ -631,7 +633,7 @@ def dc_step(problem: SeedProblem, seed_map: np.ndarray, decay_y: np.ndarray, dec
     watch = Stopwatch() if watch is None else watch
     with watch("kernels"):
         c = seed_alignment(problem, seed_map) if alignment is None else alignment
-        phi_rows, psi_cols, desc = problem.free_blocks()
+        phi_rows, psi_cols, desc = problem.free_blocks
         g, kernel_scale = seed_score(phi_rows, psi_cols, c, decay_y, decay_x, kernel_scale, desc, problem.mu)
         before = dc_objective(seed_map, c, kernel_scale, decay_y, decay_x, problem.desc_block, problem.mu)
     with watch("assignment"):
@@ -957,7 +959,7 @@ def aligned_start(state: KernelState, start_map: np.ndarray, watch: Stopwatch) -
         most_similar_matches(state.confidence, state.params.init_fraction)
     with watch("kernels"):
         c = _alignment(problem.psi_s[start_map[keep]], problem.phi_s[keep]) + problem.anchor_c
-        phi_rows, psi_cols, desc = problem.free_blocks()
+        phi_rows, psi_cols, desc = problem.free_blocks
         g, _ = seed_score(phi_rows, psi_cols, c, *state.decays(state.taus[0]), None, desc, problem.mu)
     prices = np.zeros(problem.n_columns)
     with watch("assignment"):
@@ -999,10 +1001,17 @@ def choose_start(state: KernelState):
         yield Progress("initial alignment", PROGRESS_DC[0], f"kernel score of the {state.anchors_x.size} landmarks")
         start_map, prices = aligned_start(state, state.seed_map, state.watch)
         best = yield from dc_iterations(state, start_map, prices, 0, None, warm_first=True)
-        state.seed_map, state.prices, state.dc_start = best.seed_map, prices, "initial alignment"
-        state.start_alignment = best.alignment
-        state.trace.extend(best.entries)
-        return
+        dc_start = "initial alignment"
+    else:
+        best, prices, dc_start = yield from _better_of_two_starts(state)
+    state.seed_map, state.prices, state.dc_start = best.seed_map, prices, dc_start
+    state.start_alignment = best.alignment
+    state.trace.extend(best.entries)
+
+
+def _better_of_two_starts(state: KernelState):
+    """:func:`choose_start` without landmarks: the initial map's first time and, beside it, the
+    :func:`aligned_start`'s; returns the better :class:`DCRun`, its auction prices and the start's name."""
     prices = np.zeros(state.problem.n_columns)  # auction prices carried from one assignment to the next
     start_map = state.seed_map
     with ThreadPoolExecutor(max_workers=1) as pool:
@@ -1021,9 +1030,7 @@ def choose_start(state: KernelState):
             if other.value > best.value:
                 best, prices = other, other_prices
                 dc_start = "descriptors" if state.descriptor_start else "initial alignment"
-    state.seed_map, state.prices, state.dc_start = best.seed_map, prices, dc_start
-    state.start_alignment = best.alignment
-    state.trace.extend(best.entries)
+    return best, prices, dc_start
 
 
 def cell_centres(vertices: np.ndarray, matched_x: np.ndarray, matched_y: np.ndarray, n_cells: int,

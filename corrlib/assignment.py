@@ -231,8 +231,29 @@ def _effective_slack(base: np.ndarray, slack: float) -> float:
     return float(np.clip(slack, lo - (base.shape[0] + 1) * span, hi + span))
 
 
-def _auction_solve(s: np.ndarray, eps_final: float | None, eps_start: float | None, cancel, prices) -> np.ndarray:
-    """(m,) int: column of every row of ``s`` (m, n), m <= n, by the forward–reverse auction."""
+@numba.njit(cache=True, nogil=True)
+def _duality_gap(s: np.ndarray, prices: np.ndarray, row_to_col: np.ndarray) -> float:
+    """``Σ_i max_j (s_ij − p_j) + Σ_j p_j − Σ_i s_{i,σ(i)}`` (≥ 0) for a permutation ``σ`` of the columns of a
+    square ``s``: how far prices ``p`` and ``σ`` are from being optimal together (zero exactly when both are,
+    by LP duality)."""
+    m, n = s.shape
+    gap = 0.0
+    for j in range(n):
+        gap += prices[j]
+    for i in range(m):
+        best = -np.inf
+        for j in range(n):
+            v = s[i, j] - prices[j]
+            if v > best:
+                best = v
+        gap += best - s[i, row_to_col[i]]
+    return max(gap, 0.0)
+
+
+def _auction_solve(s: np.ndarray, eps_final: float | None, eps_start: float | None, cancel, prices,
+                   warm_map=None) -> np.ndarray:
+    """(m,) int: column of every row of ``s`` (m, n), m <= n, by the forward–reverse auction (``warm_map``: see
+    :func:`linear_assignment`)."""
     m, n = s.shape
     span = float(s.max() - s.min())
     if eps_final is None:
@@ -253,7 +274,13 @@ def _auction_solve(s: np.ndarray, eps_final: float | None, eps_start: float | No
     if prices is None or prices.shape != (n,):
         prices = np.zeros(n)
     if eps_start is None:
-        eps_start = 1e-3 if warm else 0.25
+        if warm and warm_map is not None and m == n:
+            # the ε at which the warm state's own suboptimality is what ε-complementary slackness allows (m ε):
+            # smaller, and the rows outbid each other in tiny steps all the way from another problem's prices;
+            # larger, and prices that are nearly right are undone
+            eps_start = min(max(_duality_gap(s, prices, warm_map) / (m * span), 1e-12), 0.25)
+        else:
+            eps_start = 1e-3 if warm else 0.25
     if not 0 < eps_start <= 1:
         raise ParameterError(f"eps_start must lie in (0, 1] (a fraction of the score range), got {eps_start}")
     eps_start *= span
@@ -273,7 +300,7 @@ def _auction_solve(s: np.ndarray, eps_final: float | None, eps_start: float | No
 def linear_assignment(score, *, slack: float | None = None, method: str = "auction",
                       eps_final: float | None = None, eps_start: float | None = None,
                       cancel: np.ndarray | None = None, prices: np.ndarray | None = None,
-                      capacity: np.ndarray | None = None) -> np.ndarray:
+                      capacity: np.ndarray | None = None, warm_map: np.ndarray | None = None) -> np.ndarray:
     """Maximum-score assignment of rows to columns.
 
     Parameters
@@ -287,8 +314,10 @@ def linear_assignment(score, *, slack: float | None = None, method: str = "aucti
         Final ε of the auction (default ``1e-9 × range / max(n_rows, n_cols)``, at least the scores'
         precision ``finfo(dtype).eps × max |score|``).
     eps_start : float, optional
-        First ε of the auction as a fraction of the score range (default 1/4, or 1e-3 with warm prices; a
-        warm start from a less similar problem is faster with a larger one).
+        First ε of the auction as a fraction of the score range. Default: 1/4 from cold prices; from warm
+        prices with a ``warm_map``, their duality gap per row (``(Σ_i max_j (s_ij − p_j) + Σ_j p_j −
+        Σ_i s_{i,σ(i)}) / m`` over the score range, at most 1/4): prices from a nearly equal problem are only
+        refined, prices from a less similar one are first moved in large steps; from warm prices alone, 1e-3.
     cancel : (1,) int8, optional
         Cancellation flag polled by the auction.
     prices : (n,) float, optional
@@ -299,6 +328,9 @@ def linear_assignment(score, *, slack: float | None = None, method: str = "aucti
         first call) count as a cold start.
     capacity : (n_cols,) int, optional
         How many rows each column may take (≥ 1; default 1 each).
+    warm_map : (n_rows,) int, optional
+        The permutation the warm ``prices`` came with (the previous problem's solution), for the first ε;
+        read for square problems without slack or capacities only.
 
     Returns
     -------
@@ -335,7 +367,15 @@ def linear_assignment(score, *, slack: float | None = None, method: str = "aucti
         small_to_large = np.empty(problem.shape[0], dtype=np.int64)
         small_to_large[rows] = cols
     elif method == "auction":
-        small_to_large = _auction_solve(problem, eps_final, eps_start, cancel, prices)
+        warm = None
+        if warm_map is not None and slack is None and copies is None and n_rows == n_cols:
+            warm = np.asarray(warm_map)
+            if warm.shape != (n_rows,) or not np.issubdtype(warm.dtype, np.integer) or \
+                    not np.array_equal(np.sort(warm), np.arange(n_rows)):
+                raise InputError(f"warm_map must be a permutation of the {n_cols} columns, got {warm.dtype} "
+                                 f"{warm.shape}")
+            warm = warm.astype(np.int64)
+        small_to_large = _auction_solve(problem, eps_final, eps_start, cancel, prices, warm)
     else:
         raise ParameterError(f"unknown assignment method {method!r} (use 'auction' or 'scipy')")
     small_to_large[small_to_large >= base.shape[1]] = -1  # slack columns: unmatched

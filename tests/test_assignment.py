@@ -107,6 +107,47 @@ def test_rectangular_matches_scipy_and_warm_start():
     assert assignment_score(second_score, warm) == pytest.approx(exact_value(second_score), abs=1e-8)
 
 
+def test_duality_gap_is_the_lp_gap():
+    # Σ_i max_j (s_ij − p_j) + Σ_j p_j is the dual objective at prices p, Σ_i s_iσ(i) the primal at σ: their
+    # difference bounds σ's suboptimality, and it is zero exactly for optimal prices with an optimal σ
+    from corrlib.assignment import _duality_gap
+
+    rng = np.random.default_rng(11)
+    for n in (1, 2, 5, 9):
+        score = rng.normal(size=(n, n))
+        prices = rng.normal(size=n)
+        sigma = rng.permutation(n)
+        dual = sum(max(score[i, j] - prices[j] for j in range(n)) for i in range(n)) + prices.sum()
+        primal = sum(score[i, sigma[i]] for i in range(n))
+        assert _duality_gap(score, prices, sigma) == pytest.approx(dual - primal, abs=1e-12)
+        assert dual >= exact_value(score) - 1e-12 >= primal - 1e-12  # weak duality, on every instance
+        optimum = linear_assignment(score, method="scipy")
+        # prices of the exact dual (SciPy's assignment is optimal; LP prices from the auction at a tiny ε)
+        auction_prices = np.zeros(n)
+        linear_assignment(score, prices=auction_prices, eps_final=1e-13)
+        assert _duality_gap(score, auction_prices, optimum) <= n * 1e-12 + 1e-12
+
+
+def test_a_warm_map_sets_the_first_eps_and_keeps_the_optimum():
+    # a DC-like sequence: each problem a perturbation of the last, solved from the last prices and solution
+    rng = np.random.default_rng(5)
+    base = rng.random((120, 120))
+    prices, previous = np.zeros(120), None
+    for step in range(6):
+        score = base + rng.normal(scale=10.0 ** -step, size=base.shape)  # from very different to nearly equal
+        sol = linear_assignment(score, prices=prices, warm_map=previous)
+        assert assignment_score(score, sol) == pytest.approx(exact_value(score), abs=1e-7)
+        previous = sol
+    with pytest.raises(InputError, match="warm_map must be a permutation"):
+        linear_assignment(base, prices=prices, warm_map=np.zeros(120, dtype=int))
+    with pytest.raises(InputError, match="warm_map must be a permutation"):
+        linear_assignment(base, prices=prices, warm_map=np.arange(119))
+    # rectangular, slack or capacities: the warm map is not read (the gap is that of a square assignment)
+    wide = rng.random((40, 60))
+    sol = linear_assignment(wide, prices=np.zeros(60), warm_map=np.arange(40))
+    assert assignment_score(wide, sol) == pytest.approx(exact_value(wide), abs=1e-8)
+
+
 def test_assignment_errors():
     with pytest.raises(InputError, match="NaN"):
         linear_assignment(np.array([[np.nan, 1.0], [0.0, 1.0]]))

@@ -132,9 +132,6 @@ CELL_FILL = 0.7
 #: pass ``p`` starts its farthest-point cell centres at the ``p × CENTRE_STRIDE``-th matched vertex farthest
 #: from the centroid, so that every pass draws its cells around different centres (no border stays fixed)
 CENTRE_STRIDE = 7
-#: first ε of the auction when the score is far from the last one (first iteration of a new time, or after
-#: the aligned start); ``None`` (the auction's own choice) otherwise
-WARM_EPS_START = 1e-2
 #: a DC step that lowers the objective by more than this fraction of it clears the ``monotone`` flag (the
 #: auction is ε-optimal and the score is float32)
 MONOTONE_RTOL = 1e-5
@@ -491,12 +488,29 @@ def free_assignment(problem: SeedProblem, seed_map: np.ndarray, score: np.ndarra
     """(n_seed,) int: ``seed_map`` with its free seeds placed by one linear assignment on ``score`` (free x seeds,
     free y seeds), :func:`~corrlib.assignment.linear_assignment` with ``auction``'s arguments; the whole map
     when every seed is free."""
+    warm = warm_columns(problem, seed_map)
     if problem.free_x is None:
-        return linear_assignment(score, **auction)
+        return linear_assignment(score, warm_map=warm, **auction)
     placed = seed_map.copy()
     if problem.free_x.size:
-        placed[problem.free_x] = problem.free_y[linear_assignment(score, **auction)]
+        placed[problem.free_x] = problem.free_y[linear_assignment(score, warm_map=warm, **auction)]
     return placed
+
+
+def warm_columns(problem: SeedProblem, seed_map: np.ndarray) -> np.ndarray | None:
+    """The columns of the seed assignment that ``seed_map`` (n_seed,) gives its free seeds, if that is a
+    permutation of them (the warm start of the next auction, see
+    :func:`~corrlib.assignment.linear_assignment`'s ``warm_map``); None otherwise (e.g. a given map that sends
+    seeds together)."""
+    if problem.free_x is None:
+        columns = seed_map
+    else:
+        position = np.full(problem.psi_s.shape[0], -1, dtype=np.int64)
+        position[problem.free_y] = np.arange(problem.free_y.size)
+        columns = position[seed_map[problem.free_x]]
+    if columns.size != problem.n_columns or not np.array_equal(np.sort(columns), np.arange(columns.size)):
+        return None
+    return columns
 
 
 def seed_alignment(problem: SeedProblem, seed_map: np.ndarray) -> np.ndarray:
@@ -780,18 +794,21 @@ def prepare(source, target, params: KernelMatchingParams, token):
                                  f"{mesh.n_vertices} vertices (lower n_eigs)")
     k = params.n_eigs
     taus = diffusion_times(params)
+    n_seed = min(params.n_seeds, n_x, n_y)
+
+    def samples(mesh):  # the greedy farthest points release the GIL: one shape per thread
+        return surface_farthest_points(mesh, n_seed), _sample_order(mesh.vertices, n_seed, params.growth)
+
     yield Progress("eigenpairs", 0.0, f"{k} eigenpairs per shape")
-    with watch("eigen"):
-        spec_x, spec_y = mesh_spectra((source, target), k)
+    # the samples need the geometry only: they are drawn beside the eigensolvers, on the core that the first
+    # of the two decompositions to finish leaves idle
+    with ThreadPoolExecutor(2) as pool:
+        sampled = [pool.submit(samples, mesh) for mesh in (source, target)]
+        with watch("eigen"):
+            spec_x, spec_y = mesh_spectra((source, target), k)
+        with watch("sampling"):
+            (seeds_x, order_x), (seeds_y, order_y) = (future.result() for future in sampled)
     token.raise_if_cancelled()
-    with watch("sampling"):
-        n_seed = min(params.n_seeds, n_x, n_y)
-
-        def samples(mesh):  # the greedy farthest points release the GIL: one shape per thread
-            return surface_farthest_points(mesh, n_seed), _sample_order(mesh.vertices, n_seed, params.growth)
-
-        with ThreadPoolExecutor(2) as pool:
-            (seeds_x, order_x), (seeds_y, order_y) = pool.map(samples, (source, target))
     return KernelState(source, target, params, token, watch, taus, spec_x, spec_y, seeds_x, seeds_y,
                        order_x, order_y, n_seed)
 
@@ -907,13 +924,13 @@ class DCRun:
 
 
 def dc_iterations(state: KernelState, seed_map: np.ndarray, prices: np.ndarray, t_index: int,
-                  kernel_scale: float | None = None, warm_first: bool = True, alignment: np.ndarray | None = None):
+                  kernel_scale: float | None = None, alignment: np.ndarray | None = None):
     """Stage 5: up to ``iters_per_time`` :func:`dc_step` at the time ``taus[t_index]``; stops when the map
     no longer changes.
 
     A generator (yields :class:`Progress`); returns a :class:`DCRun`. ``prices`` (the auction's warm start) is
-    updated in place; ``kernel_scale`` None: set from the first score; ``warm_first``: the first score is far
-    from the last one (the auction starts at :data:`WARM_EPS_START`); ``alignment``: ``C`` of ``seed_map`` if
+    updated in place (each auction's first ε follows from how far they are from ``seed_map``'s score,
+    :func:`warm_columns`); ``kernel_scale`` None: set from the first score; ``alignment``: ``C`` of ``seed_map`` if
     known (it does not depend on the time, so it is carried from one time to the next). Clears
     ``state.monotone`` if a step lowers the objective.
     """
@@ -923,8 +940,7 @@ def dc_iterations(state: KernelState, seed_map: np.ndarray, prices: np.ndarray, 
     entries, value = [], None
     for it in range(params.iters_per_time):
         state.token.raise_if_cancelled()
-        step = dc_step(state.problem, seed_map, decay_y, decay_x, kernel_scale, prices=prices,
-                       eps_start=WARM_EPS_START if it == 0 and warm_first else None, backend=params.backend,
+        step = dc_step(state.problem, seed_map, decay_y, decay_x, kernel_scale, prices=prices, backend=params.backend,
                        cancel=state.cancel, watch=state.watch, alignment=alignment)
         kernel_scale, value, seed_map, alignment = step.kernel_scale, step.value, step.seed_map, step.alignment
         if step.decreased:
@@ -1000,7 +1016,7 @@ def choose_start(state: KernelState):
     if state.landmarks_only:
         yield Progress("initial alignment", PROGRESS_DC[0], f"kernel score of the {state.anchors_x.size} landmarks")
         start_map, prices = aligned_start(state, state.seed_map, state.watch)
-        best = yield from dc_iterations(state, start_map, prices, 0, None, warm_first=True)
+        best = yield from dc_iterations(state, start_map, prices, 0, None)
         dc_start = "initial alignment"
     else:
         best, prices, dc_start = yield from _better_of_two_starts(state)
@@ -1017,7 +1033,7 @@ def _better_of_two_starts(state: KernelState):
     with ThreadPoolExecutor(max_workers=1) as pool:
         second_watch = Stopwatch()
         second = pool.submit(aligned_start, state, start_map, second_watch) if state.has_second_start else None
-        best = yield from dc_iterations(state, start_map, prices, 0, None, warm_first=False)
+        best = yield from dc_iterations(state, start_map, prices, 0, None)
         dc_start = "initial map"
         if second is not None:
             what = ("descriptor assignment, against the given map" if state.descriptor_start else
@@ -1025,8 +1041,7 @@ def _better_of_two_starts(state: KernelState):
             yield Progress("initial alignment", PROGRESS_DC[0] + PROGRESS_DC[1] * state.step / state.total_steps, what)
             other_start, other_prices = second.result()
             state.watch.times["second start (concurrent)"] = sum(second_watch.times.values())
-            other = yield from dc_iterations(state, other_start, other_prices, 0, best.kernel_scale,
-                                             warm_first=True)
+            other = yield from dc_iterations(state, other_start, other_prices, 0, best.kernel_scale)
             if other.value > best.value:
                 best, prices = other, other_prices
                 dc_start = "descriptors" if state.descriptor_start else "initial alignment"

@@ -31,7 +31,9 @@ def warm_up() -> None:
 
     rng = np.random.default_rng(0)
     for dtype in (np.float64, np.float32):
-        linear_assignment(rng.random((4, 4)).astype(dtype))
+        prices = np.zeros(4)
+        first = linear_assignment(rng.random((4, 4)).astype(dtype), prices=prices)
+        linear_assignment(rng.random((4, 4)).astype(dtype), prices=prices, warm_map=first)  # a warm start's gap
     t = np.linspace(0, 2 * np.pi, 6, endpoint=False)
     ring = np.column_stack([np.cos(t), np.sin(t), np.zeros(6)])
     adj = sp.coo_matrix((np.ones(6), (np.arange(6), (np.arange(6) + 1) % 6)), shape=(6, 6))

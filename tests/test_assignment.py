@@ -128,16 +128,35 @@ def test_duality_gap_is_the_lp_gap():
         assert _duality_gap(score, auction_prices, optimum) <= n * 1e-12 + 1e-12
 
 
-def test_a_warm_map_sets_the_first_eps_and_keeps_the_optimum():
+def test_a_warm_map_sets_the_first_eps_and_keeps_the_optimum(monkeypatch):
     # a DC-like sequence: each problem a perturbation of the last, solved from the last prices and solution
+    import corrlib.assignment as assignment
+
+    first_eps = []
+    auction = assignment._auction
+
+    def recording(benefit, benefit_t, eps_start, *args):
+        first_eps.append(eps_start)
+        return auction(benefit, benefit_t, eps_start, *args)
+
+    monkeypatch.setattr(assignment, "_auction", recording)
     rng = np.random.default_rng(5)
     base = rng.random((120, 120))
     prices, previous = np.zeros(120), None
     for step in range(6):
         score = base + rng.normal(scale=10.0 ** -step, size=base.shape)  # from very different to nearly equal
+        before = prices.copy()
         sol = linear_assignment(score, prices=prices, warm_map=previous)
         assert assignment_score(score, sol) == pytest.approx(exact_value(score), abs=1e-7)
+        span = float(score.max() - score.min())
+        if previous is None:  # cold prices: the auction's own start, a quarter of the range
+            assert first_eps[-1] == pytest.approx(0.25 * span)
+        else:  # the warm state's duality gap per row, brute force
+            gap = np.max(score - before[None, :], axis=1).sum() + before.sum() - score[np.arange(120), previous].sum()
+            assert first_eps[-1] == pytest.approx(min(max(gap / 120, 1e-12 * span), 0.25 * span), rel=1e-9)
         previous = sol
+    # from very different problems the start is coarse, from nearly equal ones fine
+    assert first_eps[1] > 100 * first_eps[-1]
     with pytest.raises(InputError, match="warm_map must be a permutation"):
         linear_assignment(base, prices=prices, warm_map=np.zeros(120, dtype=int))
     with pytest.raises(InputError, match="warm_map must be a permutation"):

@@ -5,7 +5,7 @@ import pytest
 import trimesh
 from scipy.spatial import cKDTree
 
-from corrlib.descriptors.symmetry import even_spectrum, mesh_reflection, reflection_map
+from corrlib.descriptors.symmetry import even_spectrum, mesh_reflection, mesh_reflections, reflection_map
 from corrlib.errors import InputError, ParameterError
 from corrlib.evaluation import geodesic_errors
 from corrlib.geometry.spectrum import mesh_spectrum
@@ -53,6 +53,29 @@ def test_reflection_is_intrinsic_vertex_order_and_pose_free():
     mirror = reflection_map(moved, mesh_spectrum(moved, 60, use_cache=False))
     # vertex i of `moved` is vertex perm[i] of the blob
     assert np.mean(perm[mirror] == truth[perm]) > 0.95
+
+
+def test_a_pairs_reflections_side_by_side_equal_one_at_a_time(tmp_path, monkeypatch):
+    import corrlib.descriptors.symmetry as symmetry
+
+    monkeypatch.setenv("CORRLIB_CACHE_DIR", str(tmp_path))
+    blob, _ = one_mirror_blob()
+    rng = np.random.default_rng(3)
+    perm = rng.permutation(blob.n_vertices)
+    shuffled = TriMesh(blob.vertices[perm], np.argsort(perm)[blob.faces], name="shuffled")
+    spectra = [mesh_spectrum(m, 60, use_cache=False) for m in (blob, shuffled)]
+    alone = [reflection_map(m, s) for m, s in zip((blob, shuffled), spectra)]
+    computed = []
+    original = symmetry.reflection_map
+    monkeypatch.setattr(symmetry, "reflection_map", lambda m, s: computed.append(m.name) or original(m, s))
+    together = mesh_reflections((blob, shuffled), spectra)  # two threads, single-threaded BLAS
+    assert all(np.array_equal(a, b) for a, b in zip(alone, together)) and sorted(computed) == ["blob", "shuffled"]
+    # cached now: loaded, not computed; a mesh given twice (a self-match) is computed once
+    assert all(np.array_equal(a, b) for a, b in zip(alone, mesh_reflections((blob, shuffled), spectra)))
+    assert len(computed) == 2
+    monkeypatch.setenv("CORRLIB_CACHE_DIR", str(tmp_path / "other"))
+    twice = mesh_reflections((blob, blob), spectra[:1] * 2)
+    assert np.array_equal(twice[0], alone[0]) and np.array_equal(twice[1], alone[0]) and len(computed) == 3
 
 
 def test_reflection_of_the_cat_against_its_mirrored_ground_truth():

@@ -261,13 +261,51 @@ def _parity_spectrum(spectrum, mirror: np.ndarray, k: int, even: bool) -> tuple[
     return evals[:k], phi @ (basis @ ritz[:, :k])
 
 
-def mesh_reflection(mesh, spectrum) -> np.ndarray:
-    """:func:`reflection_map` with the default sizes, cached on disk by mesh content like the spectra."""
-    key = cache.make_key("reflection-v3", mesh.content_hash, K_INIT, K_FINAL, EVEN_SCALES, ODD_SCALES, ZOOMOUT_STEP,
-                         COMMUTATIVITY, SIGN_MODES, REFLECTION_SAMPLES)
-    entry = cache.load("reflections", key)
+def _reflection_key(mesh) -> str:
+    return cache.make_key("reflection-v3", mesh.content_hash, K_INIT, K_FINAL, EVEN_SCALES, ODD_SCALES, ZOOMOUT_STEP,
+                          COMMUTATIVITY, SIGN_MODES, REFLECTION_SAMPLES)
+
+
+def _cached_reflection(mesh) -> np.ndarray | None:
+    entry = cache.load("reflections", _reflection_key(mesh))
     if entry is not None and entry.get("mirror", np.empty(0)).shape == (mesh.n_vertices,):
         return entry["mirror"].astype(np.int64)
-    mirror = reflection_map(mesh, spectrum)
-    cache.store("reflections", key, {"mirror": mirror})
+    return None
+
+
+def mesh_reflection(mesh, spectrum) -> np.ndarray:
+    """:func:`reflection_map` with the default sizes, cached on disk by mesh content like the spectra."""
+    mirror = _cached_reflection(mesh)
+    if mirror is None:
+        mirror = reflection_map(mesh, spectrum)
+        cache.store("reflections", _reflection_key(mesh), {"mirror": mirror})
     return mirror
+
+
+def mesh_reflections(meshes, spectra) -> list[np.ndarray]:
+    """:func:`mesh_reflection` of several meshes (a pair), the ones not cached on two threads.
+
+    ZoomOut's nearest-row searches are half matrix products and half a single-threaded arg-min, so two
+    reflections on two threads with single-threaded BLAS each take less wall time than one after the other
+    with two-threaded BLAS; the maps are the same (:func:`reflection_map` is deterministic). Meshes of equal
+    content are computed once.
+    """
+    from concurrent.futures import ThreadPoolExecutor
+
+    from threadpoolctl import threadpool_limits
+
+    meshes, spectra = list(meshes), list(spectra)
+    found = [_cached_reflection(mesh) for mesh in meshes]
+    first_of = {}
+    for i, mesh in enumerate(meshes):
+        first_of.setdefault(mesh.content_hash, i)
+    todo = [i for i, mirror in enumerate(found) if mirror is None and first_of[meshes[i].content_hash] == i]
+    if len(todo) >= 2:
+        with threadpool_limits(1), ThreadPoolExecutor(len(todo)) as pool:
+            for i, mirror in zip(todo, pool.map(lambda i: mesh_reflection(meshes[i], spectra[i]), todo)):
+                found[i] = mirror
+    for i, mesh in enumerate(meshes):
+        if found[i] is None:
+            first = first_of[mesh.content_hash]
+            found[i] = found[first] if found[first] is not None else mesh_reflection(mesh, spectra[i])
+    return found

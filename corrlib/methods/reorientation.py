@@ -135,7 +135,7 @@ from scipy.spatial.distance import cdist
 from corrlib.descriptors.orientation import orientation_descriptors
 from corrlib.descriptors.spectral import biharmonic_embedding
 from corrlib.descriptors.symmetry import K_FINAL as REFLECTION_EIGENPAIRS
-from corrlib.descriptors.symmetry import mesh_reflection, reflection_distortion
+from corrlib.descriptors.symmetry import mesh_reflections, reflection_distortion
 
 
 @dataclass(frozen=True)
@@ -726,8 +726,10 @@ def reorient(source, target, spec_x, spec_y, map_xy: np.ndarray, map_yx: np.ndar
     their vertices are returned as ``released`` for the caller (kernel matching places them again,
     product-manifold refinement reports them).
     """
-    mirror_x = functools.cache(lambda: mesh_reflection(source, spec_x))
-    mirror_y = functools.cache(lambda: mesh_reflection(target, spec_y))
+    # the stage asks for both reflections or for neither (measured on every pair we have): the first one asked
+    # for computes both, side by side
+    reflections = functools.cache(lambda: mesh_reflections((source, target), (spec_x, spec_y)))
+    mirror_x, mirror_y = (lambda: reflections()[0]), (lambda: reflections()[1])
     parts_x, parts_y = ShapeParts.of(source, spec_x), ShapeParts.of(target, spec_y)
     local = lambda m: local_agreement(*blocks(), m)  # noqa: E731
     before = region_agreements(map_xy, parts_x, local)

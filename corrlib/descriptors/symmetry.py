@@ -283,7 +283,7 @@ def mesh_reflection(mesh, spectrum) -> np.ndarray:
 
 
 def mesh_reflections(meshes, spectra) -> list[np.ndarray]:
-    """:func:`mesh_reflection` of several meshes (a pair), the ones not cached on two threads.
+    """:func:`mesh_reflection` of several meshes (a pair), the ones not cached on two threads (the two cores).
 
     ZoomOut's nearest-row searches are half matrix products and half a single-threaded arg-min, so two
     reflections on two threads with single-threaded BLAS each take less wall time than one after the other
@@ -301,7 +301,7 @@ def mesh_reflections(meshes, spectra) -> list[np.ndarray]:
         first_of.setdefault(mesh.content_hash, i)
     todo = [i for i, mirror in enumerate(found) if mirror is None and first_of[meshes[i].content_hash] == i]
     if len(todo) >= 2:
-        with threadpool_limits(1), ThreadPoolExecutor(len(todo)) as pool:
+        with threadpool_limits(1), ThreadPoolExecutor(2) as pool:
             for i, mirror in zip(todo, pool.map(lambda i: mesh_reflection(meshes[i], spectra[i]), todo)):
                 found[i] = mirror
     for i, mesh in enumerate(meshes):

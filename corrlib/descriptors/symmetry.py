@@ -273,13 +273,16 @@ def _cached_reflection(mesh) -> np.ndarray | None:
     return None
 
 
+def _stored_reflection(mesh, spectrum) -> np.ndarray:
+    mirror = reflection_map(mesh, spectrum)
+    cache.store("reflections", _reflection_key(mesh), {"mirror": mirror})
+    return mirror
+
+
 def mesh_reflection(mesh, spectrum) -> np.ndarray:
     """:func:`reflection_map` with the default sizes, cached on disk by mesh content like the spectra."""
     mirror = _cached_reflection(mesh)
-    if mirror is None:
-        mirror = reflection_map(mesh, spectrum)
-        cache.store("reflections", _reflection_key(mesh), {"mirror": mirror})
-    return mirror
+    return _stored_reflection(mesh, spectrum) if mirror is None else mirror
 
 
 def mesh_reflections(meshes, spectra) -> list[np.ndarray]:
@@ -302,10 +305,10 @@ def mesh_reflections(meshes, spectra) -> list[np.ndarray]:
     todo = [i for i, mirror in enumerate(found) if mirror is None and first_of[meshes[i].content_hash] == i]
     if len(todo) >= 2:
         with threadpool_limits(1), ThreadPoolExecutor(2) as pool:
-            for i, mirror in zip(todo, pool.map(lambda i: mesh_reflection(meshes[i], spectra[i]), todo)):
+            for i, mirror in zip(todo, pool.map(lambda i: _stored_reflection(meshes[i], spectra[i]), todo)):
                 found[i] = mirror
     for i, mesh in enumerate(meshes):
         if found[i] is None:
             first = first_of[mesh.content_hash]
-            found[i] = found[first] if found[first] is not None else mesh_reflection(mesh, spectra[i])
+            found[i] = found[first] if found[first] is not None else _stored_reflection(mesh, spectra[i])
     return found

@@ -478,6 +478,16 @@ class SeedProblem:
         desc = None if self.desc_block is None else self.desc_block[np.ix_(self.free_x, self.free_y)]
         return self.phi_s[self.free_x], self.psi_s[self.free_y], desc
 
+    @functools.cached_property
+    def free_column(self) -> np.ndarray | None:
+        """(n_seed,) int: the assignment column of every y seed that is free, -1 for the others; None when every
+        seed is free (the column is the seed)."""
+        if self.free_y is None:
+            return None
+        column = np.full(self.psi_s.shape[0], -1, dtype=np.int64)
+        column[self.free_y] = np.arange(self.free_y.size)
+        return column
+
     @property
     def n_columns(self) -> int:
         """Columns of the seed assignment (the size of its auction prices)."""
@@ -502,12 +512,7 @@ def warm_columns(problem: SeedProblem, seed_map: np.ndarray) -> np.ndarray | Non
     permutation of them (the warm start of the next auction, see
     :func:`~corrlib.assignment.linear_assignment`'s ``warm_map``); None otherwise (e.g. a given map that sends
     seeds together)."""
-    if problem.free_x is None:
-        columns = seed_map
-    else:
-        position = np.full(problem.psi_s.shape[0], -1, dtype=np.int64)
-        position[problem.free_y] = np.arange(problem.free_y.size)
-        columns = position[seed_map[problem.free_x]]
+    columns = seed_map if problem.free_x is None else problem.free_column[seed_map[problem.free_x]]
     if columns.size != problem.n_columns or not np.array_equal(np.sort(columns), np.arange(columns.size)):
         return None
     return columns

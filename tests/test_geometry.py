@@ -111,11 +111,15 @@ def test_slicing_equals_single_shift_invert(cat_pair):
     assert np.all(overlap[simple] > 1 - 1e-6)
 
 
-def test_slicing_wastes_no_shift(monkeypatch):
+@pytest.mark.parametrize("slice_size, n_runs", [(100, 4), (40, 10)])
+def test_slicing_wastes_no_shift(monkeypatch, slice_size, n_runs):
     """Every shift-invert run of the slicing reaches back to the last cut: the second shift is placed by the
     first slice's span (its radius is the whole span, the first slice being one-sided), so 300 eigenpairs in
-    slices of 100 take a first slice of 100 and three of about 80, no run thrown away."""
+    slices of s take a first slice of s and then slices of about 0.8 s (1 + ⌈(300 − s) / 0.8 s⌉ runs), no run
+    thrown away."""
     import corrlib.geometry.spectrum as spectrum
+
+    monkeypatch.setattr(spectrum, "SLICE_SIZE", slice_size)
 
     s = trimesh.creation.icosphere(subdivisions=4)
     mesh = TriMesh(np.asarray(s.vertices) * [3.0, 2.0, 1.0], s.faces)
@@ -129,7 +133,7 @@ def test_slicing_wastes_no_shift(monkeypatch):
 
     monkeypatch.setattr(spectrum._ShiftInvert, "run", counted)
     w, _ = eigenpairs(stiff, mass, 300, method="slicing")
-    assert len(runs) == 4 and np.all(np.diff(runs) > 0)
+    assert len(runs) == n_runs and np.all(np.diff(runs) > 0)
     monkeypatch.undo()
     assert np.allclose(w, eigenpairs(stiff, mass, 300, method="eigsh")[0], rtol=1e-9)
 

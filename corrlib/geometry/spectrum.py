@@ -12,10 +12,14 @@ Two solvers, same answer:
   there) and the next shift is placed so that its interval overlaps the
   trusted part of the previous one. Consecutive intervals are glued at a cut
   that lies in a spectral gap, so no eigenvalue is lost or counted twice.
-  ARPACK's cost grows with the square of its Krylov basis (≈ 2k), so many
-  small runs are much cheaper than one large run for k in the hundreds.
+  ARPACK keeps a Krylov basis of about twice the eigenpairs asked for and
+  re-orthogonalises every new vector against all of it, so a run costs
+  about ``n s²`` for ``s`` eigenpairs, ``n s`` per eigenpair: small runs are
+  cheaper per eigenpair, until the fixed cost of a run (its factorisation,
+  its start, the overlap it discards) dominates. Between the two the cost
+  is flat over a wide range of slice sizes (``docs/decisions.md``).
 
-``"auto"`` (default) picks slicing for k > ``AUTO_SLICING_K``. Output eigenvectors are
+``"auto"`` (default) picks slicing for k > ``AUTO_SLICING_K`` (two slices). Output eigenvectors are
 M-orthonormal (``evecs.T @ M @ evecs == I``); with a diagonal (lumped) mass
 the problem is solved in the equivalent standard form
 ``M^{-1/2} S M^{-1/2} u = lambda u``.
@@ -35,10 +39,11 @@ from corrlib import cache
 from corrlib.errors import InputError, ParameterError, SolverError
 from corrlib.geometry.lanczos import block_lanczos
 
-#: eigenpairs per shift-invert run in spectrum slicing
-SLICE_SIZE = 100
-#: "auto" uses spectrum slicing above this many eigenpairs (measured crossover on a 5k mesh)
-AUTO_SLICING_K = 250
+#: eigenpairs per shift-invert run in spectrum slicing (the middle of the flat optimum measured on
+#: 5k-20k-vertex meshes, see the module docstring)
+SLICE_SIZE = 40
+#: "auto" uses spectrum slicing above this many eigenpairs: from two slices on, slicing is the cheaper
+AUTO_SLICING_K = 2 * SLICE_SIZE
 #: problems with at most this many rows are solved densely
 DENSE_LIMIT = 600
 #: shift-invert runs below zero use a sparse Cholesky factorisation from this many rows on (SuperLU

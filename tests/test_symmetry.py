@@ -10,6 +10,7 @@ from corrlib.errors import InputError, ParameterError
 from corrlib.evaluation import geodesic_errors
 from corrlib.geometry.spectrum import mesh_spectrum
 from corrlib.io import load_mesh, load_vts
+from corrlib.resources import resource
 from corrlib.shapes import TriMesh
 
 from tests._data import TOSCA
@@ -104,6 +105,39 @@ def test_reflection_of_posed_people_searches_the_signs():
         errors[name] = geodesic_errors(reflection, mesh, np.arange(mesh.n_vertices), mirror).summary()["mean"]
     assert errors["human0"] < 0.01, errors
     assert max(errors.values()) < 0.1, errors
+
+
+def test_the_posed_capsule_person_is_reflected_left_to_right():
+    """The fourth bundled person (resources/people/human3.off, the capsule body of tests/_humanoid.py in the
+    retrieval pose). The sign candidate of least distortion there keeps orientation over all vertices, yet read
+    as reversing it on the evenly strided sample of 400; accepted, it ended as a mixture of the left-right and
+    the front-back mirror (0.28 √area from the truth, measured). Read over all vertices, the search goes on to
+    the true reflection."""
+    from tests._humanoid import rest_pose
+
+    person = load_mesh(resource("people/human3.off"))
+    rest, _ = rest_pose()
+    left_right = cKDTree(rest).query(rest * np.array([-1.0, 1.0, 1.0]))[1]  # vertex i is the same point in every pose
+    reflection = reflection_map(person, mesh_spectrum(person, 75, use_cache=False))
+    assert geodesic_errors(reflection, person, np.arange(person.n_vertices), left_right).summary()["mean"] < 0.01
+
+
+@pytest.mark.slow
+@pytest.mark.parametrize("seed", [1, 2])
+def test_reflection_of_a_posed_person_with_vertex_noise(seed):
+    """Vertex noise of 0.1 % of the bounding box diagonal on the posed person with a front (human2): the odd
+    descriptors are formed from gradients and normals and carry the noise, so the orientation of a sign
+    candidate is read over all vertices (seed 1 misread on the sample: 0.23 √area from the mirrored truth,
+    measured; 0.065 now, as for seed 2)."""
+    from tests._humanoid import humanoids
+
+    shapes, mirror = humanoids(front=True)
+    vertices, faces = shapes["human2"]
+    diagonal = np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0))
+    noisy = vertices + np.random.default_rng(seed).normal(scale=1e-3 * diagonal, size=vertices.shape)
+    mesh = TriMesh(noisy, faces, name=f"human2-noise{seed}")
+    reflection = reflection_map(mesh, mesh_spectrum(mesh, 75, use_cache=False))
+    assert geodesic_errors(reflection, mesh, np.arange(mesh.n_vertices), mirror).summary()["mean"] < 0.1
 
 
 def test_even_spectrum_is_the_spectrum_of_the_mirror_invariant_functions():

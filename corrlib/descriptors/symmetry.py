@@ -145,6 +145,11 @@ def _sign_search(spectrum, odd: np.ndarray, embedding: np.ndarray) -> np.ndarray
     """(n,) int: the orientation-reversing sign candidate of least distortion (the module's second start), or
     None when no sign sequence reverses orientation or a searched eigenvalue is repeated.
 
+    The candidates are ranked by their distortion on the evenly strided sample; in that order, the first whose
+    map reverses orientation over *all* vertices is returned. The orientation is a mean of per-vertex products
+    of odd descriptors, which are formed from gradients and normals and so carry the mesh's noise: a sample of
+    a few hundred vertices can misread it where all of them do not.
+
     Parameters
     ----------
     spectrum : Spectrum
@@ -166,14 +171,12 @@ def _sign_search(spectrum, odd: np.ndarray, embedding: np.ndarray) -> np.ndarray
     candidates = np.array([signs for signs in itertools.product((1.0, -1.0), repeat=modes) if min(signs) < 0])
     flipped = coordinates[sample][None, :, :] * candidates[:, None, :]
     all_images = tree.query(flipped.reshape(-1, modes), workers=-1)[1].reshape(len(candidates), sample.size)
-    best = None
-    for signs, images in zip(candidates, all_images):
-        if np.mean(np.sum(odd[sample] * odd[images], axis=1)) >= 0:
-            continue  # keeps orientation: not a reflection
-        distortion = _distortion(distances, embedding[images])
-        if best is None or distortion < best[0]:
-            best = (distortion, signs)
-    return None if best is None else tree.query(coordinates * best[1], workers=-1)[1]
+    distortions = [_distortion(distances, embedding[images]) for images in all_images]
+    for index in np.argsort(distortions, kind="stable"):
+        images = tree.query(coordinates * candidates[index], workers=-1)[1]
+        if np.mean(np.sum(odd * odd[images], axis=1)) < 0:
+            return images  # reverses orientation
+    return None
 
 
 #: vertices (evenly strided) on which a reflection's distortion is measured
@@ -262,7 +265,7 @@ def _parity_spectrum(spectrum, mirror: np.ndarray, k: int, even: bool) -> tuple[
 
 
 def _reflection_key(mesh) -> str:
-    return cache.make_key("reflection-v3", mesh.content_hash, K_INIT, K_FINAL, EVEN_SCALES, ODD_SCALES, ZOOMOUT_STEP,
+    return cache.make_key("reflection-v4", mesh.content_hash, K_INIT, K_FINAL, EVEN_SCALES, ODD_SCALES, ZOOMOUT_STEP,
                           COMMUTATIVITY, SIGN_MODES, REFLECTION_SAMPLES)
 
 

@@ -122,9 +122,9 @@ def reflection_map(mesh, spectrum, *, k_init: int = K_INIT, k_final: int = K_FIN
     embedding = biharmonic_embedding(spectrum.evals, spectrum.evecs)
     mirror = _zoomout(spectrum, c, k_final)
     distortion = reflection_distortion(mirror, embedding)
-    searched = _sign_search(spectrum, probes[:, even.shape[1]:], embedding)
     # refined only if it starts better than the first start ends (ZoomOut then lowers it further)
-    if searched is not None and reflection_distortion(searched, embedding) < distortion:
+    searched = _sign_search(spectrum, probes[:, even.shape[1]:], embedding, below=distortion)
+    if searched is not None:
         second = _zoomout(spectrum, pointwise_to_functional(searched, phi, phi, mass), k_final)
         if reflection_distortion(second, embedding) < distortion:
             return second
@@ -141,14 +141,16 @@ def _zoomout(spectrum, c: np.ndarray, k_final: int) -> np.ndarray:
             return stop.value[0]
 
 
-def _sign_search(spectrum, odd: np.ndarray, embedding: np.ndarray) -> np.ndarray | None:
+def _sign_search(spectrum, odd: np.ndarray, embedding: np.ndarray, below: float = np.inf) -> np.ndarray | None:
     """(n,) int: the orientation-reversing sign candidate of least distortion (the module's second start), or
-    None when no sign sequence reverses orientation or a searched eigenvalue is repeated.
+    None when no sign sequence with a distortion below ``below`` reverses orientation or a searched eigenvalue
+    is repeated.
 
-    The candidates are ranked by their distortion on the evenly strided sample; in that order, the first whose
-    map reverses orientation over *all* vertices is returned. The orientation is a mean of per-vertex products
-    of odd descriptors, which are formed from gradients and normals and so carry the mesh's noise: a sample of
-    a few hundred vertices can misread it where all of them do not.
+    The candidates are ranked by their distortion (:func:`reflection_distortion`, on the evenly strided
+    sample); in that order, the first whose map reverses orientation over *all* vertices is returned. The
+    orientation is a mean of per-vertex products of odd descriptors, which are formed from gradients and
+    normals and so carry the mesh's noise: a sample of a few hundred vertices can misread it where all of
+    them do not.
 
     Parameters
     ----------
@@ -157,6 +159,9 @@ def _sign_search(spectrum, odd: np.ndarray, embedding: np.ndarray) -> np.ndarray
         Normalised orientation-aware descriptors, negated by a reflection.
     embedding : (n, e) float
         The biharmonic embedding the candidates' distortion is measured in.
+    below : float
+        Only candidates that distort less are looked at (the caller's other start: one that does not
+        improve on it would not be used).
     """
     modes = min(SIGN_MODES, spectrum.k - 2)
     evals = spectrum.evals[1:modes + 2]
@@ -173,6 +178,8 @@ def _sign_search(spectrum, odd: np.ndarray, embedding: np.ndarray) -> np.ndarray
     all_images = tree.query(flipped.reshape(-1, modes), workers=-1)[1].reshape(len(candidates), sample.size)
     distortions = [_distortion(distances, embedding[images]) for images in all_images]
     for index in np.argsort(distortions, kind="stable"):
+        if not distortions[index] < below:
+            break
         images = tree.query(coordinates * candidates[index], workers=-1)[1]
         if np.mean(np.sum(odd * odd[images], axis=1)) < 0:
             return images  # reverses orientation

@@ -40,7 +40,7 @@ from corrlib.errors import InputError, ParameterError, SolverError
 from corrlib.geometry.lanczos import block_lanczos
 
 #: eigenpairs per shift-invert run in spectrum slicing (the middle of the flat optimum measured on
-#: 5k-20k-vertex meshes, see the module docstring)
+#: 5k-20k-vertex meshes, docs/decisions.md)
 SLICE_SIZE = 40
 #: "auto" uses spectrum slicing above this many eigenpairs: from two slices on, slicing is the cheaper
 AUTO_SLICING_K = 2 * SLICE_SIZE

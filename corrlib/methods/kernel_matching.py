@@ -70,7 +70,12 @@ Design choices, in brief (the measurements behind them are in
   and more inside any cell above ``max_cell``), transfers them through the
   current map and widens the target cells by ``cell_overlap`` (a vertex near a
   border can reach its partner beyond it); every cell is an independent
-  partial assignment scored with all current matches as anchors.
+  partial assignment scored with all current matches as anchors. One pass
+  per scale by default: a further pass at the same scale scores the cells
+  with the previous pass's matches, including those that the capacities
+  (below) pushed off their best partner, and pushes again, so the map
+  drifts wherever the capacities are tight (a source with several times the
+  target's vertices); the next scale's cells have new borders anyway.
 * Area capacities (``capacity="area"``): at the finer scales a target sample
   of area ``m_y`` may take up to ``ceil(n_x · m_y / A_Y)`` source samples, a
   transportation problem that couples the area measures instead of the
@@ -195,8 +200,10 @@ class KernelMatchingParams:
     cell_overlap: float = param(0.1, label="Cell overlap", low=0.0, high=10.0,
                                 help="Target cells are widened across their borders by about half this "
                                      "length (relative to √area) so that cells overlap; 0: disjoint cells.")
-    passes: int = param(2, label="Passes per scale", low=1, high=20,
-                        help="Refinement passes per finer scale, each with cells around new centres.")
+    passes: int = param(1, label="Passes per scale", low=1, high=20,
+                        help="Refinement passes per finer scale, each with cells around new centres (each "
+                             "further pass starts from the last one's matches, and drifts where the area "
+                             "capacities are tight).")
     partial: bool = param(False, label="Partial matching",
                           help="Slack variables: vertices whose best score is low may stay unmatched.")
     slack_quantile: float = param(0.1, label="Slack quantile", low=0.0, high=1.0,

@@ -76,6 +76,25 @@ def wolf_pair():
 
 
 @pytest.fixture(scope="session")
+def wolf1_half(wolf_pair):
+    """wolf1 decimated to half its vertices by VTK's quadric decimation (an uneven coarse mesh: small
+    triangles where it bends) and the truth of wolf0 on it, the decimated vertex nearest to each vertex's
+    partner in wolf1 (wolf0 and wolf1 share their vertex order)."""
+    pv = pytest.importorskip("pyvista")  # the studio's 3D views; installed with the test environment
+    from scipy.spatial import cKDTree
+
+    from corrlib.shapes import TriMesh
+
+    wolf1 = wolf_pair[1]
+    faces = np.hstack([np.full((wolf1.n_faces, 1), 3), wolf1.faces]).ravel()
+    coarse = pv.PolyData(wolf1.vertices, faces).decimate(0.5).clean()
+    target = TriMesh(np.asarray(coarse.points, dtype=np.float64), coarse.faces.reshape(-1, 4)[:, 1:],
+                     name="wolf1-half")
+    assert 0.45 < target.n_vertices / wolf1.n_vertices < 0.55
+    return target, cKDTree(target.vertices).query(wolf1.vertices)[1]
+
+
+@pytest.fixture(scope="session")
 def cat_pair():
     from corrlib.io import load_mesh, load_vts
 

@@ -231,26 +231,17 @@ def test_partial_shape_and_unequal_sizes(wolf_pair):
 
 
 @pytest.mark.slow
-def test_a_target_at_half_the_resolution(wolf_pair):
-    """wolf0 (4,344 vertices) against wolf1 decimated to half its vertices by VTK's quadric decimation (an
-    uneven coarse mesh: small triangles where it bends). Every target vertex then takes about two source
-    vertices under area capacities with little rounding slack, where a second refinement pass at a scale
-    pushed the matches the first had displaced further (measured 0.027 with two passes per scale, 0.018
-    with one; the functional-map baseline 0.010). Truth: the decimated vertex nearest to each vertex's
-    partner in wolf1."""
-    pv = pytest.importorskip("pyvista")  # the studio's 3D views; installed with the test environment
-    from scipy.spatial import cKDTree
-
-    wolf0, wolf1 = wolf_pair
-    faces = np.hstack([np.full((wolf1.n_faces, 1), 3), wolf1.faces]).ravel()
-    coarse = pv.PolyData(wolf1.vertices, faces).decimate(0.5).clean()
-    target = TriMesh(np.asarray(coarse.points, dtype=np.float64), coarse.faces.reshape(-1, 4)[:, 1:],
-                     name="wolf1-half")
-    assert 0.45 < target.n_vertices / wolf1.n_vertices < 0.55
-    truth = cKDTree(target.vertices).query(wolf1.vertices)[1]  # wolf0 and wolf1 share their vertex order
+def test_a_target_at_half_the_resolution(wolf_pair, wolf1_half):
+    """wolf0 (4,344 vertices) against wolf1 decimated to half its vertices. Measured 0.027 when every source
+    vertex was assigned under area capacities with two passes per scale (each target vertex taking about
+    two, with little rounding slack, the matches drift), 0.018 with one pass, 0.0071 with the source sampled
+    up to the target's vertex count and the surplus vertices placed from their matched neighbours (the
+    functional-map baseline: 0.0096)."""
+    wolf0, (target, truth) = wolf_pair[0], wolf1_half
     result = solve("kernel-matching", wolf0, target)
+    assert np.all(result.map_xy >= 0) and np.all(result.map_yx >= 0)
     err = geodesic_errors(result.map_xy, target, np.arange(wolf0.n_vertices), truth).summary()
-    assert err["mean"] < 0.022, err
+    assert err["mean"] < 0.012, err
 
 
 def test_bad_inputs(wolf_pair):

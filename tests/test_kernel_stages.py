@@ -21,6 +21,7 @@ from corrlib.methods.kernel_matching import (
     split_large_cells,
     updated_alignment,
 )
+from corrlib.methods.resolution import surplus_partners
 from corrlib.shapes import TriMesh
 
 TAU = 0.01  # relative time: t = τ · area ≈ 0.12 on the unit icosphere, decays from 1 to ~1e-4
@@ -290,3 +291,28 @@ def test_large_cells_are_split_until_none_exceeds_the_limit():
     np.testing.assert_array_equal(matched_y[split_x], split_y)  # every centre is a matched pair
     same_x, same_y = split_large_cells(mesh, split_x, split_y, matched_x, matched_y, matched_x, limit)
     np.testing.assert_array_equal(same_x, split_x)
+
+
+def test_surplus_vertices_take_the_partner_of_their_nearest_matched_vertex():
+    """A source with more vertices than the target is sampled up to the target's count; every other vertex
+    takes the partner of the matched sample vertex nearest to it on the edge graph (brute force: every
+    shortest path; equidistant ones tie), the landmarks and unmatched samples keep theirs."""
+    from scipy.sparse.csgraph import dijkstra
+
+    sphere = trimesh.creation.icosphere(subdivisions=2)
+    mesh = TriMesh(sphere.vertices, sphere.faces)
+    rng = np.random.default_rng(3)
+    sampled = rng.choice(mesh.n_vertices, 40, replace=False)
+    map_xy = -np.ones(mesh.n_vertices, dtype=np.int64)
+    map_xy[sampled] = rng.permutation(100)[:sampled.size]  # distinct: a partner names its sample vertex
+    map_xy[sampled[:3]] = -1  # left unmatched by a partial cell
+    anchors = np.setdiff1d(np.arange(mesh.n_vertices), sampled)[:5]
+    before = map_xy.copy()
+    surplus_partners(mesh, map_xy, sampled, anchors)
+    matched = sampled[3:]
+    distances = dijkstra(mesh.adjacency, directed=False, indices=matched)  # (matched, n)
+    rest = np.setdiff1d(np.arange(mesh.n_vertices), np.concatenate([sampled, anchors]))
+    chosen = np.array([np.flatnonzero(before[matched] == partner)[0] for partner in map_xy[rest]])
+    np.testing.assert_allclose(distances[chosen, rest], distances[:, rest].min(axis=0), rtol=0, atol=1e-12)
+    np.testing.assert_array_equal(map_xy[sampled], before[sampled])
+    np.testing.assert_array_equal(map_xy[anchors], -1)  # set by the caller

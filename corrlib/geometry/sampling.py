@@ -228,7 +228,8 @@ def voronoi_cells(mesh, seeds) -> tuple[np.ndarray, np.ndarray]:
     Returns
     -------
     labels : (n,) int
-        ``labels[v]`` is the position in ``seeds`` of the seed nearest to v.
+        ``labels[v]`` is the position in ``seeds`` of the seed nearest to v (-1 where no seed is connected
+        to v).
     distances : (n,) float
         Graph distance of v to that seed.
     """
@@ -243,7 +244,7 @@ def voronoi_cells(mesh, seeds) -> tuple[np.ndarray, np.ndarray]:
                                     return_predecessors=True)
     position = np.full(mesh.n_vertices, -1, dtype=np.int64)
     position[seeds] = np.arange(seeds.size)
-    return position[sources], dist
+    return np.where(sources >= 0, position[np.maximum(sources, 0)], -1), dist  # -1: no seed reaches v
 
 
 def voronoi_bands(mesh, seeds, margin: float) -> tuple[np.ndarray, list[np.ndarray]]:

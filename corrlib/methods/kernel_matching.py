@@ -74,8 +74,16 @@ Design choices, in brief (the measurements behind them are in
   per scale by default: a further pass at the same scale scores the cells
   with the previous pass's matches, including those that the capacities
   (below) pushed off their best partner, and pushes again, so the map
-  drifts wherever the capacities are tight (a source with several times the
-  target's vertices); the next scale's cells have new borders anyway.
+  drifts wherever the capacities are tight; the next scale's cells have new
+  borders anyway.
+* A source with more vertices than the target: the finer scales sample it up
+  to the target's vertex count, so that every target sample takes about one
+  source sample, and the surplus vertices take the partner of their nearest
+  matched vertex before the final ZoomOut step (§8.3.2 pairs samples of
+  equal size). The area capacities' rounding leaves about half a sample of
+  slack where the counts agree, but little where a target sample has to
+  take several: a map whose local area differs from the lumped masses then
+  pushes rows off their best partner, each pushing the next.
 * Area capacities (``capacity="area"``): at the finer scales a target sample
   of area ``m_y`` may take up to ``ceil(n_x · m_y / A_Y)`` source samples, a
   transportation problem that couples the area measures instead of the
@@ -124,7 +132,7 @@ from corrlib.methods.base import InitialMatch, MatchResult, param
 from corrlib.methods.registry import MethodSpec, register
 from corrlib.methods.reorientation import (can_reorient, mean_agreement, orientation_blocks, reorient,
                                            standardised, turned_anything, with_first_pass)
-from corrlib.methods.resolution import keep_input_partners, kernel_width
+from corrlib.methods.resolution import keep_input_partners, kernel_width, surplus_partners
 from corrlib.neighbours import nearest_rows
 from corrlib.progress import Progress, Stopwatch, scaled_progress
 
@@ -1133,8 +1141,9 @@ def multiscale_refinement(state: KernelState):
 
     There is always at least one finer scale (the seeds are surface points); its first pass takes the seeds'
     matches (interpolated eigenfunctions) as anchors. Landmarks stay matched: their vertices and partners are
-    left out of the cells (and the cells are centred on the other matches). A generator; returns ``map_xy``
-    (n_x,) and ``map_yx`` (n_y,) of the last pass (-1: unmatched).
+    left out of the cells (and the cells are centred on the other matches). The source sample grows to at
+    most the target's vertex count (:func:`surplus_partners` places the rest). A generator; returns
+    ``map_xy`` (n_x,) and ``map_yx`` (n_y,) of the last pass (-1: unmatched).
     """
     params, source, target, watch = state.params, state.source, state.target, state.watch
     n_x, n_y, psi, phi = state.n_x, state.n_y, state.psi, state.phi
@@ -1148,10 +1157,13 @@ def multiscale_refinement(state: KernelState):
     landmark_x[state.anchors_x], landmark_y[state.anchors_y] = True, True
     size, last = state.n_seed, False
     keys, cell_map, cell_map_yx = np.zeros(0, dtype=np.int64), np.zeros(0, dtype=np.int64), -np.ones(n_y, np.int64)
+    # a source with more vertices than the target is sampled up to the target's count (partial matching
+    # decides every vertex by the slack)
+    top_x = n_x if params.partial else min(n_x, n_y)
     while not last:
-        size = int(min(max(n_x, n_y), np.ceil(size * params.growth)))
-        last = size >= max(n_x, n_y)
-        x_idx, y_idx = state.order_x[:size], state.order_y[:size]
+        size = int(min(max(top_x, n_y), np.ceil(size * params.growth)))
+        last = size >= max(top_x, n_y)
+        x_idx, y_idx = state.order_x[:min(size, top_x)], state.order_y[:size]
         x_idx, y_idx = x_idx[~landmark_x[x_idx]], y_idx[~landmark_y[y_idx]]
         if x_idx.size == 0 or y_idx.size == 0 or landmark_x[matched_x].all():
             continue
@@ -1182,6 +1194,8 @@ def multiscale_refinement(state: KernelState):
                            f"{size} samples, pass {p + 1}/{params.passes}: {centres_x.size} cells")
     full_map_xy = -np.ones(n_x, dtype=np.int64)
     full_map_xy[keys] = cell_map
+    if top_x < n_x:
+        surplus_partners(source, full_map_xy, keys, state.anchors_x)
     full_map_xy[state.anchors_x] = state.anchors_y
     cell_map_yx[state.anchors_y] = state.anchors_x
     return full_map_xy, cell_map_yx

@@ -14,6 +14,9 @@ baseline's map is refined). Output: a dense map.
    target vertex may take as many source vertices as its share of the area
    holds (:func:`corrlib.assignment.area_capacities`), so independently
    remeshed shapes are not forced into a bijection that slides vertices.
+   A source with more vertices than the target is assigned on a sample of
+   the target's size, and its other vertices take their nearest sampled
+   vertex's partner (:mod:`.resolution`).
    The density resolves a partner only to within the heat kernel's width
    ``2 √t``: a row whose extracted partner lies closer than that to its
    (single) input partner gets the input partner back
@@ -51,7 +54,7 @@ import numpy as np
 from corrlib.errors import InputError, ParameterError
 from corrlib.geometry import product as pm
 from corrlib.methods.base import MatchResult, param
-from corrlib.methods.resolution import keep_input_partners, kernel_width
+from corrlib.methods.resolution import keep_input_partners, kernel_width, surplus_partners
 from corrlib.methods.registry import MethodSpec, register
 from corrlib.progress import Progress, Stopwatch, scaled_progress
 
@@ -104,8 +107,13 @@ def _vertex_masses(factor: pm.Factor) -> np.ndarray:
     return np.asarray(factor.mass.sum(axis=1)).ravel()
 
 
-def _extract(coeffs, fx: pm.Factor, fy: pm.Factor, how: str, token=None) -> tuple[np.ndarray, np.ndarray]:
-    """Dense maps from a density given by its product coefficients (assignment or maximum likelihood)."""
+def _extract(coeffs, fx: pm.Factor, fy: pm.Factor, how: str, token=None,
+             source=None) -> tuple[np.ndarray, np.ndarray]:
+    """Dense maps from a density given by its product coefficients (assignment or maximum likelihood).
+
+    With the source mesh given and more source than target vertices, the forward assignment takes a
+    farthest-point sample of the target's size and the other source vertices the partner of their nearest
+    sampled one (:func:`~corrlib.methods.resolution.surplus_partners`)."""
     if how == "assignment" and fx.n * fy.n <= ASSIGNMENT_LIMIT:
         from corrlib.assignment import area_capacities, linear_assignment
 
@@ -114,7 +122,16 @@ def _extract(coeffs, fx: pm.Factor, fy: pm.Factor, how: str, token=None) -> tupl
         cancel = token.flag if token is not None else None
         # each side's vertices take the other side's in proportion to their area (or length)
         masses_x, masses_y = _vertex_masses(fx), _vertex_masses(fy)
-        map_xy = linear_assignment(density, cancel=cancel, capacity=area_capacities(fx.n, masses_y))
+        if source is not None and fx.n > fy.n:
+            from corrlib.geometry.sampling import farthest_point_sampling
+
+            rows = farthest_point_sampling(source.vertices, fy.n)
+            map_xy = -np.ones(fx.n, dtype=np.int64)
+            map_xy[rows] = linear_assignment(np.ascontiguousarray(density[rows]), cancel=cancel,
+                                             capacity=area_capacities(rows.size, masses_y))
+            surplus_partners(source, map_xy, rows)
+        else:
+            map_xy = linear_assignment(density, cancel=cancel, capacity=area_capacities(fx.n, masses_y))
         map_yx = linear_assignment(np.ascontiguousarray(density.T), cancel=cancel,
                                    capacity=area_capacities(fy.n, masses_x))
         # rectangular problems leave rows unmatched: those take their most likely partner
@@ -127,11 +144,12 @@ def _extract(coeffs, fx: pm.Factor, fy: pm.Factor, how: str, token=None) -> tupl
 
 
 def refine(fx: pm.Factor, fy: pm.Factor, ix, iy, source_points: np.ndarray, target_points: np.ndarray,
-           params: ProductManifoldParams, token=None, watch: Stopwatch | None = None):
+           params: ProductManifoldParams, token=None, watch: Stopwatch | None = None, source=None):
     """Dense map from matches on two factors (generator; returns ``(map_xy, map_yx, extras)``).
 
     The points of the factors (vertices, curve samples) decide which input partners the global stage keeps
-    (:mod:`corrlib.methods.resolution`)."""
+    (:mod:`corrlib.methods.resolution`). ``source``: the source mesh (its vertices are ``source_points``), for
+    the extraction's sample where the source has more vertices than the target (:func:`_extract`)."""
     watch = watch or Stopwatch()
     ix, iy = np.asarray(ix, dtype=np.int64), np.asarray(iy, dtype=np.int64)
     if ix.size == 0:
@@ -140,7 +158,7 @@ def refine(fx: pm.Factor, fy: pm.Factor, ix, iy, source_points: np.ndarray, targ
     yield Progress("global diffusion", 0.1, f"{ix.size} matches, {fx.k} x {fy.k} product coefficients")
     with watch("global"):
         coeffs = pm.diffuse(_match_density_coeffs(ix, iy, fx, fy), fx, fy, params.t_global)
-        map_xy, map_yx = _extract(coeffs, fx, fy, params.extraction, token)
+        map_xy, map_yx = _extract(coeffs, fx, fy, params.extraction, token, source)
         width_x, width_y = kernel_width(params.t_global, fx.unit), kernel_width(params.t_global, fy.unit)
         kept, isometric = keep_input_partners(map_xy, ix, iy, source_points, target_points, width_x, width_y)
     global_map_xy = map_xy.copy()
@@ -234,7 +252,7 @@ def _refined_again(source, target, fx: pm.Factor, fy: pm.Factor, turned_xy: np.n
     yield Progress("re-optimising", 0.95, "the turned map, refined once more")
     keep = np.flatnonzero(turned_xy >= 0)
     map_xy, map_yx, extras = yield from scaled_progress(
-        refine(fx, fy, keep, turned_xy[keep], source.vertices, target.vertices, params, token, watch),
+        refine(fx, fy, keep, turned_xy[keep], source.vertices, target.vertices, params, token, watch, source),
         0.95, 0.99, "second pass")
     map_xy, map_yx = yield from _reoriented(source, target, fx, fy, map_xy, map_yx, extras, watch, fraction=0.995)
     return map_xy, map_yx, with_first_pass(extras, first, turned_xy)
@@ -256,7 +274,7 @@ def solve_product_manifold(source, target, params: ProductManifoldParams, token,
     with watch("eigen"):
         fx, fy = pm.mesh_factor(source, params.n_eigs), pm.mesh_factor(target, params.n_eigs)
     map_xy, map_yx, extras = yield from refine(fx, fy, ix, iy, source.vertices, target.vertices, params, token,
-                                               watch)
+                                               watch, source)
     if params.reorient and initial.map_xy is not None:
         from corrlib.methods.reorientation import turned_anything
 

@@ -17,6 +17,15 @@ it. The same function decides those rows by the assumption both
 refiners rest on, that the map is locally an isometry: of the two partners, input
 and refined, the row keeps the one whose distances to its neighbours' partners
 differ less from the distances to those neighbours on the source.
+
+An extraction that couples the two area measures (an assignment with area
+capacities) pairs samples of equal size: where the source has more vertices
+than the target, a target sample would have to take several source samples
+with little rounding slack in its capacity, and a map whose local area differs
+from the lumped masses would push rows off their best partner, each pushing
+the next. Both refiners therefore assign a sample of the source of the
+target's size and give every other source vertex the partner of its nearest
+sampled vertex (:func:`surplus_partners`).
 """
 
 from __future__ import annotations
@@ -111,3 +120,31 @@ def _input_is_more_isometric(map_xy, rows, partners, source_points, target_point
         return np.bincount(owner, np.abs(d_source - d_target), minlength=rows.size)
 
     return distortion(partners) < distortion(map_xy[rows])
+
+
+def surplus_partners(source, map_xy: np.ndarray, sampled: np.ndarray, anchors=()) -> None:
+    """Partners of the source vertices an extraction left out of its sample, in place: each takes the partner
+    of the nearest matched sample vertex (geodesic Voronoi cells of the matched ones,
+    :func:`~corrlib.geometry.sampling.voronoi_cells`; -1 where none is connected).
+
+    Parameters
+    ----------
+    source : TriMesh
+    map_xy : (n_x,) int
+        Target vertex of every sampled source vertex (-1: unmatched); completed in place.
+    sampled : (s,) int
+        The source vertices that were assigned (matched or not).
+    anchors : (a,) int
+        Vertices left alone (landmarks, which the caller sets).
+    """
+    from corrlib.geometry.sampling import voronoi_cells
+
+    matched = sampled[map_xy[sampled] >= 0]
+    if matched.size == 0:
+        return
+    rest = np.ones(map_xy.size, dtype=bool)
+    rest[sampled] = False
+    rest[np.asarray(anchors, dtype=np.int64)] = False
+    nearest, _ = voronoi_cells(source, matched)
+    rest &= nearest >= 0  # a piece of the mesh without a matched vertex stays unmatched
+    map_xy[rest] = map_xy[matched[nearest[rest]]]

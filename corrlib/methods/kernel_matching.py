@@ -79,8 +79,8 @@ Design choices, in brief (the measurements behind them are in
 * A source with more vertices than the target: the finer scales sample it up
   to the target's vertex count, so that every target sample takes about one
   source sample, and the surplus vertices take the partner of their nearest
-  matched vertex before the final ZoomOut step (§8.3.2 pairs samples of
-  equal size). The area capacities' rounding leaves about half a sample of
+  matched vertex before the final ZoomOut step (as the seeds, samples of
+  equal size are paired). The area capacities' rounding leaves about half a sample of
   slack where the counts agree, but little where a target sample has to
   take several: a map whose local area differs from the lumped masses then
   pushes rows off their best partner, each pushing the next.

@@ -232,11 +232,10 @@ def test_partial_shape_and_unequal_sizes(wolf_pair):
 
 @pytest.mark.slow
 def test_a_target_at_half_the_resolution(wolf_pair, wolf1_half):
-    """wolf0 (4,344 vertices) against wolf1 decimated to half its vertices. Measured 0.027 when every source
-    vertex was assigned under area capacities with two passes per scale (each target vertex taking about
-    two, with little rounding slack, the matches drift), 0.018 with one pass, 0.0071 with the source sampled
-    up to the target's vertex count and the surplus vertices placed from their matched neighbours (the
-    functional-map baseline: 0.0096)."""
+    """wolf0 (4,344 vertices) against wolf1 decimated to half its vertices: every target vertex would take two
+    source vertices under capacities with little rounding slack, where the matches drifted (0.018–0.027,
+    docs/decisions.md); the source is sampled up to the target's count (measured 0.0071; the functional-map
+    baseline 0.0096)."""
     wolf0, (target, truth) = wolf_pair[0], wolf1_half
     result = solve("kernel-matching", wolf0, target)
     assert np.all(result.map_xy >= 0) and np.all(result.map_yx >= 0)

@@ -72,6 +72,14 @@ def farthest_point_sampling(points, n_samples: int, *, metric: str = "euclidean"
     raise ParameterError(f"unknown metric {metric!r} (use 'euclidean' or 'geodesic')")
 
 
+def outermost_farthest_points(points, n_samples: int) -> np.ndarray:
+    """(n_samples,) int: :func:`farthest_point_sampling` started at the point farthest from the centroid, so
+    that the sample does not depend on the order of the points (the file's vertex order)."""
+    p = np.asarray(points, dtype=np.float64)
+    start = int(np.argmax(np.linalg.norm(p - p.mean(axis=0), axis=1)))
+    return farthest_point_sampling(p, n_samples, start=start)
+
+
 @numba.njit(cache=True, nogil=True)
 def _fps_kernel(coords, n_samples, start):  # pragma: no cover - compiled
     """Greedy farthest points of ``coords`` (dim, n) float64 (coordinate-major: contiguous inner loops)."""

@@ -77,13 +77,9 @@ Design choices, in brief (the measurements behind them are in
   drifts wherever the capacities are tight; the next scale's cells have new
   borders anyway.
 * A source with more vertices than the target: the finer scales sample it up
-  to the target's vertex count, so that every target sample takes about one
-  source sample, and the surplus vertices take the partner of their nearest
-  matched vertex before the final ZoomOut step (as the seeds, samples of
-  equal size are paired). The area capacities' rounding leaves about half a sample of
-  slack where the counts agree, but little where a target sample has to
-  take several: a map whose local area differs from the lumped masses then
-  pushes rows off their best partner, each pushing the next.
+  to the target's vertex count, and the surplus vertices take the partner of
+  their nearest matched vertex before the final ZoomOut step (why:
+  :mod:`.resolution`).
 * Area capacities (``capacity="area"``): at the finer scales a target sample
   of area ``m_y`` may take up to ``ceil(n_x · m_y / A_Y)`` source samples, a
   transportation problem that couples the area measures instead of the
@@ -123,6 +119,7 @@ from corrlib.geometry.fmaps import pointwise_to_functional
 from corrlib.geometry.sampling import (
     SurfaceSample,
     farthest_point_sampling,
+    outermost_farthest_points,
     surface_farthest_points,
     voronoi_bands,
     voronoi_cells,
@@ -359,9 +356,8 @@ def _sample_order(points: np.ndarray, n_seed: int, growth: float) -> np.ndarray:
     n = points.shape[0]
     n_fps = int(min(n, n_seed * growth ** FPS_SCALES))
     radius = np.linalg.norm(points - points.mean(axis=0), axis=1)
-    # start at the vertex farthest from the centroid and order the rest by that distance: the samples
-    # do not depend on the vertex order of the file
-    head = farthest_point_sampling(points, n_fps, start=int(np.argmax(radius)))
+    # the rest ordered by the distance from the centroid: the samples do not depend on the file's vertex order
+    head = outermost_farthest_points(points, n_fps)
     rest = np.setdiff1d(np.arange(n), head)
     return np.concatenate([head, rest[np.argsort(-radius[rest], kind="stable")]])
 

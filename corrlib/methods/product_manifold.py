@@ -123,11 +123,11 @@ def _extract(coeffs, fx: pm.Factor, fy: pm.Factor, how: str, token=None,
         # each side's vertices take the other side's in proportion to their area (or length)
         masses_x, masses_y = _vertex_masses(fx), _vertex_masses(fy)
         if source is not None and fx.n > fy.n:
-            from corrlib.geometry.sampling import farthest_point_sampling
+            from corrlib.geometry.sampling import outermost_farthest_points
 
-            rows = farthest_point_sampling(source.vertices, fy.n)
+            rows = outermost_farthest_points(source.vertices, fy.n)
             map_xy = -np.ones(fx.n, dtype=np.int64)
-            map_xy[rows] = linear_assignment(np.ascontiguousarray(density[rows]), cancel=cancel,
+            map_xy[rows] = linear_assignment(density[rows], cancel=cancel,
                                              capacity=area_capacities(rows.size, masses_y))
             surplus_partners(source, map_xy, rows)
         else:

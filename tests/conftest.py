@@ -75,23 +75,32 @@ def wolf_pair():
     return load_mesh(TOSCA / "wolf0.off"), load_mesh(TOSCA / "wolf1.off")
 
 
-@pytest.fixture(scope="session")
-def wolf1_half(wolf_pair):
-    """wolf1 decimated to half its vertices by VTK's quadric decimation (an uneven coarse mesh: small
-    triangles where it bends) and the truth of wolf0 on it, the decimated vertex nearest to each vertex's
-    partner in wolf1 (wolf0 and wolf1 share their vertex order)."""
+def decimated(mesh, fraction: float, name: str):
+    """``mesh`` decimated to about ``fraction`` of its vertices by VTK's quadric decimation (an uneven coarse
+    mesh: small triangles where it bends) and, for every vertex of ``mesh``, the nearest decimated vertex."""
     pv = pytest.importorskip("pyvista")  # the studio's 3D views; installed with the test environment
     from scipy.spatial import cKDTree
 
     from corrlib.shapes import TriMesh
 
-    wolf1 = wolf_pair[1]
-    faces = np.hstack([np.full((wolf1.n_faces, 1), 3), wolf1.faces]).ravel()
-    coarse = pv.PolyData(wolf1.vertices, faces).decimate(0.5).clean()
-    target = TriMesh(np.asarray(coarse.points, dtype=np.float64), coarse.faces.reshape(-1, 4)[:, 1:],
-                     name="wolf1-half")
-    assert 0.45 < target.n_vertices / wolf1.n_vertices < 0.55
-    return target, cKDTree(target.vertices).query(wolf1.vertices)[1]
+    faces = np.hstack([np.full((mesh.n_faces, 1), 3), mesh.faces]).ravel()
+    coarse = pv.PolyData(mesh.vertices, faces).decimate(1.0 - fraction).clean()
+    target = TriMesh(np.asarray(coarse.points, dtype=np.float64), coarse.faces.reshape(-1, 4)[:, 1:], name=name)
+    assert 0.9 * fraction < target.n_vertices / mesh.n_vertices < 1.1 * fraction
+    return target, cKDTree(target.vertices).query(mesh.vertices)[1]
+
+
+@pytest.fixture(scope="session")
+def wolf1_half(wolf_pair):
+    """wolf1 at half its vertices (:func:`decimated`) and the truth of wolf0 on it, the decimated vertex nearest
+    to each vertex's partner in wolf1 (wolf0 and wolf1 share their vertex order)."""
+    return decimated(wolf_pair[1], 0.5, "wolf1-half")
+
+
+@pytest.fixture(scope="session")
+def wolf1_quarter(wolf_pair):
+    """wolf1 at a quarter of its vertices, as :func:`wolf1_half`."""
+    return decimated(wolf_pair[1], 0.25, "wolf1-quarter")
 
 
 @pytest.fixture(scope="session")

@@ -169,7 +169,7 @@ from __future__ import annotations
 
 import functools
 import itertools
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numba
 import numpy as np
@@ -210,15 +210,18 @@ SIDE_VIEW_ASYMMETRY = 0.03
 SIDE_VIEW_INTRINSIC_ASYMMETRY = 1 / 3
 #: boundary points and eigenpairs at which the intrinsic asymmetry of an outline is measured
 VIEW_POINTS, VIEW_K = 200, 25
+#: the fewest points a contour is resampled to (the lower bound of ``n_contour``)
+MIN_CONTOUR_POINTS = 10
 #: the energies on the first-order product graph (the only ones that take directed edge costs)
 FIRST_ORDER_ENERGIES = ("paper", "ratio")
 
 
 @dataclass(frozen=True, kw_only=True)
 class Contour3DParams:
-    n_contour: int = param(200, label="Contour points", low=10, high=2000,
+    n_contour: int = param(200, label="Contour points", low=MIN_CONTOUR_POINTS, high=2000,
                            help="The contour is resampled by arc length to this many points (the product "
-                                "graph has n_contour layers).")
+                                "graph has n_contour layers); fewer where the mesh's mean edge is longer "
+                                "than that step.")
     k: int = param(25, label="Eigenpairs", low=5, high=500,
                    help="Laplace–Beltrami eigenpairs for HKS/WKS; the paper's sensitivity study chose 25.")
     n_scales: int = param(100, label="Scales", low=2, high=500, help="Times of the HKS and energies of the WKS.")
@@ -431,6 +434,9 @@ class PreparedQuery:
         :func:`~corrlib.descriptors.side_view.intrinsic_asymmetry` of the
         outline's WKS (0: intrinsically symmetric, e.g. a posed person from
         the front).
+    source : Contour2D or None
+        The contour as given, before resampling: a mesh coarser than the
+        contour's step asks for fewer points (:func:`query_for_mesh`).
     """
 
     points: np.ndarray
@@ -442,6 +448,7 @@ class PreparedQuery:
     parts: np.ndarray | None = None
     asymmetry: float = 0.0
     intrinsic_asymmetry: float = 0.0
+    source: Contour2D | None = None
 
     @functools.cached_property
     def reflection_shift(self) -> int:
@@ -527,7 +534,41 @@ def prepare_query(contour: Contour2D, params: Contour3DParams) -> PreparedQuery:
     else:
         intrinsic = outline_intrinsic_asymmetry(contour, params.area_ratio)
     return PreparedQuery(canonical.points, feats[:m], resampled.labels, resampled, axes, doubled, parts,
-                         mirror_asymmetry(canonical.points), intrinsic)
+                         mirror_asymmetry(canonical.points), intrinsic, contour)
+
+
+def contour_points_for(query: PreparedQuery, mesh: TriMesh) -> int:
+    """How many contour points have a step no shorter than the mesh's mean edge (both shapes at the matching's
+    scale: the mesh at unit area, the outline enclosing ``area_ratio``).
+
+    A step of the product graph along a mesh edge of length ``b`` that advances the contour by ``a`` costs
+    ``c · max(a, b)`` (the max metric). Where the mesh's edges are longer than the contour's step, no step
+    keeps pace: the path also needs steps along the contour alone, and each unit of length on the mesh costs
+    ``1 − a/b`` on top of the contour's length, a pressure towards short curves on the mesh that the continuous
+    energy does not have. A contour at least as coarse as the mesh has a step that keeps pace on a typical edge.
+
+    Parameters
+    ----------
+    query : PreparedQuery
+    mesh : TriMesh
+    """
+    closed = np.vstack([query.points, query.points[:1]])
+    length = float(np.linalg.norm(np.diff(closed, axis=0), axis=1).sum())
+    mean_edge = float(np.mean(mesh.edge_lengths)) / np.sqrt(mesh.area)
+    return int(length / mean_edge)
+
+
+def query_for_mesh(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams) -> PreparedQuery:
+    """The query itself, or where the mesh is coarser than its step, the same contour prepared with
+    :func:`contour_points_for` points (kept where so few points leave the filled silhouette too few vertices
+    for its eigenpairs)."""
+    n_points = max(contour_points_for(query, mesh), MIN_CONTOUR_POINTS)
+    if n_points >= len(query.points) or query.source is None:
+        return query
+    try:
+        return prepare_query(query.source, replace(params, n_contour=n_points))
+    except ContourError:
+        return query
 
 
 def canonical_outline(contour: Contour2D, n_points: int, area_ratio: float) -> tuple[Contour2D, Contour2D]:
@@ -805,6 +846,7 @@ def match_prepared(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams,
     yield Progress("mesh features", 0.05)
     with watch("features"):
         target = prepare_mesh(mesh, params)
+        query = query_for_mesh(query, mesh, params)
         # view=auto: a side view by the outline is one only on a mesh seen from the side (a person in profile is
         # rarely drawn); None where the mesh was not asked
         seen_from_side = (mesh_seen_from_side(mesh, params)
@@ -864,7 +906,8 @@ def match_prepared(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams,
     extras = {"axis_reversed": bool(signs[0]) if signs else False, "axis_signs": [bool(s) for s in signs],
               "model": model, "view": "side" if side is not None else "front", "asymmetry": query.asymmetry,
               "intrinsic_asymmetry": query.intrinsic_asymmetry, "mesh_seen_from_side": seen_from_side,
-              "near_half": int(near), "sided": sided is not None and model == "whole"}
+              "near_half": int(near), "sided": sided is not None and model == "whole",
+              "contour_points": len(query.points)}
     yield Progress("done", 1.0, f"energy {bb.energy:.6g} after {bb.iterations} iterations")
     per_length = " per contour length matched to a moving curve" if params.energy.endswith("ratio") else ""
     metric = f"{params.metric} product metric, " if params.energy in FIRST_ORDER_ENERGIES else ""

@@ -1100,4 +1100,8 @@ def contour_reading(result) -> str:
                  + ("; a side view by the outline, but the target is not thinnest across its plane of symmetry"
                     if overruled else "")
                  + "; the parameter view=side or view=front forces one)")
+    if extras.get("contour_points", 0) < extras.get("contour_points_asked", 0):
+        line += (f"; the contour was matched at {extras['contour_points']} points instead of "
+                 f"{extras['contour_points_asked']}: the target's mean edge is longer than the finer step, "
+                 "which would press the curve short")
     return line

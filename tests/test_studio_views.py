@@ -314,3 +314,18 @@ def test_the_log_says_when_the_target_overruled_a_side_view():
     assert "read as a side view" in reading("side", True)
     for view, seen in (("side", True), ("front", None), ("front", True)):
         assert "not thinnest" not in reading(view, seen)
+
+
+def test_the_log_says_when_the_contour_was_matched_at_fewer_points():
+    """A target whose mean edge is longer than the contour's step is matched at fewer points
+    (``contour3d.query_for_mesh``); the log line says so and why, and says nothing where all points were used."""
+    from types import SimpleNamespace
+
+    from app.main_window import contour_reading
+
+    def reading(used, asked):
+        return contour_reading(SimpleNamespace(method="contour3d", energy_meaning="paper energy", energy=1.0,
+                                               extras={"contour_points": used, "contour_points_asked": asked}))
+
+    assert "matched at 116 points instead of 200" in reading(116, 200)
+    assert "instead of" not in reading(200, 200)

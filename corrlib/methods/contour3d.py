@@ -907,7 +907,7 @@ def match_prepared(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams,
               "model": model, "view": "side" if side is not None else "front", "asymmetry": query.asymmetry,
               "intrinsic_asymmetry": query.intrinsic_asymmetry, "mesh_seen_from_side": seen_from_side,
               "near_half": int(near), "sided": sided is not None and model == "whole",
-              "contour_points": len(query.points)}
+              "contour_points": len(query.points), "contour_points_asked": params.n_contour}
     yield Progress("done", 1.0, f"energy {bb.energy:.6g} after {bb.iterations} iterations")
     per_length = " per contour length matched to a moving curve" if params.energy.endswith("ratio") else ""
     metric = f"{params.metric} product metric, " if params.energy in FIRST_ORDER_ENERGIES else ""

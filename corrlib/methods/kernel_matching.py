@@ -69,7 +69,9 @@ Design choices, in brief (the measurements behind them are in
   sample into geodesic Voronoi cells around matched centres (farthest points,
   and more inside any cell above ``max_cell``), transfers them through the
   current map and widens the target cells by ``cell_overlap`` (a vertex near a
-  border can reach its partner beyond it); every cell is an independent
+  border can reach its partner beyond it) and by the neighbourhoods of its rows'
+  current partners (where a change of pose moves the borders apart by more than
+  the overlap); every cell is an independent
   partial assignment scored with all current matches as anchors. One pass
   per scale by default: a further pass at the same scale scores the cells
   with the previous pass's matches, including those that the capacities
@@ -111,6 +113,7 @@ from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 
 import numpy as np
+from scipy.sparse.csgraph import dijkstra
 
 from corrlib.assignment import area_capacities, linear_assignment
 from corrlib.descriptors import DESCRIPTOR_KINDS, mesh_descriptors
@@ -1114,19 +1117,41 @@ def split_large_cells(source, centres_x: np.ndarray, centres_y: np.ndarray, matc
     return np.asarray(centres_x, dtype=np.int64), np.asarray(centres_y, dtype=np.int64)
 
 
-def transferred_cells(source, target, centres_x, centres_y, x_idx, y_idx, overlap: float):
-    """Geodesic Voronoi cells of the source sample ``x_idx`` around ``centres_x``, and the target cells: the
-    Voronoi cells of the sample ``y_idx`` around the centres' images ``centres_y``, widened across their
-    borders by about ``overlap × √area / 2`` (a source vertex near a border can reach its partner beyond the
-    transferred border). Returns two lists of index arrays, one entry per centre.
+def transferred_cells(source, target, centres_x, centres_y, x_idx, y_idx, overlap: float, matched_x, matched_y):
+    """Geodesic Voronoi cells of the source sample ``x_idx`` around ``centres_x``, and their target cells.
+
+    A target cell holds the Voronoi cell of the sample ``y_idx`` around the centre's image ``centres_y``, widened
+    across its borders by about ``overlap × √area / 2``, and every target vertex within that width of the current
+    partner of one of the source cell's rows (the partner of the row's nearest matched vertex, ``matched_x`` →
+    ``matched_y``). The Voronoi cells of the two shapes are transferred through the centres only, and where the
+    shapes differ in pose their borders part by more than the overlap (at a joint): a row near such a border would
+    find no partner near its own in its target cell and take the best one anywhere in it. Through the current
+    map every row can reach the neighbourhood of its partner. Returns two lists of index arrays, one entry per
+    centre.
     """
     lab_x, _ = voronoi_cells(source, centres_x)
-    _, band_y = voronoi_bands(target, centres_y, overlap * np.sqrt(target.area))
+    radius = 0.5 * overlap * np.sqrt(target.area)
+    _, band_y = voronoi_bands(target, centres_y, 2.0 * radius)
+    x_cells = [x_idx[lab_x[x_idx] == cid] for cid in range(centres_x.size)]
+    partner = _current_partners(source, matched_x, matched_y)
     in_y = np.zeros(target.n_vertices, dtype=bool)
     in_y[y_idx] = True
-    x_cells = [x_idx[lab_x[x_idx] == cid] for cid in range(centres_x.size)]
-    y_cells = [members[in_y[members]] for members in band_y]
+    y_cells = []
+    for rows, members in zip(x_cells, band_y):
+        partners = np.unique(partner[rows][partner[rows] >= 0])
+        if partners.size:
+            near = dijkstra(target.adjacency, directed=False, indices=partners, limit=radius, min_only=True)
+            members = np.union1d(members, np.flatnonzero(np.isfinite(near)))
+        y_cells.append(members[in_y[members]])
     return x_cells, y_cells
+
+
+def _current_partners(source, matched_x: np.ndarray, matched_y: np.ndarray) -> np.ndarray:
+    """(n_x,) int: the partner of every source vertex's nearest matched vertex (geodesic; -1 where none is
+    connected)."""
+    matched_x, first = np.unique(matched_x, return_index=True)
+    nearest, _ = voronoi_cells(source, matched_x)
+    return np.where(nearest >= 0, np.asarray(matched_y)[first][nearest], -1)
 
 
 def multiscale_refinement(state: KernelState):
@@ -1178,7 +1203,7 @@ def multiscale_refinement(state: KernelState):
                                                      matched_y[free], x_idx, params.max_cell)
             with watch("cells"):
                 x_cells, y_cells = transferred_cells(source, target, centres_x, centres_y, x_idx, y_idx,
-                                                     params.cell_overlap)
+                                                     params.cell_overlap, matched_x, matched_y)
             with watch("assignment"):
                 cell_map, cell_map_yx = _solve_cells(x_cells, y_cells, psi, phi, c, decay_y, decay_x, params,
                                                      state.cancel, n_y, capacity_y)

@@ -132,7 +132,7 @@ from corrlib.methods.base import InitialMatch, MatchResult, param
 from corrlib.methods.registry import MethodSpec, register
 from corrlib.methods.reorientation import (can_reorient, mean_agreement, orientation_blocks, reorient,
                                            standardised, turned_anything, with_first_pass)
-from corrlib.methods.resolution import keep_input_partners, kernel_width, surplus_partners
+from corrlib.methods.resolution import keep_input_partners, kernel_width, nearest_partners, surplus_partners
 from corrlib.neighbours import nearest_rows
 from corrlib.progress import Progress, Stopwatch, scaled_progress
 
@@ -1130,28 +1130,20 @@ def transferred_cells(source, target, centres_x, centres_y, x_idx, y_idx, overla
     centre.
     """
     lab_x, _ = voronoi_cells(source, centres_x)
-    radius = 0.5 * overlap * np.sqrt(target.area)
-    _, band_y = voronoi_bands(target, centres_y, 2.0 * radius)
+    margin = overlap * np.sqrt(target.area)
+    _, band_y = voronoi_bands(target, centres_y, margin)  # each border widened by about margin / 2
     x_cells = [x_idx[lab_x[x_idx] == cid] for cid in range(centres_x.size)]
-    partner = _current_partners(source, matched_x, matched_y)
+    partner = nearest_partners(source, matched_x, matched_y)
     in_y = np.zeros(target.n_vertices, dtype=bool)
     in_y[y_idx] = True
     y_cells = []
     for rows, members in zip(x_cells, band_y):
         partners = np.unique(partner[rows][partner[rows] >= 0])
         if partners.size:
-            near = dijkstra(target.adjacency, directed=False, indices=partners, limit=radius, min_only=True)
+            near = dijkstra(target.adjacency, directed=False, indices=partners, limit=margin / 2, min_only=True)
             members = np.union1d(members, np.flatnonzero(np.isfinite(near)))
         y_cells.append(members[in_y[members]])
     return x_cells, y_cells
-
-
-def _current_partners(source, matched_x: np.ndarray, matched_y: np.ndarray) -> np.ndarray:
-    """(n_x,) int: the partner of every source vertex's nearest matched vertex (geodesic; -1 where none is
-    connected)."""
-    matched_x, first = np.unique(matched_x, return_index=True)
-    nearest, _ = voronoi_cells(source, matched_x)
-    return np.where(nearest >= 0, np.asarray(matched_y)[first][nearest], -1)
 
 
 def multiscale_refinement(state: KernelState):

@@ -122,10 +122,26 @@ def _input_is_more_isometric(map_xy, rows, partners, source_points, target_point
     return distortion(partners) < distortion(map_xy[rows])
 
 
+def nearest_partners(source, matched_x: np.ndarray, matched_y: np.ndarray) -> np.ndarray:
+    """(n_x,) int: for every source vertex, the partner of its nearest matched vertex (geodesic Voronoi cells
+    of ``matched_x``, :func:`~corrlib.geometry.sampling.voronoi_cells`; -1 where none is connected).
+
+    Parameters
+    ----------
+    source : TriMesh
+    matched_x, matched_y : (s,) int
+        Matched source vertices (repeats allowed: the first one counts) and their target vertices.
+    """
+    from corrlib.geometry.sampling import voronoi_cells
+
+    matched_x, first = np.unique(np.asarray(matched_x, dtype=np.int64), return_index=True)
+    nearest, _ = voronoi_cells(source, matched_x)
+    return np.where(nearest >= 0, np.asarray(matched_y)[first][np.maximum(nearest, 0)], -1)
+
+
 def surplus_partners(source, map_xy: np.ndarray, sampled: np.ndarray, anchors=()) -> None:
     """Partners of the source vertices an extraction left out of its sample, in place: each takes the partner
-    of the nearest matched sample vertex (geodesic Voronoi cells of the matched ones,
-    :func:`~corrlib.geometry.sampling.voronoi_cells`; -1 where none is connected).
+    of the nearest matched sample vertex (:func:`nearest_partners`; -1 where none is connected).
 
     Parameters
     ----------
@@ -137,14 +153,12 @@ def surplus_partners(source, map_xy: np.ndarray, sampled: np.ndarray, anchors=()
     anchors : (a,) int
         Vertices left alone (landmarks, which the caller sets).
     """
-    from corrlib.geometry.sampling import voronoi_cells
-
     matched = sampled[map_xy[sampled] >= 0]
     if matched.size == 0:
         return
     rest = np.ones(map_xy.size, dtype=bool)
     rest[sampled] = False
     rest[np.asarray(anchors, dtype=np.int64)] = False
-    nearest, _ = voronoi_cells(source, matched)
-    rest &= nearest >= 0  # a piece of the mesh without a matched vertex stays unmatched
-    map_xy[rest] = map_xy[matched[nearest[rest]]]
+    partner = nearest_partners(source, matched, map_xy[matched])
+    rest &= partner >= 0  # a piece of the mesh without a matched vertex stays unmatched
+    map_xy[rest] = partner[rest]

@@ -96,7 +96,10 @@ Design choices, in brief (the measurements behind them are in
 * ``smooth_k``: a last pointwise step, one ZoomOut step (Melzi et al.
   2019): the map is projected onto the first eigenfunctions and every vertex
   takes its nearest partner in them (no longer bijective, which suits
-  independently remeshed shapes). By default the basis is what the smallest
+  independently remeshed shapes). The functional map of that step is the
+  mean of the estimates from the map and from its reverse
+  (:func:`_pointwise_from_basis`), so that the coarser shape's samples do not
+  carry their partners' offsets into it. By default the basis is what the smallest
   kernel resolves, the eigenfunctions with ``τ_min λ · area ≤ 1``: finer
   ones it cannot tell apart, coarser ones would blur what it resolved.
 * Unequal vertex counts: rectangular assignments are padded; with
@@ -219,7 +222,8 @@ class KernelMatchingParams:
                                        "best scores in each cell.")
     smooth_k: int = param(-1, label="Final ZoomOut basis", low=-1, high=3000,
                           help="Final pointwise step: the map is projected onto this many eigenfunctions and "
-                               "every vertex takes its nearest partner in them (one ZoomOut step; removes the "
+                               "every vertex takes its nearest partner in them (one ZoomOut step, on the mean "
+                               "of the functional maps of the map and of its reverse; removes the "
                                "jitter a bijection forces between differently sampled meshes). -1: the "
                                "eigenfunctions the smallest kernel resolves (τ λ·area ≤ 1); 0: off.")
     capacity: str = param("area", label="Finer-scale capacity", choices=("area", "one"),
@@ -274,19 +278,49 @@ def diffusion_times(params: KernelMatchingParams) -> np.ndarray:
     return np.geomspace(params.tau_max, params.tau_min, params.n_times)
 
 
-def _pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k):
-    """One ZoomOut step (Melzi et al. 2019, the pointwise map from a functional map): every vertex takes the
-    nearest vertex in the first ``k`` eigenfunctions, ``m(x) = argmin_y ‖Φ_k(x) C − Ψ_k(y)‖`` with
-    ``C = Φ_kᵀ M_X Ψ_k[m]``, and the inverse alike (unmatched vertices stay -1).
+def _pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k, both_directions: bool = True):
+    """One ZoomOut step (Melzi et al. 2019, the pointwise maps from a functional map) with one functional map
+    estimated from both directions of the map.
 
-    The nearest neighbour, not the best inner product ``Φ_k(x) C Ψ_k(y)ᵀ``: the latter favours target vertices
-    whose spectral embedding is long, so it moves the partners of an exact isometry too.
+    The pull-back of functions on Y along ``m = map_xy`` is estimated twice: from ``m`` itself,
+    ``C_xy = Φ_kᵀ M_X Π_m Ψ_k`` (an integral over X), and as the adjoint of the pull-back along the reverse map
+    ``n = map_yx``, ``C_yxᵀ`` with ``C_yx = Ψ_kᵀ M_Y Π_n Φ_k`` (an integral over Y). For an area-preserving
+    bijection ``n = m⁻¹`` the two are equal; for the maps kernel matching ends with they are not: every sample
+    of the coarser side carries its partner's offset into its own estimate (e.g. one target edge where the
+    source's vertices take target samples), while the other side's many vertices per partner average it
+    out. The step uses their mean ``Ĉ_xy = (C_xy + C_yxᵀ) / 2`` for both maps: ``m(x)`` is the vertex ``y``
+    whose image ``(Ψ_k Ĉ_xyᵀ)(y)`` in X's basis is nearest ``Φ_k(x)``, and ``n(y)`` the vertex ``x`` with
+    ``(Φ_k Ĉ_xy)(x)`` nearest ``Ψ_k(y)`` (the nearest neighbour, not the best inner product, which favours
+    vertices whose spectral embedding is long). Unmatched vertices (-1) stay unmatched.
+
+    A map that carries information its reverse map does not have (the refinement of a map from outside the
+    solver, which keeps that map's partners, :func:`~corrlib.methods.resolution.keep_input_partners`) is
+    instead projected with its own estimate, and the reverse map with its own (``both_directions=False``):
+    the mean would dilute the given partners with the reverse map's, which the kernels resolve less finely.
+
+    Parameters
+    ----------
+    map_xy : (n_x,) int
+    map_yx : (n_y,) int
+    spec_x, spec_y : Spectrum
+        With at least ``k`` eigenpairs.
+    k : int
+    both_directions : bool
+
+    Returns
+    -------
+    new_xy : (n_x,) int
+    new_yx : (n_y,) int
     """
     phi, psi = spec_x.evecs[:, :k], spec_y.evecs[:, :k]
     c_xy = pointwise_to_functional(map_xy, psi, phi, spec_x.mass.diagonal())  # pulls Y's functions back to X
     c_yx = pointwise_to_functional(map_yx, phi, psi, spec_y.mass.diagonal())
-    new_xy = np.where(map_xy >= 0, nearest_rows(phi @ c_xy, psi), -1)
-    new_yx = np.where(map_yx >= 0, nearest_rows(psi @ c_yx, phi), -1)
+    if not both_directions:
+        return (np.where(map_xy >= 0, nearest_rows(phi @ c_xy, psi), -1),
+                np.where(map_yx >= 0, nearest_rows(psi @ c_yx, phi), -1))
+    both = 0.5 * (c_xy + c_yx.T)
+    new_xy = np.where(map_xy >= 0, nearest_rows(phi, psi @ both.T), -1)
+    new_yx = np.where(map_yx >= 0, nearest_rows(psi, phi @ both), -1)
     return new_xy, new_yx
 
 
@@ -724,6 +758,7 @@ class KernelState:
     landmarks_only: bool = False
     descriptor_start: bool = False  # a given map competes with the descriptor assignment (the second start)
     refined_map: tuple | None = None  # the dense map being refined, as (source, target) vertex pairs
+    outside_map: bool = False  # that map came from outside this solve (the caller's, or init="fmap"), not a first pass
     orientation: tuple | None = None  # standardised orientation-aware descriptors of both shapes, once computed
     desc_x: np.ndarray | None = None  # standardised plain descriptors, once computed
     desc_y: np.ndarray | None = None
@@ -853,7 +888,7 @@ def initial_seed_map(state: KernelState, initial: InitialMatch | None, compete: 
         yield Progress("initial map", PROGRESS_DC[0], f"{ix.size} given matches")
         if not state.landmarks_only:
             state.refined_map = (ix, iy)
-            state.descriptor_start = compete
+            state.descriptor_start = state.outside_map = compete
         partner_of = -np.ones(state.n_x, dtype=np.int64)
         partner_of[ix] = iy
         if state.landmarks_only:
@@ -868,7 +903,7 @@ def initial_seed_map(state: KernelState, initial: InitialMatch | None, compete: 
         yield Progress("initial map", PROGRESS_INIT, "functional maps + ZoomOut")
         with state.watch("init"):
             fm = run(solve_fmap_zoomout(source, target, FmapZoomOutParams(), state.token))
-        state.refined_map = (np.arange(state.n_x), fm.map_xy)
+        state.refined_map, state.outside_map = (np.arange(state.n_x), fm.map_xy), True
         partner = fm.map_xy[state.seeds_x.nearest_corners(source)]
         state.seed_map = _nearest_point(state.seeds_y.points, target.vertices[partner])
     else:
@@ -1240,8 +1275,10 @@ def kernel_result(state: KernelState, full_map_xy: np.ndarray, full_map_yx: np.n
     if smooth_k > 0:
         yield Progress("final ZoomOut step", PROGRESS_SMOOTHING, f"nearest partners in {smooth_k} eigenfunctions")
         with watch("zoomout"):
+            # a map refined from outside keeps that map's partners, which the reverse map does not know of
             full_map_xy, full_map_yx = _pointwise_from_basis(full_map_xy, full_map_yx, state.spec_x,
-                                                             state.spec_y, smooth_k)
+                                                             state.spec_y, smooth_k,
+                                                             both_directions=not state.outside_map)
     # the map's own energy: landmarks are rows of the dense map already (their anchor term is the solver's)
     c = _alignment(psi[full_map_xy[full_map_xy >= 0]], phi[full_map_xy >= 0])
     energy = kernel_energy(c, decay_y, decay_x)

@@ -758,7 +758,7 @@ class KernelState:
     landmarks_only: bool = False
     descriptor_start: bool = False  # a given map competes with the descriptor assignment (the second start)
     refined_map: tuple | None = None  # the dense map being refined, as (source, target) vertex pairs
-    outside_map: bool = False  # that map came from outside this solve (the caller's, or init="fmap"), not a first pass
+    outside_map: bool = False  # that map came from outside the solver (the caller's, init="fmap"), not a first pass
     orientation: tuple | None = None  # standardised orientation-aware descriptors of both shapes, once computed
     desc_x: np.ndarray | None = None  # standardised plain descriptors, once computed
     desc_y: np.ndarray | None = None

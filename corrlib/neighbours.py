@@ -2,6 +2,7 @@
 
 from __future__ import annotations
 
+import numba
 import numpy as np
 from scipy.spatial import cKDTree
 
@@ -39,4 +40,63 @@ def nearest_rows(query: np.ndarray, data: np.ndarray, chunk: int = 512) -> np.nd
         block = minus_two_query[start:start + chunk] @ data32.T
         block += sq[None, :]
         out[start:start + chunk] = np.argmin(block, axis=1)
+    return out
+
+
+def descended_nearest_rows(query: np.ndarray, data: np.ndarray, start: np.ndarray, indptr: np.ndarray,
+                           indices: np.ndarray) -> np.ndarray:
+    """(q,) int: for every row of ``query``, the row of ``data`` reached by steepest descent of the L2
+    distance over a graph on ``data``'s rows, from ``start``.
+
+    From ``start[i]`` the walk moves to the nearest of the current row's graph neighbours while that one is
+    nearer ``query[i]`` than the current row, and stops at a local minimum of the distance on the graph.
+    Where the distance has one minimum in the start's neighbourhood this is :func:`nearest_rows` at the cost
+    of a few neighbourhoods instead of all of ``data``. Rows with ``start[i] < 0`` stay -1.
+
+    Parameters
+    ----------
+    query : (q, d) float
+    data : (p, d) float
+    start : (q,) int
+        A row of ``data`` for each query row, or -1.
+    indptr, indices : int arrays
+        The graph on ``data``'s rows in CSR form (e.g. a mesh's vertex adjacency).
+    """
+    query = np.ascontiguousarray(query, dtype=np.float64)
+    data = np.ascontiguousarray(data, dtype=np.float64)
+    return _descend(query, data, np.asarray(start, dtype=np.int64), np.asarray(indptr, dtype=np.int64),
+                    np.asarray(indices, dtype=np.int64))
+
+
+@numba.njit(cache=True, nogil=True)
+def _squared_distance_below(a, b, bound):
+    """``|a − b|²``, or a value ≥ ``bound`` as soon as the partial sum reaches it."""
+    total = 0.0
+    for c in range(a.shape[0]):
+        t = a[c] - b[c]
+        total += t * t
+        if total >= bound:
+            break
+    return total
+
+
+@numba.njit(cache=True, nogil=True)
+def _descend(query, data, start, indptr, indices):
+    out = start.copy()
+    for i in range(query.shape[0]):
+        here = start[i]
+        if here < 0:
+            continue
+        best = _squared_distance_below(query[i], data[here], np.inf)
+        while True:
+            nearer = -1
+            for e in range(indptr[here], indptr[here + 1]):
+                j = indices[e]
+                d = _squared_distance_below(query[i], data[j], best)
+                if d < best:
+                    best, nearer = d, j
+            if nearer < 0:
+                break
+            here = nearer
+        out[i] = here
     return out

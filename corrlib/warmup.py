@@ -26,6 +26,7 @@ def warm_up() -> None:
     from corrlib.geometry.sampling import farthest_point_sampling
     from corrlib.geometry.segmentation import persistent_protrusions
     from corrlib.methods.contour3d import node_costs
+    from corrlib.neighbours import descended_nearest_rows
     from corrlib.progress import run
     from corrlib.shapes import TriMesh
 
@@ -45,6 +46,9 @@ def warm_up() -> None:
     shot(sphere.vertices, sphere.faces, radius=2.0, min_neighbors=1)  # a mesh's arrays are read-only
     farthest_point_sampling(rng.random((6, 3)), 3)
     persistent_protrusions(rng.random(6), adj, 0.1)
+    ring_graph = (adj + adj.T).tocsr()
+    descended_nearest_rows(rng.random((6, 3)), rng.random((6, 3)), np.arange(6), ring_graph.indptr,
+                           ring_graph.indices)
     path_graph = sp.diags([-1.0, 2.5, -1.0], [-1, 0, 1], shape=(8, 8), format="csc")
     CholeskySolver(path_graph).solve(rng.random((8, 2)))
     GeodesicSolver(sphere).pair_distances(np.arange(3), np.arange(3, 6))

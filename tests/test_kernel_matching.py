@@ -63,7 +63,7 @@ def test_wolf_recovers_the_identity(wolf_pair, wolf_result):
     wolf0, wolf1 = wolf_pair
     ident = np.arange(wolf0.n_vertices)
     err = geodesic_errors(wolf_result.map_xy, wolf1, ident, ident).summary()
-    assert err["within_0.025"] >= 0.95, err
+    assert err["within_0.025"] >= 0.99, err  # measured 99.9 % (98 % with one final ZoomOut step)
     err_yx = geodesic_errors(wolf_result.map_yx, wolf0, ident, ident).summary()
     assert err_yx["within_0.025"] >= 0.9, err_yx
     assert wolf_result.extras["monotone"]
@@ -83,20 +83,22 @@ def test_cat_pair_with_symmetric_ground_truth(cat_pair):
     cat0, cat1, gt = cat_pair
     result = solve("kernel-matching", cat0, cat1)
     report = geodesic_errors(result.map_xy, cat1, gt["cat0"], gt["cat1"], gt_target_sym=gt["cat1.sym"]).summary()
-    # cat0/cat1 are remeshed independently and not quite isometric. Measured with the defaults: mean 0.029 and
-    # 88.8 % of points within 0.05 (symmetric), 99.8 % within 0.1; the first issue's target was 80 %, issue 19
-    # keeps 87 % as the floor of any speed change. (With seeds at vertices instead of surface points: 77 %.)
-    assert report["mean_sym"] <= 0.035, report
-    assert report["within_0.05_sym"] >= 0.87, report
+    # cat0/cat1 are remeshed independently and not quite isometric. Measured with the defaults: mean 0.020 and
+    # 94.5 % of points within 0.05 (symmetric), 100 % within 0.1 (91.5 % with one final ZoomOut step instead
+    # of the repeated one, 88.8 % before that step); the first issue's target was 80 %, issue 19 keeps 87 % as
+    # the floor of any speed change. (With seeds at vertices instead of surface points: 77 %.)
+    assert report["mean_sym"] <= 0.023, report
+    assert report["within_0.05_sym"] >= 0.92, report
     assert report["within_0.1_sym"] >= 0.99, report
     # left matched to left everywhere (orientation-aware initialisation, initial alignment from the most similar
     # matches as a second start): the same without symmetry. With the first start only (init_fraction=1) the
     # front legs end swapped (77 % without symmetry, 84 % with, measured with 3000 seeds); without the
     # orientation features 44 % / 87 %.
-    assert report["mean"] <= 0.035, report
-    assert report["within_0.05"] >= 0.87, report
-    back = solve("kernel-matching", cat1, cat0)  # the other direction: 88.0 % (86.0 % with 3000 seeds)
-    assert geodesic_errors(back.map_xy, cat0, gt["cat1"], gt["cat0"]).summary()["within_0.05"] >= 0.87
+    assert report["mean"] <= 0.023, report
+    assert report["within_0.05"] >= 0.92, report
+    back = solve("kernel-matching", cat1, cat0)  # the other direction: mean 0.0204, 93.0 % (one step: 91.6 %)
+    back_report = geodesic_errors(back.map_xy, cat0, gt["cat1"], gt["cat0"]).summary()
+    assert back_report["mean"] <= 0.023 and back_report["within_0.05"] >= 0.92, back_report
     assert result.extras["start"] == "initial alignment"  # the second start wins here (see above)
 
 
@@ -462,6 +464,35 @@ def test_the_final_step_estimates_one_functional_map_from_both_directions(wolf_p
     new_xy, new_yx = _pointwise_from_basis(off_xy, map_yx, spec_x, spec_y, k)
     exact_own, exact_new = np.mean(own == map_xy), np.mean(new_xy == map_xy)
     assert exact_own < 0.5 and exact_new > 0.55 and np.mean(new_yx == map_yx) > 0.55, (exact_own, exact_new)
+
+
+def test_the_repeated_final_step_recovers_what_one_step_leaves(wolf_pair):
+    """wolf0 -> wolf1 (another pose, truth the identity) with both maps' partners one edge off: one step of
+    the final projection makes 52 % of either map's partners exact (measured), the step repeated while it
+    moves fewer partners 75 % (ZoomOut's alternation at one basis size, each partner searched by descent
+    from the current one). The exact maps between a mesh and its shuffled copy are a fixed point."""
+    from corrlib.geometry.spectrum import mesh_spectrum
+    from corrlib.methods.kernel_matching import _pointwise_from_basis, _repeated_pointwise_from_basis
+
+    wolf0, wolf1 = wolf_pair
+    k = 100
+    spec_0, spec_1 = mesh_spectrum(wolf0, k), mesh_spectrum(wolf1, k)
+    truth = np.arange(wolf0.n_vertices)
+    first_neighbour_1 = wolf1.adjacency.indices[wolf1.adjacency.indptr[:-1]]
+    first_neighbour_0 = wolf0.adjacency.indices[wolf0.adjacency.indptr[:-1]]
+    once_xy, once_yx = _pointwise_from_basis(first_neighbour_1, first_neighbour_0, spec_0, spec_1, k)
+    assert np.mean(once_xy == truth) < 0.6 and np.mean(once_yx == truth) < 0.6
+    again_xy, again_yx = _repeated_pointwise_from_basis(once_xy, once_yx, spec_0, spec_1, k, wolf0.adjacency,
+                                                        wolf1.adjacency)
+    assert np.mean(again_xy == truth) > 0.7 and np.mean(again_yx == truth) > 0.7
+
+    perm = np.random.default_rng(5).permutation(wolf0.n_vertices)
+    inverse = np.argsort(perm)
+    shuffled = TriMesh(wolf0.vertices[perm], inverse[wolf0.faces])
+    fixed_xy, fixed_yx = _repeated_pointwise_from_basis(inverse.copy(), perm.copy(), spec_0,
+                                                        mesh_spectrum(shuffled, k), k, wolf0.adjacency,
+                                                        shuffled.adjacency)
+    assert np.mean(fixed_xy == inverse) > 0.999 and np.mean(fixed_yx == perm) > 0.999
 
 
 def test_resolved_eigenpairs_counts_the_decays_above_one_over_e():

@@ -2,9 +2,10 @@
 
 import numpy as np
 import pytest
+import scipy.sparse as sp
 from scipy.spatial.distance import cdist
 
-from corrlib.neighbours import KD_TREE_MAX_DIMENSION, nearest_rows
+from corrlib.neighbours import KD_TREE_MAX_DIMENSION, descended_nearest_rows, nearest_rows
 
 
 @pytest.mark.parametrize("dim", [3, KD_TREE_MAX_DIMENSION, KD_TREE_MAX_DIMENSION + 1, 60])
@@ -23,3 +24,42 @@ def test_nearest_rows_is_the_brute_force_argmin(dim, chunk):
 def test_nearest_rows_of_the_data_itself_is_the_identity():
     data = np.random.default_rng(1).standard_normal((1000, 40)) * 1e3  # far from the unit scale
     assert np.array_equal(nearest_rows(data, data), np.arange(1000))
+
+
+def _csr(graph):
+    graph = sp.csr_matrix(graph)
+    return graph.indptr, graph.indices
+
+
+def test_descent_on_a_complete_graph_is_the_nearest_row():
+    rng = np.random.default_rng(3)
+    query, data = rng.standard_normal((200, 12)), rng.standard_normal((50, 12))
+    complete = np.ones((50, 50)) - np.eye(50)
+    start = rng.integers(0, 50, 200)
+    found = descended_nearest_rows(query, data, start, *_csr(complete))
+    assert np.array_equal(found, np.argmin(cdist(query, data), axis=1))
+
+
+def test_descent_on_a_grid_of_a_convex_distance_is_the_nearest_row():
+    """Points of a plane grid, 4-neighbour graph: the distance to any query has one minimum on the graph."""
+    side = 20
+    xs, ys = np.meshgrid(np.arange(side), np.arange(side), indexing="ij")
+    data = np.column_stack([xs.ravel(), ys.ravel()]).astype(float)
+    index = np.arange(side * side).reshape(side, side)
+    edges = np.vstack([np.column_stack([index[:-1].ravel(), index[1:].ravel()]),
+                       np.column_stack([index[:, :-1].ravel(), index[:, 1:].ravel()])])
+    grid = sp.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(side * side,) * 2)
+    rng = np.random.default_rng(4)
+    query = rng.uniform(0, side - 1, (300, 2)) + 0.01 * rng.standard_normal((300, 2))
+    found = descended_nearest_rows(query, data, rng.integers(0, side * side, 300), *_csr(grid + grid.T))
+    assert np.array_equal(found, nearest_rows(query, data))
+
+
+def test_descent_stops_at_a_local_minimum_and_keeps_unmatched_rows():
+    """A path graph 0 - 1 - 2 - 3 - 4 over values with minima at rows 1 and 4: a walk from row 0 ends at row 1
+    although row 4 is nearer; a walk from row 3 reaches row 4; -1 stays -1."""
+    data = np.array([[3.0], [1.0], [2.0], [0.5], [0.0]])
+    path = sp.diags([np.ones(4), np.ones(4)], [-1, 1], shape=(5, 5))
+    query = np.zeros((3, 1))
+    found = descended_nearest_rows(query, data, np.array([0, 3, -1]), *_csr(path))
+    assert found.tolist() == [1, 4, -1]

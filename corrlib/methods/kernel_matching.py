@@ -99,7 +99,10 @@ Design choices, in brief (the measurements behind them are in
   independently remeshed shapes). The functional map of that step is the
   mean of the estimates from the map and from its reverse
   (:func:`_pointwise_from_basis`), so that the coarser shape's samples do not
-  carry their partners' offsets into it. By default the basis is what the smallest
+  carry their partners' offsets into it. The step is repeated from its own
+  maps while it moves fewer partners each time (ZoomOut's alternation at one
+  basis size, :func:`_repeated_pointwise_from_basis`), except for a map
+  refined from outside the solver. By default the basis is what the smallest
   kernel resolves, the eigenfunctions with ``τ_min λ · area ≤ 1``: finer
   ones it cannot tell apart, coarser ones would blur what it resolved.
 * Unequal vertex counts: rectangular assignments are padded; with
@@ -136,7 +139,7 @@ from corrlib.methods.registry import MethodSpec, register
 from corrlib.methods.reorientation import (can_reorient, mean_agreement, orientation_blocks, reorient,
                                            standardised, turned_anything, with_first_pass)
 from corrlib.methods.resolution import keep_input_partners, kernel_width, nearest_partners, surplus_partners
-from corrlib.neighbours import nearest_rows
+from corrlib.neighbours import descended_nearest_rows, nearest_rows
 from corrlib.progress import Progress, Stopwatch, scaled_progress
 
 #: threads solving the cells of a refinement pass: the auction releases the GIL, so cells can overlap; two,
@@ -221,11 +224,12 @@ class KernelMatchingParams:
                                   help="With partial matching: the slack equals this quantile of the rows' "
                                        "best scores in each cell.")
     smooth_k: int = param(-1, label="Final ZoomOut basis", low=-1, high=3000,
-                          help="Final pointwise step: the map is projected onto this many eigenfunctions and "
-                               "every vertex takes its nearest partner in them (one ZoomOut step, on the mean "
-                               "of the functional maps of the map and of its reverse; removes the "
-                               "jitter a bijection forces between differently sampled meshes). -1: the "
-                               "eigenfunctions the smallest kernel resolves (τ λ·area ≤ 1); 0: off.")
+                          help="Final pointwise steps: the map is projected onto this many eigenfunctions and "
+                               "every vertex takes its nearest partner in them (ZoomOut steps on the mean "
+                               "of the functional maps of the map and of its reverse, repeated while they move "
+                               "fewer partners; removes the jitter a bijection forces between differently "
+                               "sampled meshes). -1: the eigenfunctions the smallest kernel resolves "
+                               "(τ λ·area ≤ 1); 0: off.")
     capacity: str = param("area", label="Finer-scale capacity", choices=("area", "one"),
                           help="Finer scales: a target sample may take as many source samples as its area "
                                "holds (measure-preserving; for differently meshed shapes) or exactly one "
@@ -278,7 +282,7 @@ def diffusion_times(params: KernelMatchingParams) -> np.ndarray:
     return np.geomspace(params.tau_max, params.tau_min, params.n_times)
 
 
-def _pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k, both_directions: bool = True):
+def _pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k, both_directions: bool = True, graphs=None):
     """One ZoomOut step (Melzi et al. 2019, the pointwise maps from a functional map) with one functional map
     estimated from both directions of the map.
 
@@ -306,6 +310,10 @@ def _pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k, both_directions: bo
         With at least ``k`` eigenpairs.
     k : int
     both_directions : bool
+    graphs : (graph_x, graph_y) of (n, n) sparse, optional
+        The shapes' vertex adjacencies: each vertex's new partner is then found by descent over the other
+        shape's edge graph from its current partner (:func:`~corrlib.neighbours.descended_nearest_rows`), not
+        among all vertices. Only with ``both_directions``.
 
     Returns
     -------
@@ -319,9 +327,55 @@ def _pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k, both_directions: bo
         return (np.where(map_xy >= 0, nearest_rows(phi @ c_xy, psi), -1),
                 np.where(map_yx >= 0, nearest_rows(psi @ c_yx, phi), -1))
     both = 0.5 * (c_xy + c_yx.T)
+    if graphs is not None:
+        graph_x, graph_y = graphs
+        return (descended_nearest_rows(phi, psi @ both.T, map_xy, graph_y.indptr, graph_y.indices),
+                descended_nearest_rows(psi, phi @ both, map_yx, graph_x.indptr, graph_x.indices))
     new_xy = np.where(map_xy >= 0, nearest_rows(phi, psi @ both.T), -1)
     new_yx = np.where(map_yx >= 0, nearest_rows(psi, phi @ both), -1)
     return new_xy, new_yx
+
+
+def _repeated_pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k, graph_x, graph_y, token=None):
+    """:func:`_pointwise_from_basis` repeated from its own maps while the number of partners a step changes
+    decreases (and is not zero); the repeated steps search each partner by descent from the current one.
+
+    Every step re-estimates ``Ĉ_xy`` from the maps the previous one made and moves each vertex to its
+    nearest partner in that basis, so the repetition is ZoomOut's alternation (Melzi et al. 2019) at a
+    fixed basis size, towards maps consistent with one functional map. A falling count of moved partners
+    says the alternation is settling; once a step moves as many as the one before, the maps oscillate
+    between near-ties, and the repetition stops there (that step's maps are returned). The count is a
+    whole number that must fall at every repetition, so the loop ends. The partners move by about an edge
+    per step, so each is searched by steepest descent over the other shape's edge graph from the current
+    partner (:func:`~corrlib.neighbours.descended_nearest_rows`) instead of over all vertices.
+
+    Parameters
+    ----------
+    map_xy : (n_x,) int
+    map_yx : (n_y,) int
+        The maps after the first (global) step.
+    spec_x, spec_y : Spectrum
+    k : int
+    graph_x, graph_y : (n, n) sparse
+        The shapes' vertex adjacencies.
+    token : CancelToken, optional
+        Checked before every step.
+
+    Returns
+    -------
+    map_xy : (n_x,) int
+    map_yx : (n_y,) int
+    """
+    changed_before = None
+    while True:
+        if token is not None:
+            token.raise_if_cancelled()
+        new_xy, new_yx = _pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k, graphs=(graph_x, graph_y))
+        changed = int(np.count_nonzero(new_xy != map_xy) + np.count_nonzero(new_yx != map_yx))
+        map_xy, map_yx = new_xy, new_yx
+        if changed == 0 or (changed_before is not None and changed >= changed_before):
+            return map_xy, map_yx
+        changed_before = changed
 
 
 def resolved_eigenpairs(evals: np.ndarray, area: float, tau: float) -> int:
@@ -1250,7 +1304,8 @@ def multiscale_refinement(state: KernelState):
 
 
 def kernel_result(state: KernelState, full_map_xy: np.ndarray, full_map_yx: np.ndarray):
-    """Stage 7: the turns of reversed regions, the final ZoomOut step (:func:`_pointwise_from_basis`), the
+    """Stage 7: the turns of reversed regions, the final ZoomOut steps (:func:`_pointwise_from_basis`,
+    repeated by :func:`_repeated_pointwise_from_basis` unless the map came from outside the solver), the
     kernel energy ``<Π, K_Y Π K_X>`` of the final map at the smallest time, the :class:`MatchResult`. A
     generator."""
     params, k, watch = state.params, state.k, state.watch
@@ -1279,6 +1334,10 @@ def kernel_result(state: KernelState, full_map_xy: np.ndarray, full_map_yx: np.n
             full_map_xy, full_map_yx = _pointwise_from_basis(full_map_xy, full_map_yx, state.spec_x,
                                                              state.spec_y, smooth_k,
                                                              both_directions=not state.outside_map)
+            if not state.outside_map:
+                full_map_xy, full_map_yx = _repeated_pointwise_from_basis(
+                    full_map_xy, full_map_yx, state.spec_x, state.spec_y, smooth_k, state.source.adjacency,
+                    state.target.adjacency, state.token)
     # the map's own energy: landmarks are rows of the dense map already (their anchor term is the solver's)
     c = _alignment(psi[full_map_xy[full_map_xy >= 0]], phi[full_map_xy >= 0])
     energy = kernel_energy(c, decay_y, decay_x)

@@ -495,6 +495,25 @@ def test_the_repeated_final_step_recovers_what_one_step_leaves(wolf_pair):
     assert np.mean(fixed_xy == inverse) > 0.999 and np.mean(fixed_yx == perm) > 0.999
 
 
+def test_the_functional_map_updated_by_the_moved_rows_equals_a_fresh_estimate(wolf_pair):
+    from corrlib.geometry.fmaps import pointwise_to_functional
+    from corrlib.geometry.spectrum import mesh_spectrum
+    from corrlib.methods.kernel_matching import _moved_rows_change
+
+    wolf0, wolf1 = wolf_pair
+    k = 40
+    phi, psi = mesh_spectrum(wolf0, k).evecs[:, :k], mesh_spectrum(wolf1, k).evecs[:, :k]
+    mass = mesh_spectrum(wolf0, k).mass.diagonal()
+    rng = np.random.default_rng(2)
+    old = rng.integers(0, wolf1.n_vertices, wolf0.n_vertices)
+    old[:5] = -1  # unmatched rows stay unmatched in both maps
+    new = old.copy()
+    moved = rng.choice(np.arange(5, wolf0.n_vertices), 300, replace=False)
+    new[moved] = rng.integers(0, wolf1.n_vertices, 300)
+    updated = pointwise_to_functional(old, psi, phi, mass) + _moved_rows_change(old, new, psi, phi, mass)
+    np.testing.assert_allclose(updated, pointwise_to_functional(new, psi, phi, mass), atol=1e-12)
+
+
 def test_resolved_eigenpairs_counts_the_decays_above_one_over_e():
     from corrlib.methods.kernel_matching import resolved_eigenpairs
 

@@ -282,7 +282,7 @@ def diffusion_times(params: KernelMatchingParams) -> np.ndarray:
     return np.geomspace(params.tau_max, params.tau_min, params.n_times)
 
 
-def _pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k, both_directions: bool = True, graphs=None):
+def _pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k, both_directions: bool = True):
     """One ZoomOut step (Melzi et al. 2019, the pointwise maps from a functional map) with one functional map
     estimated from both directions of the map.
 
@@ -310,10 +310,6 @@ def _pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k, both_directions: bo
         With at least ``k`` eigenpairs.
     k : int
     both_directions : bool
-    graphs : (graph_x, graph_y) of (n, n) sparse, optional
-        The shapes' vertex adjacencies: each vertex's new partner is then found by descent over the other
-        shape's edge graph from its current partner (:func:`~corrlib.neighbours.descended_nearest_rows`), not
-        among all vertices. Only with ``both_directions``.
 
     Returns
     -------
@@ -327,33 +323,30 @@ def _pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k, both_directions: bo
         return (np.where(map_xy >= 0, nearest_rows(phi @ c_xy, psi), -1),
                 np.where(map_yx >= 0, nearest_rows(psi @ c_yx, phi), -1))
     both = 0.5 * (c_xy + c_yx.T)
-    if graphs is not None:
-        graph_x, graph_y = graphs
-        return (descended_nearest_rows(phi, psi @ both.T, map_xy, graph_y.indptr, graph_y.indices),
-                descended_nearest_rows(psi, phi @ both, map_yx, graph_x.indptr, graph_x.indices))
     new_xy = np.where(map_xy >= 0, nearest_rows(phi, psi @ both.T), -1)
     new_yx = np.where(map_yx >= 0, nearest_rows(psi, phi @ both), -1)
     return new_xy, new_yx
 
 
 def _repeated_pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k, graph_x, graph_y, token=None):
-    """:func:`_pointwise_from_basis` repeated from its own maps while the number of partners a step changes
-    decreases (and is not zero); the repeated steps search each partner by descent from the current one.
+    """The step of :func:`_pointwise_from_basis` repeated from its own maps while the number of partners a
+    step changes decreases (and is not zero), each partner searched by descent from the current one.
 
-    Every step re-estimates ``Ĉ_xy`` from the maps the previous one made and moves each vertex to its
-    nearest partner in that basis, so the repetition is ZoomOut's alternation (Melzi et al. 2019) at a
-    fixed basis size, towards maps consistent with one functional map. A falling count of moved partners
-    says the alternation is settling; once a step moves as many as the one before, the maps oscillate
-    between near-ties, and the repetition stops there (that step's maps are returned). The count is a
-    whole number that must fall at every repetition, so the loop ends. The partners move by about an edge
-    per step, so each is searched by steepest descent over the other shape's edge graph from the current
-    partner (:func:`~corrlib.neighbours.descended_nearest_rows`) instead of over all vertices.
+    Every step re-estimates ``Ĉ_xy = (C_xy + C_yxᵀ) / 2`` from the maps the previous one made and moves each
+    vertex to its nearest partner in that basis, so the repetition is ZoomOut's alternation (Melzi et al.
+    2019) at a fixed basis size, towards maps consistent with one functional map. A falling count of moved
+    partners says the alternation is settling; once a step moves as many as the one before, the maps
+    oscillate between near-ties, and the repetition stops there (that step's maps are returned). The count
+    is a whole number that must fall at every repetition, so the loop ends. The partners move by about an
+    edge per step, so each is searched by steepest descent over the other shape's edge graph from the
+    current partner (:func:`~corrlib.neighbours.descended_nearest_rows`) instead of over all vertices, and
+    the two estimates are updated by the moved rows only (:func:`_moved_rows_change`).
 
     Parameters
     ----------
     map_xy : (n_x,) int
     map_yx : (n_y,) int
-        The maps after the first (global) step.
+        The maps after the first (global) step; -1 rows stay -1.
     spec_x, spec_y : Spectrum
     k : int
     graph_x, graph_y : (n, n) sparse
@@ -366,16 +359,33 @@ def _repeated_pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k, graph_x, g
     map_xy : (n_x,) int
     map_yx : (n_y,) int
     """
+    phi, psi = np.ascontiguousarray(spec_x.evecs[:, :k]), np.ascontiguousarray(spec_y.evecs[:, :k])
+    mass_x, mass_y = spec_x.mass.diagonal(), spec_y.mass.diagonal()
+    c_xy = pointwise_to_functional(map_xy, psi, phi, mass_x)
+    c_yx = pointwise_to_functional(map_yx, phi, psi, mass_y)
     changed_before = None
     while True:
         if token is not None:
             token.raise_if_cancelled()
-        new_xy, new_yx = _pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k, graphs=(graph_x, graph_y))
+        both = 0.5 * (c_xy + c_yx.T)
+        new_xy = descended_nearest_rows(phi, psi @ both.T, map_xy, graph_y.indptr, graph_y.indices)
+        new_yx = descended_nearest_rows(psi, phi @ both, map_yx, graph_x.indptr, graph_x.indices)
+        c_xy += _moved_rows_change(map_xy, new_xy, psi, phi, mass_x)
+        c_yx += _moved_rows_change(map_yx, new_yx, phi, psi, mass_y)
         changed = int(np.count_nonzero(new_xy != map_xy) + np.count_nonzero(new_yx != map_yx))
         map_xy, map_yx = new_xy, new_yx
         if changed == 0 or (changed_before is not None and changed >= changed_before):
             return map_xy, map_yx
         changed_before = changed
+
+
+def _moved_rows_change(old_map, new_map, evecs_to, evecs_from, mass_from):
+    """(k, k) float: the change of ``Φᵀ M Π Ψ`` (:func:`~corrlib.geometry.fmaps.pointwise_to_functional`, here
+    with ``Φ = evecs_from``, ``Ψ = evecs_to``) when ``old_map`` becomes ``new_map``: only the moved rows
+    contribute, ``Φ[r]ᵀ M[r] (Ψ[new[r]] − Ψ[old[r]])``. Both maps must be -1 on the same rows."""
+    moved = np.flatnonzero(new_map != old_map)
+    weighted = mass_from[moved, None] * (evecs_to[new_map[moved]] - evecs_to[old_map[moved]])
+    return evecs_from[moved].T @ weighted
 
 
 def resolved_eigenpairs(evals: np.ndarray, area: float, tau: float) -> int:

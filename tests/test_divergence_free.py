@@ -477,13 +477,16 @@ def test_absurd_parameters_are_rejected(name, value):
 
 @pytest.mark.slow
 def test_cat_pair_with_symmetric_ground_truth(cat_pair):
-    """Remeshed TOSCA cats in different poses. Measured (defaults): mean 0.043, 73 % within 0.05, 91 % within
-    0.1, the same with the mirrored ground truth (SHOT in the distance tells left from right). Thresholds keep
-    a margin for platform noise; the morph must land on the target surface."""
+    """Remeshed TOSCA cats in different poses. Measured (defaults): the flow's own map mean 0.043–0.046, 73 %
+    within 0.05, 91 % within 0.1, the same with the mirrored ground truth (SHOT in the distance tells left from
+    right); after the final ZoomOut steps mean 0.032. Thresholds keep a margin for platform noise; the morph
+    must land on the target surface."""
     cat0, cat1, gt = cat_pair
     result = solve("divergence-free", cat0, cat1)
     report = geodesic_errors(result.map_xy, cat1, gt["cat0"], gt["cat1"], gt_target_sym=gt["cat1.sym"]).summary()
-    assert report["mean_sym"] <= 0.055 and report["within_0.05_sym"] >= 0.62 and report["within_0.1"] >= 0.85, report
+    flow = geodesic_errors(result.extras["flow_map_xy"], cat1, gt["cat0"], gt["cat1"]).summary()
+    assert report["mean_sym"] <= 0.038 and report["within_0.05_sym"] >= 0.75 and report["within_0.1"] >= 0.9, report
+    assert flow["mean"] <= 0.055 and report["mean"] < 0.85 * flow["mean"], (flow, report)
     from scipy.spatial import cKDTree
 
     gap = cKDTree(cat1.vertices).query(result.extras["morphed_vertices"])[0].mean()

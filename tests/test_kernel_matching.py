@@ -417,7 +417,7 @@ def test_the_final_zoomout_step_keeps_an_exact_isometry(wolf_pair):
     the nearest neighbour in the projected eigenfunctions. The best inner product instead (what the step
     used to take) moves partners towards target vertices of long spectral embedding."""
     from corrlib.geometry.spectrum import mesh_spectrum
-    from corrlib.methods.kernel_matching import _pointwise_from_basis
+    from corrlib.geometry.fmaps import pointwise_from_basis
 
     wolf0 = wolf_pair[0]
     perm = np.random.default_rng(3).permutation(wolf0.n_vertices)
@@ -425,14 +425,14 @@ def test_the_final_zoomout_step_keeps_an_exact_isometry(wolf_pair):
     shuffled = TriMesh(wolf0.vertices[perm], inverse[wolf0.faces])
     spec_x, spec_y = mesh_spectrum(wolf0, 160), mesh_spectrum(shuffled, 160)
     map_xy, map_yx = inverse.copy(), perm.copy()  # vertex i of wolf0 is vertex inverse[i] of the copy
-    new_xy, new_yx = _pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, 160)
+    new_xy, new_yx = pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, 160)
     assert np.mean(new_xy == map_xy) > 0.999 and np.mean(new_yx == map_yx) > 0.999
     c = spec_x.evecs.T @ (spec_x.mass.diagonal()[:, None] * spec_y.evecs[map_xy])
     inner = np.argmax((spec_x.evecs @ c) @ spec_y.evecs.T, axis=1)
     assert np.mean(inner == map_xy) < np.mean(new_xy == map_xy)
     # unmatched vertices stay unmatched
     map_xy[:10] = -1
-    assert np.all(_pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, 160)[0][:10] == -1)
+    assert np.all(pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, 160)[0][:10] == -1)
 
 
 def test_the_final_step_estimates_one_functional_map_from_both_directions(wolf_pair):
@@ -443,7 +443,7 @@ def test_the_final_step_estimates_one_functional_map_from_both_directions(wolf_p
     alone), the mean halves them, and both maps share what is left (65 % / 62 % exact)."""
     from corrlib.geometry.fmaps import pointwise_to_functional
     from corrlib.geometry.spectrum import mesh_spectrum
-    from corrlib.methods.kernel_matching import _pointwise_from_basis
+    from corrlib.geometry.fmaps import pointwise_from_basis
     from corrlib.neighbours import nearest_rows
 
     wolf0 = wolf_pair[0]
@@ -461,7 +461,7 @@ def test_the_final_step_estimates_one_functional_map_from_both_directions(wolf_p
     neighbour = wolf0.adjacency.indices[wolf0.adjacency.indptr[:-1]]  # each vertex's first neighbour
     off_xy = inverse[neighbour]
     own = nearest_rows(phi @ pointwise_to_functional(off_xy, psi, phi, spec_x.mass.diagonal()), psi)
-    new_xy, new_yx = _pointwise_from_basis(off_xy, map_yx, spec_x, spec_y, k)
+    new_xy, new_yx = pointwise_from_basis(off_xy, map_yx, spec_x, spec_y, k)
     exact_own, exact_new = np.mean(own == map_xy), np.mean(new_xy == map_xy)
     assert exact_own < 0.5 and exact_new > 0.55 and np.mean(new_yx == map_yx) > 0.55, (exact_own, exact_new)
 
@@ -472,7 +472,7 @@ def test_the_repeated_final_step_recovers_what_one_step_leaves(wolf_pair):
     moves fewer partners 75 % (ZoomOut's alternation at one basis size, each partner searched by descent
     from the current one). The exact maps between a mesh and its shuffled copy are a fixed point."""
     from corrlib.geometry.spectrum import mesh_spectrum
-    from corrlib.methods.kernel_matching import _pointwise_from_basis, _repeated_pointwise_from_basis
+    from corrlib.geometry.fmaps import pointwise_from_basis, repeated_pointwise_from_basis
 
     wolf0, wolf1 = wolf_pair
     k = 100
@@ -480,16 +480,16 @@ def test_the_repeated_final_step_recovers_what_one_step_leaves(wolf_pair):
     truth = np.arange(wolf0.n_vertices)
     first_neighbour_1 = wolf1.adjacency.indices[wolf1.adjacency.indptr[:-1]]
     first_neighbour_0 = wolf0.adjacency.indices[wolf0.adjacency.indptr[:-1]]
-    once_xy, once_yx = _pointwise_from_basis(first_neighbour_1, first_neighbour_0, spec_0, spec_1, k)
+    once_xy, once_yx = pointwise_from_basis(first_neighbour_1, first_neighbour_0, spec_0, spec_1, k)
     assert np.mean(once_xy == truth) < 0.6 and np.mean(once_yx == truth) < 0.6
-    again_xy, again_yx = _repeated_pointwise_from_basis(once_xy, once_yx, spec_0, spec_1, k, wolf0.adjacency,
+    again_xy, again_yx = repeated_pointwise_from_basis(once_xy, once_yx, spec_0, spec_1, k, wolf0.adjacency,
                                                         wolf1.adjacency)
     assert np.mean(again_xy == truth) > 0.7 and np.mean(again_yx == truth) > 0.7
 
     perm = np.random.default_rng(5).permutation(wolf0.n_vertices)
     inverse = np.argsort(perm)
     shuffled = TriMesh(wolf0.vertices[perm], inverse[wolf0.faces])
-    fixed_xy, fixed_yx = _repeated_pointwise_from_basis(inverse.copy(), perm.copy(), spec_0,
+    fixed_xy, fixed_yx = repeated_pointwise_from_basis(inverse.copy(), perm.copy(), spec_0,
                                                         mesh_spectrum(shuffled, k), k, wolf0.adjacency,
                                                         shuffled.adjacency)
     assert np.mean(fixed_xy == inverse) > 0.999 and np.mean(fixed_yx == perm) > 0.999
@@ -498,7 +498,7 @@ def test_the_repeated_final_step_recovers_what_one_step_leaves(wolf_pair):
 def test_the_functional_map_updated_by_the_moved_rows_equals_a_fresh_estimate(wolf_pair):
     from corrlib.geometry.fmaps import pointwise_to_functional
     from corrlib.geometry.spectrum import mesh_spectrum
-    from corrlib.methods.kernel_matching import _moved_rows_change
+    from corrlib.geometry.fmaps import moved_rows_change
 
     wolf0, wolf1 = wolf_pair
     k = 40
@@ -510,12 +510,12 @@ def test_the_functional_map_updated_by_the_moved_rows_equals_a_fresh_estimate(wo
     new = old.copy()
     moved = rng.choice(np.arange(5, wolf0.n_vertices), 300, replace=False)
     new[moved] = rng.integers(0, wolf1.n_vertices, 300)
-    updated = pointwise_to_functional(old, psi, phi, mass) + _moved_rows_change(old, new, psi, phi, mass)
+    updated = pointwise_to_functional(old, psi, phi, mass) + moved_rows_change(old, new, psi, phi, mass)
     np.testing.assert_allclose(updated, pointwise_to_functional(new, psi, phi, mass), atol=1e-12)
 
 
 def test_resolved_eigenpairs_counts_the_decays_above_one_over_e():
-    from corrlib.methods.kernel_matching import resolved_eigenpairs
+    from corrlib.geometry.fmaps import resolved_eigenpairs
 
     evals = np.array([0.0, 1.0, 2.0, 2.5, 4.0]) / 3.0  # on a shape of area 3
     assert resolved_eigenpairs(evals, 3.0, 0.5) == 3  # tau * lambda * area <= 1 for 0, 1, 2

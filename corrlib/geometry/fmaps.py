@@ -2,7 +2,11 @@
 
 :func:`functional_map` minimises the quadratic energy of descriptor
 preservation and commutativity with operators (Laplacian, descriptors,
-orientation) exactly; :func:`zoomout` refines a map by spectral upsampling.
+orientation) exactly; :func:`zoomout` refines a map by spectral upsampling;
+:func:`pointwise_from_basis` and :func:`repeated_pointwise_from_basis` are
+the final ZoomOut steps of a map and its reverse at one basis size (kernel
+matching's and divergence-free's last stage), the basis chosen by
+:func:`resolved_eigenpairs`.
 
 Convention (pyFM's): ``C_yx`` of shape (k_Y, k_X) carries the spectral
 coefficients of a function on X to those of its pull-back on Y,
@@ -16,7 +20,7 @@ from __future__ import annotations
 import numpy as np
 import scipy.sparse as sp
 
-from corrlib.neighbours import nearest_rows
+from corrlib.neighbours import descended_nearest_rows, nearest_rows
 
 
 def pointwise_to_functional(map_yx: np.ndarray, evecs_x: np.ndarray, evecs_y: np.ndarray, mass_y) -> np.ndarray:
@@ -161,3 +165,116 @@ def functional_map(coef_x: np.ndarray, coef_y: np.ndarray, mask: np.ndarray, ope
     hessian = sum(w * t / tr for w, t, tr in zip(weights, terms, traces))
     solution = np.linalg.solve(hessian + 1e-12 * np.eye(k_x * k_y), weights[0] * rhs / traces[0])
     return solution.reshape(k_y, k_x)
+
+
+def resolved_eigenpairs(evals: np.ndarray, area: float, tau: float) -> int:
+    """How many eigenfunctions the heat kernel of relative time ``tau`` resolves: those with ``τ λ · area ≤ 1``
+    (the decay ``e^{-tλ}`` above ``1/e``; at least one)."""
+    return max(1, int(np.count_nonzero(np.asarray(evals) * area * tau <= 1.0)))
+
+
+def pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k, both_directions: bool = True):
+    """One ZoomOut step (Melzi et al. 2019, the pointwise maps from a functional map) with one functional map
+    estimated from both directions of the map.
+
+    The pull-back of functions on Y along ``m = map_xy`` is estimated twice: from ``m`` itself,
+    ``C_xy = Φ_kᵀ M_X Π_m Ψ_k`` (an integral over X), and as the adjoint of the pull-back along the reverse map
+    ``n = map_yx``, ``C_yxᵀ`` with ``C_yx = Ψ_kᵀ M_Y Π_n Φ_k`` (an integral over Y). For an area-preserving
+    bijection ``n = m⁻¹`` the two are equal; for the maps kernel matching or nearest neighbours after a
+    deformation end with they are not: every sample of the coarser side carries its partner's offset into
+    its own estimate (e.g. one target edge where the source's vertices take target samples), while the other
+    side's many vertices per partner average it out. The step uses their mean ``Ĉ_xy = (C_xy + C_yxᵀ) / 2``
+    for both maps: ``m(x)`` is the vertex ``y`` whose image ``(Ψ_k Ĉ_xyᵀ)(y)`` in X's basis is nearest
+    ``Φ_k(x)``, and ``n(y)`` the vertex ``x`` with ``(Φ_k Ĉ_xy)(x)`` nearest ``Ψ_k(y)`` (the nearest
+    neighbour, not the best inner product, which favours vertices whose spectral embedding is long).
+    Unmatched vertices (-1) stay unmatched.
+
+    A map that carries information its reverse map does not have (kernel matching's refinement of a map from
+    outside the solver, which keeps that map's partners, :func:`~corrlib.methods.resolution.keep_input_partners`) is
+    instead projected with its own estimate, and the reverse map with its own (``both_directions=False``):
+    the mean would dilute the given partners with the reverse map's, which the kernels resolve less finely.
+
+    Parameters
+    ----------
+    map_xy : (n_x,) int
+    map_yx : (n_y,) int
+    spec_x, spec_y : Spectrum
+        With at least ``k`` eigenpairs.
+    k : int
+    both_directions : bool
+
+    Returns
+    -------
+    new_xy : (n_x,) int
+    new_yx : (n_y,) int
+    """
+    phi, psi = spec_x.evecs[:, :k], spec_y.evecs[:, :k]
+    c_xy = pointwise_to_functional(map_xy, psi, phi, spec_x.mass.diagonal())  # pulls Y's functions back to X
+    c_yx = pointwise_to_functional(map_yx, phi, psi, spec_y.mass.diagonal())
+    if not both_directions:
+        return (np.where(map_xy >= 0, nearest_rows(phi @ c_xy, psi), -1),
+                np.where(map_yx >= 0, nearest_rows(psi @ c_yx, phi), -1))
+    both = 0.5 * (c_xy + c_yx.T)
+    new_xy = np.where(map_xy >= 0, nearest_rows(phi, psi @ both.T), -1)
+    new_yx = np.where(map_yx >= 0, nearest_rows(psi, phi @ both), -1)
+    return new_xy, new_yx
+
+
+def repeated_pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k, graph_x, graph_y, token=None):
+    """The step of :func:`pointwise_from_basis` repeated from its own maps while the number of partners a
+    step changes decreases (and is not zero), each partner searched by descent from the current one.
+
+    Every step re-estimates ``Ĉ_xy = (C_xy + C_yxᵀ) / 2`` from the maps the previous one made and moves each
+    vertex to its nearest partner in that basis, so the repetition is ZoomOut's alternation (Melzi et al.
+    2019) at a fixed basis size, towards maps consistent with one functional map. A falling count of moved
+    partners says the alternation is settling; once a step moves as many as the one before, the maps
+    oscillate between near-ties, and the repetition stops there (that step's maps are returned). The count
+    is a whole number that must fall at every repetition, so the loop ends. The partners move by about an
+    edge per step, so each is searched by steepest descent over the other shape's edge graph from the
+    current partner (:func:`~corrlib.neighbours.descended_nearest_rows`) instead of over all vertices, and
+    the two estimates are updated by the moved rows only (:func:`moved_rows_change`).
+
+    Parameters
+    ----------
+    map_xy : (n_x,) int
+    map_yx : (n_y,) int
+        The maps after the first (global) step; -1 rows stay -1.
+    spec_x, spec_y : Spectrum
+    k : int
+    graph_x, graph_y : (n, n) sparse
+        The shapes' vertex adjacencies.
+    token : CancelToken, optional
+        Checked before every step.
+
+    Returns
+    -------
+    map_xy : (n_x,) int
+    map_yx : (n_y,) int
+    """
+    phi, psi = np.ascontiguousarray(spec_x.evecs[:, :k]), np.ascontiguousarray(spec_y.evecs[:, :k])
+    mass_x, mass_y = spec_x.mass.diagonal(), spec_y.mass.diagonal()
+    c_xy = pointwise_to_functional(map_xy, psi, phi, mass_x)
+    c_yx = pointwise_to_functional(map_yx, phi, psi, mass_y)
+    changed_before = None
+    while True:
+        if token is not None:
+            token.raise_if_cancelled()
+        both = 0.5 * (c_xy + c_yx.T)
+        new_xy = descended_nearest_rows(phi, psi @ both.T, map_xy, graph_y.indptr, graph_y.indices)
+        new_yx = descended_nearest_rows(psi, phi @ both, map_yx, graph_x.indptr, graph_x.indices)
+        c_xy += moved_rows_change(map_xy, new_xy, psi, phi, mass_x)
+        c_yx += moved_rows_change(map_yx, new_yx, phi, psi, mass_y)
+        changed = int(np.count_nonzero(new_xy != map_xy) + np.count_nonzero(new_yx != map_yx))
+        map_xy, map_yx = new_xy, new_yx
+        if changed == 0 or (changed_before is not None and changed >= changed_before):
+            return map_xy, map_yx
+        changed_before = changed
+
+
+def moved_rows_change(old_map, new_map, evecs_to, evecs_from, mass_from):
+    """(k, k) float: the change of ``Φᵀ M Π Ψ`` (:func:`pointwise_to_functional`, here
+    with ``Φ = evecs_from``, ``Ψ = evecs_to``) when ``old_map`` becomes ``new_map``: only the moved rows
+    contribute, ``Φ[r]ᵀ M[r] (Ψ[new[r]] − Ψ[old[r]])``. Both maps must be -1 on the same rows."""
+    moved = np.flatnonzero(new_map != old_map)
+    weighted = mass_from[moved, None] * (evecs_to[new_map[moved]] - evecs_to[old_map[moved]])
+    return evecs_from[moved].T @ weighted

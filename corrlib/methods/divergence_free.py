@@ -54,6 +54,20 @@ correspondence and the coefficients are estimated jointly by EM:
   the feature factor at the final annealed variance); the
   reverse map matches every target vertex to the nearest flowed source
   vertex.
+* Final ZoomOut steps (``smooth_k``; our addition, as in kernel matching):
+  the two maps are projected onto the first Laplace–Beltrami
+  eigenfunctions and every vertex takes its nearest partner in them, with
+  one functional map estimated from both directions, the step repeated
+  while it moves fewer partners (:func:`~corrlib.geometry.fmaps.
+  repeated_pointwise_from_basis`). A flow fits the shapes' overall
+  position and volume but not every limb; the steps move the partners
+  along the surfaces to where the intrinsic geometry agrees. By default the
+  basis is the eigenfunctions kernel matching's smallest default time
+  resolves (``τ λ · area ≤ 1`` at ``τ = 5.18e-4``, about 160 by Weyl's
+  law), from the pair's 500 eigenpairs (kernel matching's default, so the
+  spectra cache serves both). The flow's own nearest-neighbour map stays
+  in ``extras["flow_map_xy"]``; the deformation (morphs, sequences) is the
+  flow's.
 
 The flow can be evaluated at any time (interpolation t ∈ [0, 1],
 extrapolation t > 1) and resolution through :class:`Deformation`.
@@ -72,12 +86,20 @@ from corrlib.deformation.flow import check_points, flow, flow_with_jacobian
 from corrlib.deformation.mixture import mixture_moments
 from corrlib.deformation.model import Deformation, Frames, StoredSteps
 from corrlib.errors import InputError
+from corrlib.geometry.fmaps import pointwise_from_basis, repeated_pointwise_from_basis, resolved_eigenpairs
 from corrlib.geometry.sampling import farthest_point_sampling
 from corrlib.methods.base import MatchResult, param
 from corrlib.methods.registry import MethodSpec, register
 from corrlib.neighbours import nearest_rows
 from corrlib.progress import Progress, Stopwatch
 from corrlib.shapes import signed_volume
+
+#: eigenpairs computed for the final ZoomOut steps: kernel matching's default count, so that a pair's spectra
+#: are computed once for both methods (the on-disk cache truncates a larger decomposition)
+FINAL_STEP_EIGENPAIRS = 500
+#: the relative diffusion time whose resolved eigenfunctions form the final steps' basis by default (kernel
+#: matching's smallest default time, :func:`~corrlib.geometry.fmaps.resolved_eigenpairs`)
+FINAL_STEP_TAU = 5.18e-4
 
 #: the result stores the flow of the source vertices at every RK2 step up to this time (scrubbing, export)
 SEQUENCE_T_MAX = 3.0
@@ -122,6 +144,12 @@ class DivergenceFreeParams:
     margin: float = param(0.15, label="Margin", low=0.0, high=0.45,
                           help="Free border of the unit cube around the shapes.")
     seed: int = param(0, label="Seed", low=0, high=2 ** 31 - 1, help="Start of the farthest-point sampling.")
+    smooth_k: int = param(-1, label="Final ZoomOut basis", low=-1, high=FINAL_STEP_EIGENPAIRS,
+                          help="Final pointwise steps after the flow: both maps are projected onto this many "
+                               "eigenfunctions and every vertex takes its nearest partner in them (ZoomOut steps "
+                               "on the mean of the functional maps of the map and of its reverse, repeated while "
+                               "they move fewer partners). -1: the eigenfunctions resolved at kernel matching's "
+                               "smallest default time (τ λ·area ≤ 1, τ = 5.18e-4); 0: off (the flow's map).")
 
 
 def _bbox_centre(p: np.ndarray) -> np.ndarray:
@@ -555,6 +583,42 @@ def _initial_map(source, target, params: DivergenceFreeParams, token, initial, w
     return iy[nearest_rows(source.vertices, source.vertices[ix])]
 
 
+def final_zoomout_steps(source, target, map_xy, map_yx, smooth_k: int, token, watch):
+    """The flow's maps after the final ZoomOut steps (see the module docstring).
+
+    Parameters
+    ----------
+    source, target : TriMesh
+    map_xy : (n_x,) int
+    map_yx : (n_y,) int
+    smooth_k : int
+        The basis size, or -1 for the eigenfunctions resolved at :data:`FINAL_STEP_TAU`.
+    token : CancelToken
+    watch : Stopwatch
+
+    Returns
+    -------
+    map_xy : (n_x,) int
+    map_yx : (n_y,) int
+    """
+    from corrlib.geometry.spectrum import available_eigenpairs, mesh_spectra
+
+    what = "the final ZoomOut steps (smooth_k=0 turns them off)"
+    with watch("eigen"):
+        spec_x, spec_y = mesh_spectra((source, target), (available_eigenpairs(source, FINAL_STEP_EIGENPAIRS, what),
+                                                         available_eigenpairs(target, FINAL_STEP_EIGENPAIRS, what)))
+    k = min(spec_x.evecs.shape[1], spec_y.evecs.shape[1])
+    if smooth_k > 0:
+        k = min(k, smooth_k)
+    else:
+        k = min(resolved_eigenpairs(spec_x.evals, source.area, FINAL_STEP_TAU),
+                resolved_eigenpairs(spec_y.evals, target.area, FINAL_STEP_TAU), k)
+    with watch("zoomout"):
+        map_xy, map_yx = pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k)
+        return repeated_pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k, source.adjacency,
+                                             target.adjacency, token)
+
+
 def solve_divergence_free(source, target, params: DivergenceFreeParams, token, *, initial=None):
     """Registered solver: fit, dense maps, deformation record (generator returning a MatchResult)."""
     watch = Stopwatch()
@@ -588,7 +652,12 @@ def solve_divergence_free(source, target, params: DivergenceFreeParams, token, *
     morphed = steps.positions[params.n_steps]
     with watch("dense map"):
         map_xy, map_yx = dense_maps(fitted.frames, morphed, target.vertices, fitted.feature_factor, feats_x, feats_y)
+    flow_map_xy = map_xy
+    if params.smooth_k != 0:
+        yield Progress("final ZoomOut steps", 0.97, "nearest partners in the Laplace–Beltrami eigenfunctions")
+        map_xy, map_yx = final_zoomout_steps(source, target, map_xy, map_yx, params.smooth_k, token, watch)
     extras = {
+        "flow_map_xy": flow_map_xy,
         "morphed_vertices": morphed,
         "iterations": fitted.iterations,
         "converged": bool(fitted.converged),

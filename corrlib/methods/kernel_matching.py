@@ -98,10 +98,10 @@ Design choices, in brief (the measurements behind them are in
   takes its nearest partner in them (no longer bijective, which suits
   independently remeshed shapes). The functional map of that step is the
   mean of the estimates from the map and from its reverse
-  (:func:`_pointwise_from_basis`), so that the coarser shape's samples do not
+  (:func:`~corrlib.geometry.fmaps.pointwise_from_basis`), so that the coarser shape's samples do not
   carry their partners' offsets into it. The step is repeated from its own
   maps while it moves fewer partners each time (ZoomOut's alternation at one
-  basis size, :func:`_repeated_pointwise_from_basis`), except for a map
+  basis size, :func:`~corrlib.geometry.fmaps.repeated_pointwise_from_basis`), except for a map
   refined from outside the solver. By default the basis is what the smallest
   kernel resolves, the eigenfunctions with ``τ_min λ · area ≤ 1``: finer
   ones it cannot tell apart, coarser ones would blur what it resolved.
@@ -124,7 +124,7 @@ from scipy.sparse.csgraph import dijkstra
 from corrlib.assignment import area_capacities, linear_assignment
 from corrlib.descriptors import DESCRIPTOR_KINDS, mesh_descriptors
 from corrlib.errors import ParameterError
-from corrlib.geometry.fmaps import pointwise_to_functional
+from corrlib.geometry.fmaps import pointwise_from_basis, repeated_pointwise_from_basis, resolved_eigenpairs
 from corrlib.geometry.sampling import (
     SurfaceSample,
     farthest_point_sampling,
@@ -139,7 +139,6 @@ from corrlib.methods.registry import MethodSpec, register
 from corrlib.methods.reorientation import (can_reorient, mean_agreement, orientation_blocks, reorient,
                                            standardised, turned_anything, with_first_pass)
 from corrlib.methods.resolution import keep_input_partners, kernel_width, nearest_partners, surplus_partners
-from corrlib.neighbours import descended_nearest_rows, nearest_rows
 from corrlib.progress import Progress, Stopwatch, scaled_progress
 
 #: threads solving the cells of a refinement pass: the auction releases the GIL, so cells can overlap; two,
@@ -280,118 +279,6 @@ def diffusion_times(params: KernelMatchingParams) -> np.ndarray:
     if taus is not None:
         return taus
     return np.geomspace(params.tau_max, params.tau_min, params.n_times)
-
-
-def _pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k, both_directions: bool = True):
-    """One ZoomOut step (Melzi et al. 2019, the pointwise maps from a functional map) with one functional map
-    estimated from both directions of the map.
-
-    The pull-back of functions on Y along ``m = map_xy`` is estimated twice: from ``m`` itself,
-    ``C_xy = Φ_kᵀ M_X Π_m Ψ_k`` (an integral over X), and as the adjoint of the pull-back along the reverse map
-    ``n = map_yx``, ``C_yxᵀ`` with ``C_yx = Ψ_kᵀ M_Y Π_n Φ_k`` (an integral over Y). For an area-preserving
-    bijection ``n = m⁻¹`` the two are equal; for the maps kernel matching ends with they are not: every sample
-    of the coarser side carries its partner's offset into its own estimate (e.g. one target edge where the
-    source's vertices take target samples), while the other side's many vertices per partner average it
-    out. The step uses their mean ``Ĉ_xy = (C_xy + C_yxᵀ) / 2`` for both maps: ``m(x)`` is the vertex ``y``
-    whose image ``(Ψ_k Ĉ_xyᵀ)(y)`` in X's basis is nearest ``Φ_k(x)``, and ``n(y)`` the vertex ``x`` with
-    ``(Φ_k Ĉ_xy)(x)`` nearest ``Ψ_k(y)`` (the nearest neighbour, not the best inner product, which favours
-    vertices whose spectral embedding is long). Unmatched vertices (-1) stay unmatched.
-
-    A map that carries information its reverse map does not have (the refinement of a map from outside the
-    solver, which keeps that map's partners, :func:`~corrlib.methods.resolution.keep_input_partners`) is
-    instead projected with its own estimate, and the reverse map with its own (``both_directions=False``):
-    the mean would dilute the given partners with the reverse map's, which the kernels resolve less finely.
-
-    Parameters
-    ----------
-    map_xy : (n_x,) int
-    map_yx : (n_y,) int
-    spec_x, spec_y : Spectrum
-        With at least ``k`` eigenpairs.
-    k : int
-    both_directions : bool
-
-    Returns
-    -------
-    new_xy : (n_x,) int
-    new_yx : (n_y,) int
-    """
-    phi, psi = spec_x.evecs[:, :k], spec_y.evecs[:, :k]
-    c_xy = pointwise_to_functional(map_xy, psi, phi, spec_x.mass.diagonal())  # pulls Y's functions back to X
-    c_yx = pointwise_to_functional(map_yx, phi, psi, spec_y.mass.diagonal())
-    if not both_directions:
-        return (np.where(map_xy >= 0, nearest_rows(phi @ c_xy, psi), -1),
-                np.where(map_yx >= 0, nearest_rows(psi @ c_yx, phi), -1))
-    both = 0.5 * (c_xy + c_yx.T)
-    new_xy = np.where(map_xy >= 0, nearest_rows(phi, psi @ both.T), -1)
-    new_yx = np.where(map_yx >= 0, nearest_rows(psi, phi @ both), -1)
-    return new_xy, new_yx
-
-
-def _repeated_pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k, graph_x, graph_y, token=None):
-    """The step of :func:`_pointwise_from_basis` repeated from its own maps while the number of partners a
-    step changes decreases (and is not zero), each partner searched by descent from the current one.
-
-    Every step re-estimates ``Ĉ_xy = (C_xy + C_yxᵀ) / 2`` from the maps the previous one made and moves each
-    vertex to its nearest partner in that basis, so the repetition is ZoomOut's alternation (Melzi et al.
-    2019) at a fixed basis size, towards maps consistent with one functional map. A falling count of moved
-    partners says the alternation is settling; once a step moves as many as the one before, the maps
-    oscillate between near-ties, and the repetition stops there (that step's maps are returned). The count
-    is a whole number that must fall at every repetition, so the loop ends. The partners move by about an
-    edge per step, so each is searched by steepest descent over the other shape's edge graph from the
-    current partner (:func:`~corrlib.neighbours.descended_nearest_rows`) instead of over all vertices, and
-    the two estimates are updated by the moved rows only (:func:`_moved_rows_change`).
-
-    Parameters
-    ----------
-    map_xy : (n_x,) int
-    map_yx : (n_y,) int
-        The maps after the first (global) step; -1 rows stay -1.
-    spec_x, spec_y : Spectrum
-    k : int
-    graph_x, graph_y : (n, n) sparse
-        The shapes' vertex adjacencies.
-    token : CancelToken, optional
-        Checked before every step.
-
-    Returns
-    -------
-    map_xy : (n_x,) int
-    map_yx : (n_y,) int
-    """
-    phi, psi = np.ascontiguousarray(spec_x.evecs[:, :k]), np.ascontiguousarray(spec_y.evecs[:, :k])
-    mass_x, mass_y = spec_x.mass.diagonal(), spec_y.mass.diagonal()
-    c_xy = pointwise_to_functional(map_xy, psi, phi, mass_x)
-    c_yx = pointwise_to_functional(map_yx, phi, psi, mass_y)
-    changed_before = None
-    while True:
-        if token is not None:
-            token.raise_if_cancelled()
-        both = 0.5 * (c_xy + c_yx.T)
-        new_xy = descended_nearest_rows(phi, psi @ both.T, map_xy, graph_y.indptr, graph_y.indices)
-        new_yx = descended_nearest_rows(psi, phi @ both, map_yx, graph_x.indptr, graph_x.indices)
-        c_xy += _moved_rows_change(map_xy, new_xy, psi, phi, mass_x)
-        c_yx += _moved_rows_change(map_yx, new_yx, phi, psi, mass_y)
-        changed = int(np.count_nonzero(new_xy != map_xy) + np.count_nonzero(new_yx != map_yx))
-        map_xy, map_yx = new_xy, new_yx
-        if changed == 0 or (changed_before is not None and changed >= changed_before):
-            return map_xy, map_yx
-        changed_before = changed
-
-
-def _moved_rows_change(old_map, new_map, evecs_to, evecs_from, mass_from):
-    """(k, k) float: the change of ``Φᵀ M Π Ψ`` (:func:`~corrlib.geometry.fmaps.pointwise_to_functional`, here
-    with ``Φ = evecs_from``, ``Ψ = evecs_to``) when ``old_map`` becomes ``new_map``: only the moved rows
-    contribute, ``Φ[r]ᵀ M[r] (Ψ[new[r]] − Ψ[old[r]])``. Both maps must be -1 on the same rows."""
-    moved = np.flatnonzero(new_map != old_map)
-    weighted = mass_from[moved, None] * (evecs_to[new_map[moved]] - evecs_to[old_map[moved]])
-    return evecs_from[moved].T @ weighted
-
-
-def resolved_eigenpairs(evals: np.ndarray, area: float, tau: float) -> int:
-    """How many eigenfunctions the heat kernel of relative time ``tau`` resolves: those with ``τ λ · area ≤ 1``
-    (the decay ``e^{-tλ}`` above ``1/e``; at least one)."""
-    return max(1, int(np.count_nonzero(np.asarray(evals) * area * tau <= 1.0)))
 
 
 def kernel_energy(c: np.ndarray, decay_y: np.ndarray, decay_x: np.ndarray) -> float:
@@ -1314,9 +1201,10 @@ def multiscale_refinement(state: KernelState):
 
 
 def kernel_result(state: KernelState, full_map_xy: np.ndarray, full_map_yx: np.ndarray):
-    """Stage 7: the turns of reversed regions, the final ZoomOut steps (:func:`_pointwise_from_basis`,
-    repeated by :func:`_repeated_pointwise_from_basis` unless the map came from outside the solver), the
-    kernel energy ``<Π, K_Y Π K_X>`` of the final map at the smallest time, the :class:`MatchResult`. A
+    """Stage 7: the turns of reversed regions, the final ZoomOut steps
+    (:func:`~corrlib.geometry.fmaps.pointwise_from_basis`, repeated by
+    :func:`~corrlib.geometry.fmaps.repeated_pointwise_from_basis` unless the map came from outside the solver),
+    the kernel energy ``<Π, K_Y Π K_X>`` of the final map at the smallest time, the :class:`MatchResult`. A
     generator."""
     params, k, watch = state.params, state.k, state.watch
     psi, phi, trace = state.psi, state.phi, state.trace
@@ -1341,11 +1229,11 @@ def kernel_result(state: KernelState, full_map_xy: np.ndarray, full_map_yx: np.n
         yield Progress("final ZoomOut step", PROGRESS_SMOOTHING, f"nearest partners in {smooth_k} eigenfunctions")
         with watch("zoomout"):
             # a map refined from outside keeps that map's partners, which the reverse map does not know of
-            full_map_xy, full_map_yx = _pointwise_from_basis(full_map_xy, full_map_yx, state.spec_x,
+            full_map_xy, full_map_yx = pointwise_from_basis(full_map_xy, full_map_yx, state.spec_x,
                                                              state.spec_y, smooth_k,
                                                              both_directions=not state.outside_map)
             if not state.outside_map:
-                full_map_xy, full_map_yx = _repeated_pointwise_from_basis(
+                full_map_xy, full_map_yx = repeated_pointwise_from_basis(
                     full_map_xy, full_map_yx, state.spec_x, state.spec_y, smooth_k, state.source.adjacency,
                     state.target.adjacency, state.token)
     # the map's own energy: landmarks are rows of the dense map already (their anchor term is the solver's)

@@ -272,9 +272,23 @@ def repeated_pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k, graph_x, gr
 
 
 def moved_rows_change(old_map, new_map, evecs_to, evecs_from, mass_from):
-    """(k, k) float: the change of ``Φᵀ M Π Ψ`` (:func:`pointwise_to_functional`, here
-    with ``Φ = evecs_from``, ``Ψ = evecs_to``) when ``old_map`` becomes ``new_map``: only the moved rows
-    contribute, ``Φ[r]ᵀ M[r] (Ψ[new[r]] − Ψ[old[r]])``. Both maps must be -1 on the same rows."""
+    """The change of ``Φᵀ M Π Ψ`` (:func:`pointwise_to_functional`, here with ``Φ = evecs_from``,
+    ``Ψ = evecs_to``) when ``old_map`` becomes ``new_map``: only the moved rows ``r`` contribute,
+    ``Φ[r]ᵀ M[r] (Ψ[new[r]] − Ψ[old[r]])``.
+
+    Parameters
+    ----------
+    old_map, new_map : (n,) int
+        Partners on the other shape; -1 on the same rows in both.
+    evecs_to : (n_other, k) float
+    evecs_from : (n, k) float
+    mass_from : (n,) float
+        Lumped masses of the shape the maps start from.
+
+    Returns
+    -------
+    (k, k) float
+    """
     moved = np.flatnonzero(new_map != old_map)
     weighted = mass_from[moved, None] * (evecs_to[new_map[moved]] - evecs_to[old_map[moved]])
     return evecs_from[moved].T @ weighted

@@ -64,8 +64,15 @@ def descended_nearest_rows(query: np.ndarray, data: np.ndarray, start: np.ndarra
     """
     query = np.ascontiguousarray(query, dtype=np.float64)
     data = np.ascontiguousarray(data, dtype=np.float64)
-    return _descend(query, data, np.asarray(start, dtype=np.int64), np.asarray(indptr, dtype=np.int64),
-                    np.asarray(indices, dtype=np.int64))
+    start, indptr, indices = (np.asarray(a, dtype=np.int64) for a in (start, indptr, indices))
+    # the compiled walk does not check bounds: a bad index would read outside the arrays
+    n = data.shape[0]
+    if (query.shape[1] != data.shape[1] or start.shape != (query.shape[0],) or indptr.shape != (n + 1,)
+            or (start.size and start.max() >= n) or (indices.size and (indices.min() < 0 or indices.max() >= n))
+            or indptr[-1] > indices.size):
+        raise ValueError(f"descended_nearest_rows: query {query.shape}, data {data.shape}, start {start.shape} "
+                         f"and a graph with {indptr.size - 1} rows and {indices.size} entries do not fit")
+    return _descend(query, data, start, indptr, indices)
 
 
 @numba.njit(cache=True, nogil=True)

@@ -482,8 +482,8 @@ def test_the_repeated_final_step_recovers_what_one_step_leaves(wolf_pair):
     first_neighbour_0 = wolf0.adjacency.indices[wolf0.adjacency.indptr[:-1]]
     once_xy, once_yx = pointwise_from_basis(first_neighbour_1, first_neighbour_0, spec_0, spec_1, k)
     assert np.mean(once_xy == truth) < 0.6 and np.mean(once_yx == truth) < 0.6
-    again_xy, again_yx = repeated_pointwise_from_basis(once_xy, once_yx, spec_0, spec_1, k, wolf0.adjacency,
-                                                        wolf1.adjacency)
+    again_xy, again_yx = repeated_pointwise_from_basis(first_neighbour_1, first_neighbour_0, spec_0, spec_1, k,
+                                                        wolf0.adjacency, wolf1.adjacency)
     assert np.mean(again_xy == truth) > 0.7 and np.mean(again_yx == truth) > 0.7
 
     perm = np.random.default_rng(5).permutation(wolf0.n_vertices)

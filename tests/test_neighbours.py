@@ -63,3 +63,12 @@ def test_descent_stops_at_a_local_minimum_and_keeps_unmatched_rows():
     query = np.zeros((3, 1))
     found = descended_nearest_rows(query, data, np.array([0, 3, -1]), *_csr(path))
     assert found.tolist() == [1, 4, -1]
+
+
+def test_descent_rejects_indices_outside_the_data():
+    path = sp.diags([np.ones(4), np.ones(4)], [-1, 1], shape=(5, 5))
+    data, query = np.zeros((5, 2)), np.zeros((2, 2))
+    with pytest.raises(ValueError, match="do not fit"):
+        descended_nearest_rows(query, data, np.array([0, 5]), *_csr(path))
+    with pytest.raises(ValueError, match="do not fit"):
+        descended_nearest_rows(query, data[:4], np.array([0, 1]), *_csr(path))

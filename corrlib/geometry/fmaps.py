@@ -221,8 +221,9 @@ def pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k, both_directions: boo
 
 
 def repeated_pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k, graph_x, graph_y, token=None):
-    """The step of :func:`pointwise_from_basis` repeated from its own maps while the number of partners a
-    step changes decreases (and is not zero), each partner searched by descent from the current one.
+    """The step of :func:`pointwise_from_basis`, then the same step repeated from its own maps while the
+    number of partners a step changes decreases (and is not zero), each partner searched by descent from the
+    current one.
 
     Every step re-estimates ``Ĉ_xy = (C_xy + C_yxᵀ) / 2`` from the maps the previous one made and moves each
     vertex to its nearest partner in that basis, so the repetition is ZoomOut's alternation (Melzi et al.
@@ -238,7 +239,7 @@ def repeated_pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k, graph_x, gr
     ----------
     map_xy : (n_x,) int
     map_yx : (n_y,) int
-        The maps after the first (global) step; -1 rows stay -1.
+        The maps to refine; -1 rows stay -1.
     spec_x, spec_y : Spectrum
     k : int
     graph_x, graph_y : (n, n) sparse
@@ -251,6 +252,7 @@ def repeated_pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k, graph_x, gr
     map_xy : (n_x,) int
     map_yx : (n_y,) int
     """
+    map_xy, map_yx = pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k)  # the first step searches globally
     phi, psi = np.ascontiguousarray(spec_x.evecs[:, :k]), np.ascontiguousarray(spec_y.evecs[:, :k])
     mass_x, mass_y = spec_x.mass.diagonal(), spec_y.mass.diagonal()
     c_xy = pointwise_to_functional(map_xy, psi, phi, mass_x)

@@ -86,9 +86,10 @@ from corrlib.deformation.flow import check_points, flow, flow_with_jacobian
 from corrlib.deformation.mixture import mixture_moments
 from corrlib.deformation.model import Deformation, Frames, StoredSteps
 from corrlib.errors import InputError
-from corrlib.geometry.fmaps import pointwise_from_basis, repeated_pointwise_from_basis, resolved_eigenpairs
+from corrlib.geometry.fmaps import repeated_pointwise_from_basis, resolved_eigenpairs
 from corrlib.geometry.sampling import farthest_point_sampling
 from corrlib.methods.base import MatchResult, param
+from corrlib.methods.kernel_matching import DEFAULT_EIGENPAIRS, DEFAULT_TAU_MIN
 from corrlib.methods.registry import MethodSpec, register
 from corrlib.neighbours import nearest_rows
 from corrlib.progress import Progress, Stopwatch
@@ -96,10 +97,10 @@ from corrlib.shapes import signed_volume
 
 #: eigenpairs computed for the final ZoomOut steps: kernel matching's default count, so that a pair's spectra
 #: are computed once for both methods (the on-disk cache truncates a larger decomposition)
-FINAL_STEP_EIGENPAIRS = 500
+FINAL_STEP_EIGENPAIRS = DEFAULT_EIGENPAIRS
 #: the relative diffusion time whose resolved eigenfunctions form the final steps' basis by default (kernel
 #: matching's smallest default time, :func:`~corrlib.geometry.fmaps.resolved_eigenpairs`)
-FINAL_STEP_TAU = 5.18e-4
+FINAL_STEP_TAU = DEFAULT_TAU_MIN
 
 #: the result stores the flow of the source vertices at every RK2 step up to this time (scrubbing, export)
 SEQUENCE_T_MAX = 3.0
@@ -614,7 +615,6 @@ def final_zoomout_steps(source, target, map_xy, map_yx, smooth_k: int, token, wa
         k = min(resolved_eigenpairs(spec_x.evals, source.area, FINAL_STEP_TAU),
                 resolved_eigenpairs(spec_y.evals, target.area, FINAL_STEP_TAU), k)
     with watch("zoomout"):
-        map_xy, map_yx = pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k)
         return repeated_pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k, source.adjacency,
                                              target.adjacency, token)
 

@@ -165,11 +165,15 @@ PROGRESS_DC = (0.1, 0.6)
 PROGRESS_MULTISCALE = (0.7, 0.27)
 #: progress fractions of the initial-map computation and of the final smoothing step
 PROGRESS_INIT, PROGRESS_SMOOTHING = 0.05, 0.98
+#: the default eigenpairs per shape and smallest relative diffusion time (divergence-free's final steps use the
+#: same, so that a pair's spectra are shared through the cache and the basis is the same)
+DEFAULT_EIGENPAIRS = 500
+DEFAULT_TAU_MIN = 5.18e-4
 
 
 @dataclass(frozen=True, kw_only=True)
 class KernelMatchingParams:
-    n_eigs: int = param(500, label="Eigenpairs", low=10, high=3000,
+    n_eigs: int = param(DEFAULT_EIGENPAIRS, label="Eigenpairs", low=10, high=3000,
                         help="Laplace–Beltrami eigenpairs of the heat kernels (spectral form).")
     init: str = param("descriptors", label="Initialisation", choices=("descriptors", "fmap", "best"),
                       help="Linear assignment on descriptors, or the functional-maps baseline's map, or both "
@@ -193,7 +197,7 @@ class KernelMatchingParams:
                            "term, both scaled to unit maximum).")
     tau_max: float = param(0.0259, label="Largest time / area", low=1e-7, high=10.0,
                            help="First diffusion time divided by the surface area (500 at TOSCA scale).")
-    tau_min: float = param(5.18e-4, label="Smallest time / area", low=1e-8, high=10.0,
+    tau_min: float = param(DEFAULT_TAU_MIN, label="Smallest time / area", low=1e-8, high=10.0,
                            help="Last diffusion time divided by the surface area (10 at TOSCA scale).")
     n_times: int = param(10, label="Times", low=1, high=100, help="Log-spaced diffusion times.")
     times: str = param("", label="Explicit times / area",
@@ -1228,11 +1232,10 @@ def kernel_result(state: KernelState, full_map_xy: np.ndarray, full_map_yx: np.n
     if smooth_k > 0:
         yield Progress("final ZoomOut step", PROGRESS_SMOOTHING, f"nearest partners in {smooth_k} eigenfunctions")
         with watch("zoomout"):
-            # a map refined from outside keeps that map's partners, which the reverse map does not know of
-            full_map_xy, full_map_yx = pointwise_from_basis(full_map_xy, full_map_yx, state.spec_x,
-                                                             state.spec_y, smooth_k,
-                                                             both_directions=not state.outside_map)
-            if not state.outside_map:
+            if state.outside_map:  # a map refined from outside keeps its partners, which the reverse map lacks
+                full_map_xy, full_map_yx = pointwise_from_basis(full_map_xy, full_map_yx, state.spec_x,
+                                                                state.spec_y, smooth_k, both_directions=False)
+            else:
                 full_map_xy, full_map_yx = repeated_pointwise_from_basis(
                     full_map_xy, full_map_yx, state.spec_x, state.spec_y, smooth_k, state.source.adjacency,
                     state.target.adjacency, state.token)

@@ -316,3 +316,28 @@ def test_surplus_vertices_take_the_partner_of_their_nearest_matched_vertex():
     np.testing.assert_allclose(distances[chosen, rest], distances[:, rest].min(axis=0), rtol=0, atol=1e-12)
     np.testing.assert_array_equal(map_xy[sampled], before[sampled])
     np.testing.assert_array_equal(map_xy[anchors], -1)  # set by the caller
+
+
+def test_a_second_pass_reuses_the_descriptors_of_the_first():
+    """The descriptors and the seeds' descriptor similarity depend on the shapes and the seeds only: a state
+    prepared again for a second pass (:meth:`KernelState.prepared`) carries them instead of recomputing them,
+    and its seed problem is the first one's."""
+    from corrlib.methods.base import make_params
+    from corrlib.methods.kernel_matching import KernelMatchingParams, prepare, seed_problem
+    from corrlib.progress import CancelToken, run
+
+    ico = trimesh.creation.icosphere(subdivisions=3)
+    source = TriMesh(ico.vertices * [1.3, 1.0, 0.8], ico.faces, name="x")
+    target = TriMesh(ico.vertices * [1.2, 1.1, 0.7], ico.faces, name="y")
+    params = make_params(KernelMatchingParams, n_eigs=40, n_seeds=120, descriptor="wks")
+    state = run(prepare(source, target, params, CancelToken()))
+    first = seed_problem(state)
+    assert first.desc_block is not None
+    fresh = state.prepared()
+    assert fresh.desc_x is state.desc_x and fresh.seed_similarity is state.seed_similarity
+    second = seed_problem(fresh)
+    assert second.desc_block is first.desc_block
+    np.testing.assert_array_equal(second.phi_s, first.phi_s)
+    # and the carried block is the one a state without it computes
+    state.desc_x = state.desc_y = state.seed_similarity = None
+    np.testing.assert_allclose(seed_problem(state).desc_block, first.desc_block, rtol=0, atol=0)

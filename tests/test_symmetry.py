@@ -177,6 +177,16 @@ def test_geodesic_distortion_is_zero_for_an_exact_reflection_only():
         geodesic_distortion(uneven, shuffled), rel=1e-12)
 
 
+def test_geodesic_distortions_of_several_maps_equal_one_at_a_time():
+    from corrlib.descriptors.symmetry import geodesic_distortion, geodesic_distortions
+
+    mesh, truth = one_mirror_blob()
+    shuffled = np.random.default_rng(0).permutation(mesh.n_vertices)
+    together = geodesic_distortions(mesh, (shuffled, truth, np.arange(mesh.n_vertices)))
+    assert together == [geodesic_distortion(mesh, m) for m in (shuffled, truth, np.arange(mesh.n_vertices))]
+    assert together[0] > 0.1 > together[1]
+
+
 def test_even_spectrum_is_the_spectrum_of_the_mirror_invariant_functions():
     mesh, truth = one_mirror_blob()
     spectrum = mesh_spectrum(mesh, 60, use_cache=False)

@@ -128,7 +128,8 @@ def reflection_map(mesh, spectrum, *, k_init: int = K_INIT, k_final: int = K_FIN
                             below=reflection_distortion(mirror, embedding))
     if searched is not None:
         second = _zoomout(spectrum, pointwise_to_functional(searched, phi, phi, mass), k_final)
-        if geodesic_distortion(mesh, second) < geodesic_distortion(mesh, mirror):
+        distortion_second, distortion_first = geodesic_distortions(mesh, (second, mirror))
+        if distortion_second < distortion_first:
             return second
     return mirror
 
@@ -229,15 +230,23 @@ def geodesic_distortion(mesh, mirror: np.ndarray) -> float:
     mesh : TriMesh
     mirror : (n,) int
     """
+    return geodesic_distortions(mesh, (mirror,))[0]
+
+
+def geodesic_distortions(mesh, mirrors) -> list[float]:
+    """:func:`geodesic_distortion` of several self-maps of one mesh (the sample's own distances computed once)."""
     from corrlib.geometry.geodesics import GeodesicSolver
     from corrlib.geometry.sampling import outermost_farthest_points
 
-    mirror = np.asarray(mirror)
     sample = outermost_farthest_points(mesh.vertices, min(GEODESIC_SAMPLES, mesh.n_vertices))
     solver = GeodesicSolver(mesh)
     before = solver.distances(sample, method="graph")[:, sample]
-    after = solver.distances(mirror[sample], method="graph")[:, mirror[sample]]
-    return float(np.mean(np.abs(before - after)) / np.sqrt(mesh.area))
+    out = []
+    for mirror in mirrors:
+        images = np.asarray(mirror)[sample]
+        after = solver.distances(images, method="graph")[:, images]
+        out.append(float(np.mean(np.abs(before - after)) / np.sqrt(mesh.area)))
+    return out
 
 
 def distortion_sample(n: int) -> np.ndarray:

@@ -717,6 +717,7 @@ class KernelState:
     orientation: tuple | None = None  # standardised orientation-aware descriptors of both shapes, once computed
     desc_x: np.ndarray | None = None  # standardised plain descriptors, once computed
     desc_y: np.ndarray | None = None
+    seed_similarity: np.ndarray | None = None  # (n_seed, n_seed) the seeds' plain descriptor similarity, once computed
     confidence: np.ndarray | None = None  # (n_seed,) similarity of every initial descriptor match
     seed_map: np.ndarray | None = None  # (n_seed,) seed x -> seed y
     free_x: np.ndarray | None = None  # with landmarks: the seeds the assignments place (:func:`fixed_seeds`)
@@ -732,11 +733,13 @@ class KernelState:
     seed_vertices_y: np.ndarray | None = None
 
     def prepared(self) -> "KernelState":
-        """A state as :func:`prepare` left it (spectra, times, seeds, sample orders), with the orientation
-        descriptors kept once computed; every later stage's field at its default."""
+        """A state as :func:`prepare` left it (spectra, times, seeds, sample orders), with the descriptors (plain
+        and orientation-aware, and the seeds' similarity) kept once computed: they depend on the shapes and the
+        seeds only. Every later stage's field at its default."""
         fresh = KernelState(self.source, self.target, self.params, self.token, self.watch, self.taus, self.spec_x,
                             self.spec_y, self.seeds_x, self.seeds_y, self.order_x, self.order_y, self.n_seed)
         fresh.orientation = self.orientation
+        fresh.desc_x, fresh.desc_y, fresh.seed_similarity = self.desc_x, self.desc_y, self.seed_similarity
         return fresh
 
     def orientation_blocks(self) -> tuple[np.ndarray, np.ndarray]:
@@ -913,8 +916,10 @@ def seed_problem(state: KernelState) -> SeedProblem:
         if state.desc_x is None:
             state.desc_x, state.desc_y = _descriptors(source, target, state.spec_x, state.spec_y,
                                                       params.descriptor)
-        desc_block = _descriptor_similarity(state.seeds_x.interpolate(source, state.desc_x),
-                                            state.seeds_y.interpolate(target, state.desc_y))  # (seed x, seed y)
+        if state.seed_similarity is None:
+            state.seed_similarity = _descriptor_similarity(state.seeds_x.interpolate(source, state.desc_x),
+                                                           state.seeds_y.interpolate(target, state.desc_y))
+        desc_block = state.seed_similarity  # (seed x, seed y)
     anchor_c = _alignment(state.psi[state.anchors_y], state.phi[state.anchors_x]) if state.anchors_x.size else 0.0
     state.problem = SeedProblem(phi_s, psi_s, anchor_c, desc_block, params.mu, state.free_x, state.free_y)
     return state.problem

@@ -234,7 +234,18 @@ def geodesic_distortion(mesh, mirror: np.ndarray) -> float:
 
 
 def geodesic_distortions(mesh, mirrors) -> list[float]:
-    """:func:`geodesic_distortion` of several self-maps of one mesh (the sample's own distances computed once)."""
+    """:func:`geodesic_distortion` of several self-maps of one mesh, the sample's own distances computed once.
+
+    Parameters
+    ----------
+    mesh : TriMesh
+    mirrors : sequence of (n,) int
+
+    Returns
+    -------
+    list of float
+        One distortion per map, in their order.
+    """
     from corrlib.geometry.geodesics import GeodesicSolver
     from corrlib.geometry.sampling import outermost_farthest_points
 

@@ -63,7 +63,7 @@ correspondence and the coefficients are estimated jointly by EM:
   position and volume but not every limb; the steps move the partners
   along the surfaces to where the intrinsic geometry agrees. By default the
   basis is the eigenfunctions kernel matching's smallest default time
-  resolves (``τ λ · area ≤ 1`` at ``τ = 5.18e-4``, about 160 by Weyl's
+  resolves (``τ λ · area ≤ 1`` at :data:`FINAL_STEP_TAU`, about 160 by Weyl's
   law), from the pair's 500 eigenpairs (kernel matching's default, so the
   spectra cache serves both). The flow's own nearest-neighbour map stays
   in ``extras["flow_map_xy"]``; the deformation (morphs, sequences) is the
@@ -150,7 +150,8 @@ class DivergenceFreeParams:
                                "eigenfunctions and every vertex takes its nearest partner in them (ZoomOut steps "
                                "on the mean of the functional maps of the map and of its reverse, repeated while "
                                "they move fewer partners). -1: the eigenfunctions resolved at kernel matching's "
-                               "smallest default time (τ λ·area ≤ 1, τ = 5.18e-4); 0: off (the flow's map).")
+                               f"smallest default time (τ λ·area ≤ 1, τ = {FINAL_STEP_TAU:g}); 0: off "
+                               "(the flow's map).")
 
 
 def _bbox_centre(p: np.ndarray) -> np.ndarray:

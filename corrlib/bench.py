@@ -310,14 +310,18 @@ class Runner:
     def run(self, *, jobs: int | None = None, scheduler: str | None = None, callback=None,
             limit: int | None = None) -> dict:
         """Run every pending job, then write the summary. ``limit`` stops after that many jobs (tests)."""
-        self.out.mkdir(parents=True, exist_ok=True)
-        self._write_environment(jobs, scheduler)
         todo = self.pending()
         if limit is not None:
             todo = todo[:limit]
-        if todo:
+        if not todo:
+            self.out.mkdir(parents=True, exist_ok=True)
+            self._write_environment(jobs, scheduler)
+        else:  # the workers (the number asked for, the scheduler reached) before anything is written
             with job_executor(jobs, scheduler) as pool:
                 from concurrent.futures import as_completed
+
+                self.out.mkdir(parents=True, exist_ok=True)
+                self._write_environment(jobs, scheduler)
 
                 futures = {pool.submit(run_job, job): (label, job) for label, job in todo}
                 for done, future in enumerate(as_completed(futures), 1):
@@ -471,7 +475,7 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
     meshes = mesh_files(collection)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
-    rows, ranking = [], []
+    rows, ranking, failed_meshes = [], [], set()
     for number, q in enumerate(query_paths, 1):
         row = {"query": q.name, "class": class_of(q), "ap": float("nan"), "first_relevant": "", "top": "",
                "error": ""}
@@ -480,6 +484,13 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
             ranking += [{"query": q.name, "rank": rank, "mesh": h.path.name, "class": h.label, "energy": h.energy,
                          "seconds": h.seconds, "error": h.error} for rank, h in enumerate(hits, 1)]
             labels = [h.label for h in hits]
+            broken = [h for h in hits if h.error]
+            if len(broken) == len(hits):
+                raise InputError(f"no mesh of the collection could be matched (first: {broken[0].path.name}: "
+                                 f"{broken[0].error})")
+            failed_meshes.update(h.path.name for h in broken)
+            if row["class"] not in labels:  # no relevant mesh: the AP is undefined, not 0
+                raise InputError(f"no mesh of class {row['class']!r} in the collection")
             row["ap"] = average_precision(labels, row["class"])
             row["first_relevant"] = labels.index(row["class"]) + 1 if row["class"] in labels else ""
             row["top"] = " ".join(h.path.name for h in hits[:5])
@@ -500,13 +511,19 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
     per_class = {}
     for r in ok:
         per_class.setdefault(r["class"], []).append(r["ap"])
-    summary = {"map": float(np.mean([r["ap"] for r in ok])) if ok else float("nan"),
+    summary = {"map": float(np.mean([r["ap"] for r in ok])) if ok else None,
                "per_class": {c: float(np.mean(v)) for c, v in sorted(per_class.items())},
-               "queries": len(rows), "failed": len(rows) - len(ok), "collection": len(meshes)}
+               "queries": len(rows), "failed": len(rows) - len(ok), "collection": len(meshes),
+               "failed_meshes": sorted(failed_meshes)}
     with atomic_write(out / "retrieval_summary.json") as fh:
         json.dump(summary, fh, indent=1)
     with atomic_write(out / "retrieval_summary.md") as fh:
-        fh.write(f"mean average precision: {summary['map']:.3f} over {len(ok)} queries "
-                 f"({summary['failed']} failed), {len(meshes)} meshes\n\n| class | AP |\n|---|---|\n")
+        head = (f"mean average precision: {summary['map']:.3f} over {len(ok)} queries" if ok else
+                "mean average precision: none (no query was ranked)")
+        fh.write(f"{head} ({summary['failed']} failed), {len(meshes)} meshes\n")
+        if failed_meshes:
+            fh.write(f"meshes that could not be matched (ranked last; see retrieval_ranking.csv): "
+                     f"{', '.join(sorted(failed_meshes))}\n")
+        fh.write("\n| class | AP |\n|---|---|\n")
         fh.write("".join(f"| {c} | {v:.3f} |\n" for c, v in summary["per_class"].items()))
     return summary

@@ -229,11 +229,19 @@ def _stage_match_pictures(result, source, target, out: Path) -> list:
     return written
 
 
+#: what a match may write beside its ``-o`` stem (the result, the maps, the pictures)
+MATCH_OUTPUT_SUFFIXES = (".npz", ".json", ".map_xy.txt", ".map_yx.txt", ".png", ".energy.png")
+
+
 def _check_output_stem(args) -> Path:
-    """The ``-o`` stem, checked before any work (its folder created and writable)."""
+    """The ``-o`` stem, checked before any work (its folder created and writable, and no folder where one of
+    its files goes)."""
     from corrlib.io import check_output_file
 
-    return check_output_file(Path(args.output), "-o")
+    stem = check_output_file(Path(args.output), "-o")
+    for suffix in MATCH_OUTPUT_SUFFIXES:
+        check_output_file(stem.with_name(stem.name + suffix), "-o")
+    return stem
 
 
 def _progress_printer(quiet: bool):
@@ -283,13 +291,27 @@ def _initial_match(value: str, source, target, spec=None):
     return InitialMatch(map_xy=load_map(path, n_target=target.n_vertices, n_source=source.n_vertices))
 
 
+def _best_method(source, target):
+    """The best-ranked registered method for this pair of inputs (:func:`~corrlib.methods.registry.methods_for`)."""
+    from corrlib.methods import methods_for
+    from corrlib.methods.registry import kind_of
+
+    specs = methods_for(source, target)
+    if not specs:
+        raise CorrError(f"no method matches a {kind_of(source)} to a {kind_of(target)} (a contour is matched to a "
+                        "mesh, not a mesh to a contour: swap the two inputs)")
+    return specs[0]
+
+
 def cmd_match(args) -> int:
     from corrlib.methods import get_method, solve
+    from corrlib.methods.registry import check_inputs
 
     _check_output_stem(args)
     source, target = _load_shape(args.source), _load_shape(args.target)
     overrides = _parse_overrides(args.param)
-    spec = get_method(args.method)
+    spec = get_method(args.method) if args.method else _best_method(source, target)
+    check_inputs(spec, source, target)
     initial = None
     if args.init:
         if args.init in _init_choices(spec):
@@ -315,6 +337,7 @@ def cmd_match(args) -> int:
 
 def cmd_refine(args) -> int:
     from corrlib.methods import get_method, solve
+    from corrlib.methods.registry import check_inputs
 
     _check_output_stem(args)
     source, target = _load_shape(args.source), _load_shape(args.target)
@@ -322,6 +345,7 @@ def cmd_refine(args) -> int:
     if not spec.refines:
         raise CorrError(f"method {spec.name!r} does not refine a map (methods that do: "
                         f"{', '.join(m.name for m in _refining_methods())})")
+    check_inputs(spec, source, target)
     initial = _initial_match(args.init, source, target)
     plotting = _preload_plotting() if args.pictures else None
     result = solve(spec, source, target, callback=_progress_printer(args.quiet), initial=initial,
@@ -400,7 +424,7 @@ def cmd_bench_retrieval(args) -> int:
     summary = retrieval_benchmark(args.queries, args.collection, args.output, params=params, jobs=args.jobs,
                                   scheduler=args.scheduler, callback=progress)
     print((Path(args.output) / "retrieval_summary.md").read_text())
-    return 0 if summary["failed"] == 0 else 1
+    return 0 if summary["failed"] == 0 and not summary["failed_meshes"] else 1
 
 
 def cmd_bench_contour(args) -> int:
@@ -445,8 +469,11 @@ def cmd_morph(args) -> int:
 
     if not 2 <= args.frames <= MAX_FRAMES:
         raise CorrError(f"--frames must be between 2 and {MAX_FRAMES}, got {args.frames}")
-    if not (np.isfinite(args.t_max) and args.t_max > 0):
-        raise CorrError(f"--t-max must be a positive number, got {args.t_max}")
+    from corrlib.methods.divergence_free import SEQUENCE_T_MAX
+
+    if not (np.isfinite(args.t_max) and 0 < args.t_max <= SEQUENCE_T_MAX):
+        raise CorrError(f"--t-max must be a positive number of at most {SEQUENCE_T_MAX:g} (the way between the "
+                        f"shapes extrapolated {SEQUENCE_T_MAX:g} times), got {args.t_max}")
     from corrlib.io import ensure_output_folder, staged_output
 
     out = ensure_output_folder(args.output, "-o")
@@ -571,6 +598,8 @@ def cmd_retrieve(args) -> int:
     from corrlib.progress import run
     from corrlib.retrieval import class_of, mean_average_precision, mesh_files, retrieve
 
+    if args.top < 1:
+        raise CorrError(f"--top must be at least 1, got {args.top}")
     if args.output:
         from corrlib.io import check_output_file
 
@@ -618,6 +647,8 @@ def cmd_methods(args) -> int:
 def cmd_perf(args) -> int:
     from corrlib import perf
 
+    if args.repeat < 1:
+        raise CorrError(f"--repeat must be at least 1, got {args.repeat}")
     perf.run_suite(args.suite, repeat=args.repeat, quick=args.quick)
     return 0
 
@@ -679,7 +710,9 @@ def _add_match_parsers(sub) -> None:
     p = _command(sub, "match", "match two shapes with a registered method", func=cmd_match)
     p.add_argument("source")
     p.add_argument("target")
-    p.add_argument("--method", default="kernel-matching", help="registered method (see `corr methods`)")
+    p.add_argument("--method", help="registered method (see `corr methods`; default: the best-ranked method for the "
+                                    "two inputs: kernel-matching for two meshes, contour3d for a contour and a mesh, "
+                                    "contour2d for two contours)")
     p.add_argument("--param", action="append", metavar="NAME=VALUE", help="method parameter (repeatable)")
     p.add_argument("--init", help="descriptors | fmap | best (both, kernel matching) | a map file (one target index "
                                   "per source vertex) | a landmarks file (source target per line), for methods "
@@ -797,7 +830,7 @@ def _add_morph_parser(sub) -> None:
                    help="registered method (divergence-free: its flow; others: linear interpolation through the map)")
     p.add_argument("--frames", type=int, default=11, help="number of frames (default 11)")
     p.add_argument("--t-max", dest="t_max", type=float, default=1.5,
-                   help="last time: 1 is the target, above 1 extrapolates (default 1.5)")
+                   help="last time: 1 is the target, above 1 extrapolates, at most 3 (default 1.5)")
     p.add_argument("--format", default="obj", choices=[s.lstrip(".") for s in suffixes("mesh", writable=True)],
                    help="mesh format of the frames")
     p.add_argument("--param", action="append", metavar="NAME=VALUE", help="method parameter (repeatable)")

@@ -132,8 +132,12 @@ def staged_output(folder):
 
     try:
         yield stage
+        entries = sorted(stage.iterdir())
+        for entry in entries:  # a folder where a file goes would stop the moves half-way: none is moved
+            if (folder / entry.name).is_dir():
+                raise InputError(f"{folder / entry.name}: an output file goes there, but it is a folder")
         with signals_held():  # an interrupt during the moves waits until the whole set is in place
-            for entry in sorted(stage.iterdir()):
+            for entry in entries:
                 os.replace(entry, folder / entry.name)
     except BaseException as exc:
         shutil.rmtree(stage, ignore_errors=True)
@@ -958,13 +962,13 @@ def save_result(stem, arrays: dict[str, np.ndarray], meta: dict | None = None) -
         if a.dtype == object:
             raise InputError(f"result array {key!r} is not numeric")
         clean[key] = a
-    npz = stem.with_suffix(".npz")
+    npz = stem.with_name(stem.name + ".npz")  # appended: a stem with a dot ("run.v1") keeps it
     with atomic_write(npz, "wb") as fh:
         np.savez(fh, **clean)
     info = dict(meta or {})
     info.setdefault("environment", environment())
     info["arrays"] = {k: {"shape": list(v.shape), "dtype": str(v.dtype)} for k, v in clean.items()}
-    js = stem.with_suffix(".json")
+    js = stem.with_name(stem.name + ".json")
     with atomic_write(js) as fh:
         json.dump(_jsonable(info), fh, indent=2)
     return npz, js
@@ -975,14 +979,14 @@ def load_result(stem) -> tuple[dict[str, np.ndarray], dict]:
     stem = Path(stem)
     if stem.suffix in {".npz", ".json"}:
         stem = stem.with_suffix("")
-    npz = _require_file(stem.with_suffix(".npz"))
+    npz = _require_file(stem.with_name(stem.name + ".npz"))
     try:
         with np.load(npz, allow_pickle=False) as data:
             arrays = {k: data[k] for k in data.files}
     except (OSError, ValueError) as exc:
         raise FileFormatError(f"{npz}: cannot read result: {exc}") from exc
     meta = {}
-    js = stem.with_suffix(".json")
+    js = stem.with_name(stem.name + ".json")
     if js.exists():
         try:
             meta = json.loads(js.read_text())

@@ -79,8 +79,12 @@ def triangle_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
 
 
 def signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
-    """Signed volume enclosed by a closed triangle surface (divergence theorem; positive if outward-oriented)."""
+    """Signed volume enclosed by a closed triangle surface (divergence theorem; positive if outward-oriented).
+
+    The sum of the tetrahedra from the origin does not depend on where the origin is; it is taken at the
+    vertices' mean, so that a shape far from the origin does not lose its volume to cancellation."""
     v, f = np.asarray(vertices, dtype=np.float64), np.asarray(faces)
+    v = v - v.mean(axis=0)
     return float(np.einsum("ij,ij->i", v[f[:, 0]], np.cross(v[f[:, 1]], v[f[:, 2]])).sum() / 6.0)
 
 

@@ -187,3 +187,38 @@ def test_retrieval_benchmark_local_and_on_dask(tmp_path):
                                      scheduler=cluster.scheduler_address)
     assert remote["map"] == pytest.approx(summary["map"])
     assert remote["per_class"] == pytest.approx(summary["per_class"])
+
+
+def test_retrieval_benchmark_names_broken_meshes_and_absent_classes(tmp_path, capsys):
+    """A mesh of the collection that cannot be matched is named (and the exit status says so), a query whose
+    class has no mesh has no AP (not 0), and a collection nothing of which can be matched gives no MAP (valid
+    JSON, not NaN)."""
+    from corrlib.cli import main
+    from corrlib.geometry.sections import render_silhouette
+    from corrlib.io import load_mesh, save_contour
+
+    queries, collection, broken = tmp_path / "queries", tmp_path / "collection", tmp_path / "broken"
+    for folder in (queries, collection, broken):
+        folder.mkdir()
+    shutil.copy(TOSCA / "cat1.off", collection)
+    for folder in (collection, broken):
+        (folder / "junk1.off").write_text("OFF\n3 1 0\n0 0 0\n1 0 0\n")  # truncated
+    silhouette = render_silhouette(load_mesh(TOSCA / "cat0.off"), [0, 0, 1])
+    save_contour(queries / "cat-1.txt", silhouette)
+    save_contour(queries / "lion-1.txt", silhouette)
+
+    def strict(path):  # NaN is not JSON
+        return json.loads(path.read_text(), parse_constant=lambda name: pytest.fail(f"{name} in {path}"))
+
+    assert main(["bench-retrieval", str(queries), str(collection), "-o", str(tmp_path / "a"), "--jobs", "1", "-q",
+                 "--n-contour", "60"]) == 1
+    summary = strict(tmp_path / "a" / "retrieval_summary.json")
+    assert summary["failed_meshes"] == ["junk1.off"] and summary["failed"] == 1 and summary["map"] == 1.0
+    rows = (tmp_path / "a" / "retrieval.csv").read_text()
+    assert "no mesh of class 'lion' in the collection" in rows
+    assert "junk1.off" in (tmp_path / "a" / "retrieval_summary.md").read_text()
+    assert main(["bench-retrieval", str(queries), str(broken), "-o", str(tmp_path / "b"), "--jobs", "1", "-q",
+                 "--n-contour", "60"]) == 1
+    summary = strict(tmp_path / "b" / "retrieval_summary.json")
+    assert summary["map"] is None and summary["failed"] == 2
+    assert "no mesh of the collection could be matched" in (tmp_path / "b" / "retrieval.csv").read_text()

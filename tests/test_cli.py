@@ -131,6 +131,26 @@ def test_match_contour_bad_input(tmp_path, capsys):
     assert "no mesh files" in capsys.readouterr().err
 
 
+def test_match_picks_the_method_of_the_inputs_and_names_a_wrong_pair(tmp_path, capsys):
+    """Without --method, a contour and a mesh are matched by 2D-to-3D matching; a mesh and a contour (the wrong
+    order), or a map file given to a method whose inputs do not fit, get a message, not a traceback."""
+    t = np.linspace(0, 2 * np.pi, 60, endpoint=False)
+    circle = tmp_path / "circle.txt"
+    np.savetxt(circle, np.column_stack([np.cos(t), 0.6 * np.sin(t)]))
+    mesh = str(TOSCA / "wolf0.off")
+    np.savetxt(tmp_path / "map.txt", np.arange(60), fmt="%d")
+    assert main(["match", str(circle), mesh, "--param", "n_contour=40", "-o", str(tmp_path / "c"), "-q"]) == 0
+    assert "method contour3d" in capsys.readouterr().out
+    assert main(["match", mesh, str(circle), "-o", str(tmp_path / "m"), "-q"]) == 2
+    assert "swap the two inputs" in capsys.readouterr().err
+    for command in (["match", "--method", "kernel-matching"], ["refine"]):
+        assert main([*command, str(circle), mesh, "--init", str(tmp_path / "map.txt"), "-o", str(tmp_path / "r"),
+                     "-q"]) == 2
+        err = capsys.readouterr().err
+        assert "takes mesh + mesh, got contour + mesh" in err and "Traceback" not in err
+    assert not list(tmp_path.glob("m.*")) and not list(tmp_path.glob("r.*"))
+
+
 @pytest.mark.slow
 def test_match_kernel_with_init_file(tmp_path, capsys):
     n = 4344

@@ -125,3 +125,61 @@ def test_fmap_zoomout_keeps_left_on_left_on_the_cats_and_their_mirror_image():
     mirror = TriMesh(cat1.vertices * [-1.0, 1.0, 1.0], cat1.faces[:, ::-1], name="cat1-mirror")
     mirrored = evaluate(solve("fmap-zoomout", cat0, mirror), mirror, rows0, rows1_sym).summary()
     assert mirrored["mean"] < 0.05 and mirrored["within_0.05"] > 0.8, mirrored
+
+
+def _scaled(mesh, factor: float) -> TriMesh:
+    return TriMesh(mesh.vertices * factor, mesh.faces, name=f"{mesh.name}-x{factor:g}")
+
+
+def test_unit_area_spectra_of_a_scaled_surface_are_equal(wolf_pair):
+    """Scaling a surface by s multiplies its eigenvalues by 1/s² and its mass-orthonormal eigenvectors by 1/s;
+    at unit area both spectra are the same (eigenvectors up to sign)."""
+    wolf = wolf_pair[0]
+    plain = mesh_spectrum(wolf, 30, use_cache=False)
+    scaled = mesh_spectrum(_scaled(wolf, 1e3), 30, use_cache=False)
+    assert np.allclose(scaled.evals[1:], plain.evals[1:] * 1e-6, rtol=1e-8)
+    a, b = plain.at_unit_area(wolf.area), scaled.at_unit_area(wolf.area * 1e6)
+    assert np.allclose(a.evals, b.evals, rtol=1e-8, atol=1e-10)
+    signs = np.sign(np.sum(a.evecs * b.evecs, axis=0))
+    assert np.allclose(a.evecs, b.evecs * signs, atol=1e-6)
+    assert np.allclose(a.evecs.T @ (a.mass @ a.evecs), np.eye(30), atol=1e-8)  # orthonormal at unit area
+    assert np.isclose(a.mass.diagonal().sum(), 1.0)
+
+
+def test_pointwise_steps_do_not_depend_on_the_shapes_sizes(wolf_pair):
+    """The final ZoomOut steps of wolf0 → wolf1 from a noisy map give the same maps with wolf1 in other units
+    (millimetres against metres); unscaled bases would compare images off by the ratio of the areas."""
+    from corrlib.geometry.fmaps import pointwise_from_basis, repeated_pointwise_from_basis
+
+    x, y = wolf_pair
+    rng = np.random.default_rng(3)
+    noisy = np.where(rng.random(x.n_vertices) < 0.2, rng.integers(0, y.n_vertices, x.n_vertices),
+                     np.arange(x.n_vertices))
+    spec_x = mesh_spectrum(x, 60)
+    results = []
+    for factor in (1.0, 1e3, 1e-3):
+        target = _scaled(y, factor)
+        spec_y = mesh_spectrum(target, 60)
+        one = pointwise_from_basis(noisy, noisy.copy(), spec_x, spec_y, 40)
+        repeated = repeated_pointwise_from_basis(noisy, noisy.copy(), spec_x, spec_y, 40, x.adjacency,
+                                                 target.adjacency)
+        results.append((one, repeated))
+    for one, repeated in results[1:]:
+        assert np.mean(one[0] == results[0][0][0]) > 0.995 and np.mean(repeated[0] == results[0][1][0]) > 0.995
+    def offset(m):  # mean distance to the true partner (the wolves share their vertex order)
+        return np.linalg.norm(y.vertices[m] - y.vertices, axis=1).mean() / np.sqrt(y.area)
+
+    assert offset(results[0][1][0]) < 0.2 * offset(noisy)  # and the steps correct the noise
+
+
+@pytest.mark.parametrize("method", ["fmap-zoomout", "descriptor-nn"])
+def test_baselines_match_a_pair_in_different_units_as_the_same_pair(wolf_pair, method):
+    """wolf1 in millimetres against wolf0 in metres: the spectra are taken at unit area, so the descriptors,
+    the functional map and its nearest neighbours are those of the pair in one unit (before, the functional
+    map of wolf0 → wolf1 × 1000 was random: 0.49 √area on the cats)."""
+    x, y = wolf_pair
+    plain = solve(method, x, y).map_xy
+    scaled = solve(method, x, _scaled(y, 1e3)).map_xy
+    assert np.mean(plain == scaled) > 0.995
+    if method == "fmap-zoomout":  # and that map is the wolves' identity up to a few near misses
+        assert np.linalg.norm(y.vertices[plain] - y.vertices, axis=1).mean() < 0.01 * np.sqrt(y.area)

@@ -61,6 +61,70 @@ def test_output_locations_are_checked_before_any_work(tmp_path, capsys):
     assert "Dask scheduler address" in error_of(capsys, ["bench", tmp_path, "-o", tmp_path / "b", "--scheduler",
                                                         "not a url"])
     assert not (tmp_path / "b").exists()
+    dataset = tmp_path / "pair"
+    dataset.mkdir()
+    for name in ("wolf0", "wolf1"):
+        (dataset / f"{name}.off").symlink_to(TOSCA / f"{name}.off")
+    assert "whole number of worker processes" in error_of(capsys, ["bench", dataset, *FAST, "--jobs", "-3", "-o",
+                                                                   tmp_path / "b"])
+    assert not (tmp_path / "b").exists()  # not even environment.json
+
+
+def test_a_folder_where_an_output_file_goes_stops_before_any_work_and_a_dotted_stem_keeps_its_dot(tmp_path,
+                                                                                                   capsys):
+    from corrlib.io import staged_output
+    from corrlib.methods.base import MatchResult
+
+    (tmp_path / "x.map_yx.txt").mkdir()
+    start = time.perf_counter()
+    message = error_of(capsys, ["match", WOLF0, WOLF1, *FAST, "-o", tmp_path / "x"])
+    assert "x.map_yx.txt" in message and "is a folder" in message, message
+    assert time.perf_counter() - start < 5 and files_in(tmp_path) == ["x.map_yx.txt"]
+    # the staging itself moves nothing where one destination is a folder
+    (tmp_path / "set").mkdir()
+    (tmp_path / "set" / "b.txt").mkdir()
+    with pytest.raises(Exception, match="b.txt: an output file goes there, but it is a folder"):
+        with staged_output(tmp_path / "set") as stage:
+            (stage / "a.txt").write_text("a")
+            (stage / "b.txt").write_text("b")
+    assert files_in(tmp_path / "set") == ["b.txt"]
+    # "run.v1" and "run.v2" are two result sets, not one overwritten by the other
+    for stem in ("run.v1", "run.v2"):
+        assert main(["match", WOLF0, WOLF1, *FAST, "-o", str(tmp_path / "dots" / stem), "-q"]) == 0
+    assert files_in(tmp_path / "dots") == sorted(f"run.{v}{suffix}" for v in ("v1", "v2")
+                                                 for suffix in (".json", ".map_xy.txt", ".map_yx.txt", ".npz"))
+    assert MatchResult.load(tmp_path / "dots" / "run.v1").method == "descriptor-nn"
+
+
+def test_a_morph_extrapolates_at_most_as_far_as_the_studio_scrubs(capsys, tmp_path):
+    """--t-max 1e308 wrote frames of infinite coordinates; the last time is bounded as in the studio."""
+    from corrlib.methods.divergence_free import SEQUENCE_T_MAX
+
+    for t_max in ("1e308", str(SEQUENCE_T_MAX * 1.01)):
+        message = error_of(capsys, ["morph", WOLF0, WOLF1, *FAST, "--t-max", t_max, "-o", tmp_path / "m"])
+        assert f"at most {SEQUENCE_T_MAX:g}" in message, message
+    assert not (tmp_path / "m").exists() or files_in(tmp_path / "m") == []
+
+
+def test_counts_below_one_are_refused(capsys, tmp_path):
+    assert "--top must be at least 1" in error_of(capsys, ["retrieve", tmp_path / "q.txt", tmp_path, "--top", "-5"])
+    assert "--repeat must be at least 1" in error_of(capsys, ["perf", "foundation", "--repeat", "0"])
+
+
+def test_descriptors_that_cannot_tell_points_apart_are_named(capsys, tmp_path):
+    """SHOT on a coarse round surface is empty at every vertex: a nearest-neighbour map would send every
+    vertex to one, and a functional map would divide by zero; both methods say why instead."""
+    import trimesh
+
+    from corrlib.io import save_mesh
+
+    sphere = trimesh.creation.icosphere(subdivisions=2)
+    path = tmp_path / "ball.off"
+    save_mesh(path, sphere.vertices, sphere.faces)
+    for method in ("descriptor-nn", "fmap-zoomout"):
+        message = error_of(capsys, ["match", path, path, "--method", method, "--param", "descriptor=shot",
+                                    "-o", tmp_path / method])
+        assert "ball.off: the shot descriptors are the same at every vertex" in message, message
 
 
 @pytest.mark.skipif(os.geteuid() != 0, reason="needs root to become another user (setpriv)")

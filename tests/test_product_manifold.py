@@ -145,6 +145,25 @@ def test_bad_bands_and_parameters(curves):
         pm.map_density(np.array([fy.n]), fy)
 
 
+def test_a_band_too_wide_for_the_localized_stage_is_refused_before_any_work(wolf_pair, monkeypatch):
+    """A band of 5 % on two 5k meshes would be an eigenproblem of 1.25M product vertices (it ran for more than
+    ten minutes): refused with the widest fraction these shapes take, before the initial map is computed."""
+    from corrlib.methods import product_manifold as P
+    from corrlib.methods import solve
+
+    P.check_band_size([], 10 ** 6, 10 ** 6, 7.0, 7.0)  # no bands: the global stage alone
+    P.check_band_size([0.05], 200, 200, 3.0, 3.0)  # curves: 2,000 product vertices
+    with pytest.raises(ParameterError, match="at most") as refused:
+        P.check_band_size([0.05], 5000, 5000, 7.0, 7.0)
+    widest = float(re.search(r"at most ([0-9.e-]+)", str(refused.value)).group(1))
+    P.check_band_size([widest], 5000, 5000, 7.0, 7.0)  # the fraction the message offers is taken
+    called = []
+    monkeypatch.setattr("corrlib.methods.baselines.solve_fmap_zoomout", lambda *a, **k: called.append(a))
+    with pytest.raises(ParameterError, match="bands: a band of 0.05 of the 4344 target vertices"):
+        solve("product-manifold", *wolf_pair, bands="0.05")
+    assert not called
+
+
 def noisy_landmarks(n, seed=0):
     rng = np.random.default_rng(seed)
     lx = rng.choice(n, n // 10, replace=False)

@@ -173,6 +173,15 @@ def resolved_eigenpairs(evals: np.ndarray, area: float, tau: float) -> int:
     return max(1, int(np.count_nonzero(np.asarray(evals) * area * tau <= 1.0)))
 
 
+def _unit_area_bases(spec_x, spec_y, k: int):
+    """The first ``k`` eigenpairs of both shapes scaled to unit area (the lumped masses sum to the area): the
+    partners are searched in one embedding whatever the two shapes' sizes. Unscaled, the images of one shape's
+    basis functions in the other's are off by the ratio of their areas (``C_xy = Φᵀ M_X Π Ψ`` grows as
+    ``√(A_X / A_Y)``)."""
+    return (spec_x.truncated(k).at_unit_area(float(spec_x.mass.diagonal().sum())),
+            spec_y.truncated(k).at_unit_area(float(spec_y.mass.diagonal().sum())))
+
+
 def pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k, both_directions: bool = True):
     """One ZoomOut step (Melzi et al. 2019, the pointwise maps from a functional map) with one functional map
     estimated from both directions of the map.
@@ -208,7 +217,8 @@ def pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k, both_directions: boo
     new_xy : (n_x,) int
     new_yx : (n_y,) int
     """
-    phi, psi = spec_x.evecs[:, :k], spec_y.evecs[:, :k]
+    spec_x, spec_y = _unit_area_bases(spec_x, spec_y, k)
+    phi, psi = spec_x.evecs, spec_y.evecs
     c_xy = pointwise_to_functional(map_xy, psi, phi, spec_x.mass.diagonal())  # pulls Y's functions back to X
     c_yx = pointwise_to_functional(map_yx, phi, psi, spec_y.mass.diagonal())
     if not both_directions:
@@ -253,7 +263,8 @@ def repeated_pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k, graph_x, gr
     map_yx : (n_y,) int
     """
     map_xy, map_yx = pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k)  # the first step searches globally
-    phi, psi = np.ascontiguousarray(spec_x.evecs[:, :k]), np.ascontiguousarray(spec_y.evecs[:, :k])
+    spec_x, spec_y = _unit_area_bases(spec_x, spec_y, k)
+    phi, psi = np.ascontiguousarray(spec_x.evecs), np.ascontiguousarray(spec_y.evecs)
     mass_x, mass_y = spec_x.mass.diagonal(), spec_y.mass.diagonal()
     c_xy = pointwise_to_functional(map_xy, psi, phi, mass_x)
     c_yx = pointwise_to_functional(map_yx, phi, psi, mass_y)

@@ -121,7 +121,7 @@ class GeodesicSolver:
         if self._heat is None:
             import potpourri3d as pp3d
 
-            self._heat = pp3d.MeshHeatMethodDistanceSolver(self.mesh.vertices, self.mesh.faces)
+            self._heat = pp3d.MeshHeatMethodDistanceSolver(self._centred_vertices(), self.mesh.faces)
         return self._heat
 
     @property
@@ -129,8 +129,14 @@ class GeodesicSolver:
         if self._flip is None:
             import potpourri3d as pp3d
 
-            self._flip = pp3d.EdgeFlipGeodesicSolver(self.mesh.vertices, self.mesh.faces)
+            self._flip = pp3d.EdgeFlipGeodesicSolver(self._centred_vertices(), self.mesh.faces)
         return self._flip
+
+    def _centred_vertices(self) -> np.ndarray:
+        """The vertices less their mean: distances do not move, and a mesh far from the origin (coordinates of
+        1e9 for a shape of size 1) keeps the digits its edges need."""
+        vertices = np.asarray(self.mesh.vertices, dtype=np.float64)
+        return vertices - vertices.mean(axis=0)
 
     def distances(self, sources, method: str = "heat") -> np.ndarray:
         """Distances from each source to every vertex.

@@ -86,6 +86,19 @@ class Spectrum:
         """The first ``k`` eigenpairs."""
         return Spectrum(self.evals[:k], self.evecs[:, :k], self.stiffness, self.mass)
 
+    def at_unit_area(self, area: float) -> "Spectrum":
+        """The eigenpairs of the surface scaled to unit area (``area``: its area now).
+
+        Scaling a surface by ``s`` multiplies its mass by ``s²`` and leaves the cotangent stiffness as it is,
+        so the eigenvalues become ``λ s²`` and the mass-orthonormal eigenvectors ``φ s``. With ``s² = 1 /
+        area``: eigenvalues ``λ · area``, eigenvectors ``φ √area``, orthonormal under ``M / area``. What is
+        computed from this spectrum (spectral descriptors, functional maps, nearest neighbours in the
+        eigenbasis) does not depend on the units of either shape of a pair.
+        """
+        if not area > 0:
+            raise InputError(f"a spectrum is scaled to unit area by a positive area, got {area}")
+        return Spectrum(self.evals * area, self.evecs * np.sqrt(area), self.stiffness, self.mass / area)
+
 
 def _is_diagonal(m: sp.spmatrix) -> bool:
     m = sp.csr_matrix(m)

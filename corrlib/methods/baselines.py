@@ -18,6 +18,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from corrlib.errors import InputError
 from corrlib.descriptors import DESCRIPTOR_KINDS, mesh_descriptors
 from corrlib.descriptors.orientation import orientation_operators
 from corrlib.geometry.fmaps import functional_map, multiplication_operators, resolvent_mask, zoomout
@@ -49,13 +50,21 @@ class DescriptorNNParams:
 
 
 def _spectra_and_descriptors(source, target, n_eigs: int, descriptor: str, n_scales: int, watch):
-    """Laplacian spectra (``n_eigs`` pairs, capped by the vertex counts) and descriptors of both shapes."""
+    """Laplacian spectra (``n_eigs`` pairs, capped by the vertex counts) of both shapes scaled to unit area
+    (:meth:`~corrlib.geometry.spectrum.Spectrum.at_unit_area`: a pair in different units, millimetres against
+    metres, is matched as the same pair), and the descriptors computed from them."""
     with watch("eigen"):
         spec_x, spec_y = mesh_spectra((source, target),
                                       (available_eigenpairs(source, n_eigs), available_eigenpairs(target, n_eigs)))
+        spec_x, spec_y = spec_x.at_unit_area(source.area), spec_y.at_unit_area(target.area)
     with watch("descriptors"):
         desc_x = mesh_descriptors(source, descriptor, spectrum=spec_x, n_scales=n_scales)
         desc_y = mesh_descriptors(target, descriptor, spectrum=spec_y, n_scales=n_scales)
+    for mesh, desc in ((source, desc_x), (target, desc_y)):
+        if np.ptp(desc, axis=0).max() <= 1e-9 * max(float(np.abs(desc).max()), 1e-300):
+            raise InputError(f"{mesh.name}: the {descriptor} descriptors are the same at every vertex (SHOT on a "
+                             "surface too smooth or too coarse for its support), so they cannot tell its points "
+                             "apart; try descriptor=wks")
     return spec_x, spec_y, desc_x, desc_y
 
 
@@ -132,6 +141,19 @@ def descriptor_functional_map(source, target, spec_x, spec_y, desc_x, desc_y, k:
     return functional_map(coef_x, coef_y, resolvent_mask(spec_x.evals[:k], spec_y.evals[:k]), pairs, weights)
 
 
+def _unit_norm_descriptors(desc_x, desc_y, spec_x, spec_y, source, target, kind: str):
+    """The descriptor functions scaled to unit M-norm on each shape (the terms then compare shapes of any
+    scale and vertex density), without those that vanish on either shape (SHOT on a smooth round surface:
+    every histogram bin but a few is empty there); :class:`InputError` where none is left."""
+    norm_x = np.sqrt(spec_x.mass.diagonal() @ desc_x ** 2)
+    norm_y = np.sqrt(spec_y.mass.diagonal() @ desc_y ** 2)
+    keep = (norm_x > 1e-12 * max(float(norm_x.max()), 1e-300)) & (norm_y > 1e-12 * max(float(norm_y.max()), 1e-300))
+    if not keep.any():
+        raise InputError(f"the {kind} descriptors vanish on {source.name} or {target.name}: nothing for a "
+                         "functional map to preserve (try descriptor=wks)")
+    return desc_x[:, keep] / norm_x[keep], desc_y[:, keep] / norm_y[keep]
+
+
 def solve_fmap_zoomout(source, target, params: FmapZoomOutParams, token):
     watch = Stopwatch()
     k_final = min(available_eigenpairs(source, params.k_final, "functional maps"),
@@ -144,9 +166,7 @@ def solve_fmap_zoomout(source, target, params: FmapZoomOutParams, token):
     with watch("descriptors"):
         pick = np.unique(np.linspace(0, desc_x.shape[1] - 1, params.n_descriptors).round().astype(int))
         desc_x, desc_y = desc_x[:, pick], desc_y[:, pick]
-        # unit M-norm on each shape: the terms compare shapes of any scale and vertex density
-        desc_x = desc_x / np.sqrt(spec_x.mass.diagonal() @ desc_x ** 2)
-        desc_y = desc_y / np.sqrt(spec_y.mass.diagonal() @ desc_y ** 2)
+        desc_x, desc_y = _unit_norm_descriptors(desc_x, desc_y, spec_x, spec_y, source, target, params.descriptor)
     yield Progress("functional map", 0.4)
     with watch("fmap"):
         c_yx = descriptor_functional_map(source, target, spec_x, spec_y, desc_x, desc_y, k_init, params)

@@ -271,6 +271,8 @@ def _given_times(params: KernelMatchingParams) -> np.ndarray | None:
             raise ParameterError(f"times must be comma-separated numbers, got {params.times!r}") from None
         if taus.size == 0 or not np.all(np.isfinite(taus)) or np.any(taus <= 0):
             raise ParameterError(f"times must be positive numbers, got {params.times!r}")
+        if np.any(np.diff(taus) >= 0):  # the schedule goes from coarse to fine
+            raise ParameterError(f"times must decrease (from the coarsest kernel to the finest), got {params.times!r}")
         return taus
     if params.tau_min > params.tau_max:
         raise ParameterError(f"tau_min ({params.tau_min}) must not exceed tau_max ({params.tau_max})")

@@ -143,6 +143,43 @@ def _extract(coeffs, fx: pm.Factor, fy: pm.Factor, how: str, token=None,
     return pm.ml_map(coeffs, fx, fy), pm.ml_map(coeffs.T, fy, fx)
 
 
+#: nonzeros of the largest band operator the localized stage takes (product vertices times the couplings of
+#: each, the product of the factors' nonzeros per row): its Dirichlet harmonics are an eigenproblem of that
+#: size (a 162-vertex sphere against itself in one whole band, 26k product vertices and 1.3M nonzeros: 25 s)
+MAX_BAND_NONZEROS = 1_500_000
+
+
+def check_band_size(bands: list[float], n_x: int, n_y: int, row_x: float, row_y: float) -> None:
+    """:class:`ParameterError` where the first (widest) band's operator would hold more than
+    :data:`MAX_BAND_NONZEROS` nonzeros, before any work is done.
+
+    Parameters
+    ----------
+    bands : list of float
+        The band fractions, widest first.
+    n_x, n_y : int
+        Vertices (or curve samples) of the two factors.
+    row_x, row_y : float
+        Mean nonzeros per row of each factor's operator (a vertex and its neighbours: about 7 on a surface,
+        3 on a curve).
+    """
+    if not bands:
+        return
+    size = n_x * max(1, int(np.ceil(bands[0] * n_y)))
+    nonzeros = size * row_x * row_y
+    if nonzeros > MAX_BAND_NONZEROS:
+        largest = MAX_BAND_NONZEROS / (row_x * row_y * n_x * n_y)
+        raise ParameterError(f"bands: a band of {bands[0]:g} of the {n_y} target vertices around each of the {n_x} "
+                             f"source vertices holds {size:,} product vertices ({nonzeros:,.0f} couplings), more "
+                             f"than the localized stage takes ({MAX_BAND_NONZEROS:,}); use band fractions of at "
+                             f"most {largest:.2g} on these shapes, or none (the global stage alone, the default on "
+                             "meshes)")
+
+
+def _nonzeros_per_row(matrix) -> float:
+    return matrix.nnz / max(matrix.shape[0], 1)
+
+
 def refine(fx: pm.Factor, fy: pm.Factor, ix, iy, source_points: np.ndarray, target_points: np.ndarray,
            params: ProductManifoldParams, token=None, watch: Stopwatch | None = None, source=None):
     """Dense map from matches on two factors (generator; returns ``(map_xy, map_yx, extras)``).
@@ -155,6 +192,7 @@ def refine(fx: pm.Factor, fy: pm.Factor, ix, iy, source_points: np.ndarray, targ
     if ix.size == 0:
         raise InputError("the initial map is empty: give at least one match")
     bands = params.band_list()
+    check_band_size(bands, fx.n, fy.n, _nonzeros_per_row(fx.stiffness), _nonzeros_per_row(fy.stiffness))
     yield Progress("global diffusion", 0.1, f"{ix.size} matches, {fx.k} x {fy.k} product coefficients")
     with watch("global"):
         coeffs = pm.diffuse(_match_density_coeffs(ix, iy, fx, fy), fx, fy, params.t_global)
@@ -262,6 +300,9 @@ def solve_product_manifold(source, target, params: ProductManifoldParams, token,
     from corrlib.methods.base import InitialMatch
 
     watch = Stopwatch()
+    # before the initial map's work: a vertex couples with itself and its neighbours
+    check_band_size(params.band_list(), source.n_vertices, target.n_vertices,
+                    1 + _nonzeros_per_row(source.adjacency), 1 + _nonzeros_per_row(target.adjacency))
     if initial is None:  # nothing given (e.g. from the studio): refine the functional-maps baseline
         from corrlib.methods.baselines import FmapZoomOutParams, solve_fmap_zoomout
 

@@ -122,6 +122,14 @@ def methods_for(source, target) -> list[MethodSpec]:
     return [s for s in all_methods() if s.inputs == kinds]
 
 
+def check_inputs(spec: MethodSpec, source, target) -> None:
+    """:class:`InputError` unless the method takes this pair of inputs (a mesh or a contour on each side)."""
+    kinds = (kind_of(source), kind_of(target))
+    if kinds != spec.inputs:
+        raise InputError(f"method {spec.name!r} takes {spec.inputs[0]} + {spec.inputs[1]}, "
+                         f"got {kinds[0]} + {kinds[1]}")
+
+
 def solve_iter(method: str | MethodSpec, source, target, params=None, token: CancelToken | None = None, *,
                initial=None, **overrides):
     """Generator form of :func:`solve` (what the studio runs in a worker thread).
@@ -131,10 +139,7 @@ def solve_iter(method: str | MethodSpec, source, target, params=None, token: Can
     and ``method`` filled in.
     """
     spec = method if isinstance(method, MethodSpec) else get_method(method)
-    kinds = (kind_of(source), kind_of(target))
-    if kinds != spec.inputs:
-        raise InputError(f"method {spec.name!r} takes {spec.inputs[0]} + {spec.inputs[1]}, "
-                         f"got {kinds[0]} + {kinds[1]}")
+    check_inputs(spec, source, target)
     if params is None:
         params = make_params(spec.params, **overrides)
     else:

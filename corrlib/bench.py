@@ -314,15 +314,12 @@ class Runner:
         if limit is not None:
             todo = todo[:limit]
         if not todo:
-            self.out.mkdir(parents=True, exist_ok=True)
             self._write_environment(jobs, scheduler)
         else:  # the workers (the number asked for, the scheduler reached) before anything is written
             with job_executor(jobs, scheduler) as pool:
                 from concurrent.futures import as_completed
 
-                self.out.mkdir(parents=True, exist_ok=True)
                 self._write_environment(jobs, scheduler)
-
                 futures = {pool.submit(run_job, job): (label, job) for label, job in todo}
                 for done, future in enumerate(as_completed(futures), 1):
                     label, job = futures[future]
@@ -333,6 +330,7 @@ class Runner:
         return self.summarize()
 
     def _write_environment(self, jobs, scheduler) -> None:
+        """The output folder (created) and its ``environment.json``."""
         from corrlib.io import atomic_write, environment
 
         env = environment()
@@ -342,6 +340,7 @@ class Runner:
                    methods=[{"label": m.label, "name": m.name, "params": m.params,
                              "all_params": _all_params(m)} for m in self.methods],
                    external=self.external)
+        self.out.mkdir(parents=True, exist_ok=True)
         with atomic_write(self.out / "environment.json") as fh:
             json.dump(env, fh, indent=1, default=str)
 

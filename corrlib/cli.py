@@ -200,9 +200,9 @@ def _stage_match_outputs(result, source, target, out: Path, pictures: bool) -> l
     npz, js = result.save(out)
     written = [npz, js]
     if result.map_xy is not None:
-        written.append(save_map(out.with_name(out.name + ".map_xy.txt"), result.map_xy))
+        written.append(save_map(_beside(out, ".map_xy.txt"), result.map_xy))
     if result.map_yx is not None:
-        written.append(save_map(out.with_name(out.name + ".map_yx.txt"), result.map_yx))
+        written.append(save_map(_beside(out, ".map_yx.txt"), result.map_yx))
     if pictures:
         written += _stage_match_pictures(result, source, target, out)
     return [Path(p) for p in written]
@@ -213,19 +213,19 @@ def _stage_match_pictures(result, source, target, out: Path) -> list:
     if result.energy_trace is not None:
         from corrlib.plotting import save_energy_trace
 
-        written.append(save_energy_trace(out.with_name(out.name + ".energy.png"), result.energy_trace,
+        written.append(save_energy_trace(_beside(out, ".energy.png"), result.energy_trace,
                                          result.extras.get("tau_trace")))
     from corrlib.shapes import Contour2D, TriMesh
 
     if result.map_yx is not None and isinstance(source, TriMesh) and isinstance(target, TriMesh):
         from corrlib.plotting import save_colour_transfer
 
-        written.append(save_colour_transfer(out.with_name(out.name + ".png"), source, target, result.map_yx,
+        written.append(save_colour_transfer(_beside(out, ".png"), source, target, result.map_yx,
                                             title=f"{result.method}"))
     elif isinstance(source, Contour2D) and isinstance(target, Contour2D):
         from corrlib.plotting import save_torus_pictures
 
-        written.append(save_torus_pictures(out.with_name(out.name + ".png"), result))
+        written.append(save_torus_pictures(_beside(out, ".png"), result))
     return written
 
 
@@ -240,8 +240,15 @@ def _check_output_stem(args) -> Path:
 
     stem = check_output_file(Path(args.output), "-o")
     for suffix in MATCH_OUTPUT_SUFFIXES:
-        check_output_file(stem.with_name(stem.name + suffix), "-o")
+        check_output_file(_beside(stem, suffix), "-o")
     return stem
+
+
+def _beside(stem: Path, suffix: str) -> Path:
+    """The file ``stem`` + ``suffix`` (one of :data:`MATCH_OUTPUT_SUFFIXES`: the ones checked before any work)."""
+    if suffix not in MATCH_OUTPUT_SUFFIXES:
+        raise ValueError(f"{suffix!r} is not among the suffixes checked before the work")
+    return stem.with_name(stem.name + suffix)
 
 
 def _progress_printer(quiet: bool):
@@ -586,7 +593,7 @@ def cmd_match_contour(args) -> int:
 
     with staged_output(out.parent) as stage:
         staged = [*result.save(stage / out.name),
-                  save_contour_match(stage / (out.name + ".png"), path.contour_points, mesh, path.vertices,
+                  save_contour_match(_beside(stage / out.name, ".png"), path.contour_points, mesh, path.vertices,
                                      path.contour_index, title=f"energy {result.energy:.4g}")]
     if not args.quiet:
         for written in staged:

@@ -157,6 +157,8 @@ def test_a_band_too_wide_for_the_localized_stage_is_refused_before_any_work(wolf
         P.check_band_size([0.05], 5000, 5000, 7.0, 7.0)
     widest = float(re.search(r"at most ([0-9.e-]+)", str(refused.value)).group(1))
     P.check_band_size([widest], 5000, 5000, 7.0, 7.0)  # the fraction the message offers is taken
+    with pytest.raises(ParameterError, match="a band of 0.05"):  # the widest band, wherever it is in the list
+        P.check_band_size([0.001, 0.05], 5000, 5000, 7.0, 7.0)
     called = []
     monkeypatch.setattr("corrlib.methods.baselines.solve_fmap_zoomout", lambda *a, **k: called.append(a))
     with pytest.raises(ParameterError, match="bands: a band of 0.05 of the 4344 target vertices"):

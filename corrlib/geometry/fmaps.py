@@ -217,10 +217,14 @@ def pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k, both_directions: boo
     new_xy : (n_x,) int
     new_yx : (n_y,) int
     """
-    spec_x, spec_y = _unit_area_bases(spec_x, spec_y, k)
-    phi, psi = spec_x.evecs, spec_y.evecs
-    c_xy = pointwise_to_functional(map_xy, psi, phi, spec_x.mass.diagonal())  # pulls Y's functions back to X
-    c_yx = pointwise_to_functional(map_yx, phi, psi, spec_y.mass.diagonal())
+    return _global_step(map_xy, map_yx, *_unit_area_bases(spec_x, spec_y, k), both_directions)
+
+
+def _global_step(map_xy, map_yx, unit_x, unit_y, both_directions: bool = True):
+    """:func:`pointwise_from_basis` on bases already at unit area (:func:`_unit_area_bases`)."""
+    phi, psi = unit_x.evecs, unit_y.evecs
+    c_xy = pointwise_to_functional(map_xy, psi, phi, unit_x.mass.diagonal())  # pulls Y's functions back to X
+    c_yx = pointwise_to_functional(map_yx, phi, psi, unit_y.mass.diagonal())
     if not both_directions:
         return (np.where(map_xy >= 0, nearest_rows(phi @ c_xy, psi), -1),
                 np.where(map_yx >= 0, nearest_rows(psi @ c_yx, phi), -1))
@@ -262,8 +266,8 @@ def repeated_pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k, graph_x, gr
     map_xy : (n_x,) int
     map_yx : (n_y,) int
     """
-    map_xy, map_yx = pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k)  # the first step searches globally
     spec_x, spec_y = _unit_area_bases(spec_x, spec_y, k)
+    map_xy, map_yx = _global_step(map_xy, map_yx, spec_x, spec_y)  # the first step searches globally
     phi, psi = np.ascontiguousarray(spec_x.evecs), np.ascontiguousarray(spec_y.evecs)
     mass_x, mass_y = spec_x.mass.diagonal(), spec_y.mass.diagonal()
     c_xy = pointwise_to_functional(map_xy, psi, phi, mass_x)

@@ -150,13 +150,13 @@ MAX_BAND_NONZEROS = 1_500_000
 
 
 def check_band_size(bands: list[float], n_x: int, n_y: int, row_x: float, row_y: float) -> None:
-    """:class:`ParameterError` where the first (widest) band's operator would hold more than
+    """:class:`ParameterError` where the widest band's operator would hold more than
     :data:`MAX_BAND_NONZEROS` nonzeros, before any work is done.
 
     Parameters
     ----------
     bands : list of float
-        The band fractions, widest first.
+        The band fractions.
     n_x, n_y : int
         Vertices (or curve samples) of the two factors.
     row_x, row_y : float
@@ -165,11 +165,12 @@ def check_band_size(bands: list[float], n_x: int, n_y: int, row_x: float, row_y:
     """
     if not bands:
         return
-    size = n_x * max(1, int(np.ceil(bands[0] * n_y)))
+    widest = max(bands)
+    size = n_x * max(1, int(np.ceil(widest * n_y)))
     nonzeros = size * row_x * row_y
     if nonzeros > MAX_BAND_NONZEROS:
         largest = MAX_BAND_NONZEROS / (row_x * row_y * n_x * n_y)
-        raise ParameterError(f"bands: a band of {bands[0]:g} of the {n_y} target vertices around each of the {n_x} "
+        raise ParameterError(f"bands: a band of {widest:g} of the {n_y} target vertices around each of the {n_x} "
                              f"source vertices holds {size:,} product vertices ({nonzeros:,.0f} couplings), more "
                              f"than the localized stage takes ({MAX_BAND_NONZEROS:,}); use band fractions of at "
                              f"most {largest:.2g} on these shapes, or none (the global stage alone, the default on "

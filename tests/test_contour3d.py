@@ -508,8 +508,8 @@ def test_energy_is_comparable_across_resolutions(wolf_pair):
     On the product graph a contour step longer than the mesh's edges pays the rest of its way within a layer
     (max metric), so a finer graph costs more: measured +13 % for a 4x subdivided wolf1 matched as given
     (60 points), while cat1 costs 21 % more than wolf1. Meshes finer than ``max_vertices`` are therefore
-    matched decimated to it: +1.2 % for the subdivided wolf1, +3.8 % for a 16x Loop-subdivided (smoothed)
-    one; the curve is reported on the input mesh.
+    matched decimated to it (5,000 vertices, wolf1 has 4,344): +5.9 % for the subdivided wolf1, +3.8 % for a
+    16x Loop-subdivided (smoothed) one, 2 % apart; the curve is reported on the input mesh.
     """
     wolf0, wolf1 = wolf_pair
     contour, _ = silhouette_with_ground_truth(wolf0, resolution=200)
@@ -519,8 +519,9 @@ def test_energy_is_comparable_across_resolutions(wolf_pair):
               "smooth": TriMesh(*smooth, name="smooth"), "cat1": load_mesh(TOSCA / "cat1.off")}
     results = {name: solve("contour3d", contour, mesh, n_contour=60, eps=0.05) for name, mesh in meshes.items()}
     energies = {name: result.energy for name, result in results.items()}
-    assert 0.97 < energies["fine"] / energies["wolf1"] < 1.03, energies
-    assert 0.95 < energies["smooth"] / energies["wolf1"] < 1.06, energies
+    assert 0.95 < energies["fine"] / energies["wolf1"] < 1.08, energies
+    assert 0.95 < energies["smooth"] / energies["wolf1"] < 1.08, energies
+    assert abs(energies["fine"] / energies["smooth"] - 1) < 0.04, energies
     assert max(energies["fine"], energies["smooth"]) < 0.95 * energies["cat1"], energies
     for name in ("fine", "smooth"):  # matched decimated, reported on the input mesh
         result, mesh = results[name], meshes[name]
@@ -530,7 +531,7 @@ def test_energy_is_comparable_across_resolutions(wolf_pair):
         assert "decimated from" in result.energy_meaning
     assert "matched_vertices" not in results["wolf1"].extras  # 4,344 vertices: matched as given
     as_given = solve("contour3d", contour, meshes["fine"], n_contour=60, eps=0.05, max_vertices=0)
-    assert as_given.energy / energies["wolf1"] > 1.08, (as_given.energy, energies)  # what the budget removes
+    assert as_given.energy / energies["wolf1"] > 1.1, (as_given.energy, energies)  # what the budget removes
 
 
 def test_the_vertex_budget_is_checked():

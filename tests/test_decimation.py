@@ -50,3 +50,70 @@ def test_part_labels_follow_the_nearest_input_vertex(sphere):
     away_from_the_border = np.abs(coarse.mesh.vertices[:, 0]) > 0.1
     expected = np.where(coarse.mesh.vertices[:, 0] > 0, 1, 2)
     assert np.array_equal(coarse.mesh.labels[away_from_the_border], expected[away_from_the_border])
+
+
+def test_a_fin_and_coincident_vertices_are_removed(sphere):
+    """A face folded onto its reverse (a fin) and a duplicated vertex are what edge collapse can leave."""
+    from corrlib.geometry.decimation import without_degenerate_faces
+
+    a, b = sphere.faces[0, :2]
+    tip = sphere.vertices[[a, b]].mean(axis=0) * 1.5
+    points = np.vstack([sphere.vertices, tip, sphere.vertices[5]])  # the fin's tip; a copy of vertex 5
+    faces = sphere.faces.copy()
+    fan = np.flatnonzero((faces == 5).any(axis=1))[:3]  # half of vertex 5's faces use its copy: a seam
+    faces[fan] = np.where(faces[fan] == 5, len(points) - 1, faces[fan])
+    fin = len(points) - 2
+    faces = np.vstack([faces, [[a, b, fin], [b, a, fin]]])
+    repaired_points, repaired_faces = without_degenerate_faces(points, faces)
+    mesh = TriMesh(repaired_points, repaired_faces, name="repaired")  # valid: raises otherwise
+    assert mesh.n_vertices == sphere.n_vertices and mesh.n_faces == sphere.n_faces
+    assert mesh.area == pytest.approx(sphere.area, rel=1e-12)
+
+
+@pytest.mark.slow
+def test_decimating_a_flat_subdivision_repairs_its_zero_area_faces():
+    """Edge collapse on flat regions (a mesh subdivided at its edge midpoints) leaves faces of zero area;
+    the decimated mesh has none, keeps the surface's genus and its area (to the chords' 1 %), and the vertex
+    budget."""
+    import fast_simplification
+
+    from _data import TOSCA
+    from corrlib.io import load_mesh
+    from corrlib.shapes import inspect_mesh
+
+    wolf = load_mesh(TOSCA / "wolf1.off")
+    flat = trimesh.Trimesh(wolf.vertices, wolf.faces, process=False).subdivide()
+    raw = fast_simplification.simplify(np.array(flat.vertices), np.array(flat.faces, dtype=np.int32),
+                                       target_count=round(len(flat.faces) * 5000 / len(flat.vertices)))
+    assert any(finding.code == "zero-area-face" for finding in inspect_mesh(*raw))  # what is repaired
+    coarse = decimated(TriMesh(flat.vertices, flat.faces, name="flat"), 5000).mesh
+    assert 4500 < coarse.n_vertices <= 5000
+    euler = lambda m: m.n_vertices - len(np.unique(np.sort(m.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1),
+                                                   axis=0)) + m.n_faces
+    assert euler(coarse) == euler(wolf)
+    assert coarse.area == pytest.approx(wolf.area, rel=0.02)
+
+
+def test_relaxation_evens_out_the_edges_and_stays_on_the_surface():
+    """Quadric edge collapse leaves an adaptive mesh; the relaxed one has more even edges, the same
+    connectivity, and its vertices on the input surface."""
+    import fast_simplification
+    from scipy.spatial import cKDTree
+
+    from _data import TOSCA
+    from corrlib.geometry.decimation import tangentially_relaxed
+    from corrlib.io import load_mesh
+
+    wolf = load_mesh(TOSCA / "wolf1.off")
+    fine = TriMesh(*trimesh.remesh.subdivide_loop(wolf.vertices, wolf.faces, iterations=1), name="fine")
+    points, faces = fast_simplification.simplify(np.array(fine.vertices), np.array(fine.faces, dtype=np.int32),
+                                                 target_count=6000)
+    adaptive = TriMesh(points, faces, name="adaptive")
+    relaxed = tangentially_relaxed(adaptive, fine)
+    spread = lambda m: m.edge_lengths.std() / m.edge_lengths.mean()
+    assert spread(relaxed) < 0.85 * spread(adaptive), (spread(relaxed), spread(adaptive))
+    assert np.array_equal(relaxed.faces, adaptive.faces)
+    # on the surface: within one of its faces of a surface vertex (the chords of the coarser mesh cut in)
+    off_surface = cKDTree(fine.vertices).query(relaxed.vertices)[0]
+    assert off_surface.max() < fine.edge_lengths.max() and off_surface.mean() < 0.5 * fine.edge_lengths.mean()
+    assert relaxed.area == pytest.approx(fine.area, rel=0.02)

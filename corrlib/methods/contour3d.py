@@ -231,8 +231,9 @@ class Contour3DParams:
                                 "graph has n_contour layers); fewer where the mesh's mean edge is longer "
                                 "than that step.")
     max_vertices: int = param(DEFAULT_MAX_VERTICES, label="Mesh vertices", low=0, high=10_000_000,
-                              help="A finer mesh is decimated to about this many vertices (quadric edge collapse) "
-                                   "before matching, and the curve is reported on its nearest input vertices: the "
+                              help="A finer mesh is decimated to about this many vertices (quadric edge collapse, "
+                                   "then relaxed to even edges) before matching, and the curve is reported on its "
+                                   "nearest input vertices: the "
                                    "product-graph energy grows with the vertex count, so energies compare across "
                                    "meshes at one resolution, and a finer graph is slower. 0: never decimate.")
     k: int = param(25, label="Eigenpairs", low=5, high=500,

@@ -491,7 +491,7 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
             if row["class"] not in labels:  # no relevant mesh: the AP is undefined, not 0
                 raise InputError(f"no mesh of class {row['class']!r} in the collection")
             row["ap"] = average_precision(labels, row["class"])
-            row["first_relevant"] = labels.index(row["class"]) + 1 if row["class"] in labels else ""
+            row["first_relevant"] = labels.index(row["class"]) + 1
             row["top"] = " ".join(h.path.name for h in hits[:5])
         except Exception as exc:  # a failing query is recorded, the others go on
             row["error"] = f"{type(exc).__name__}: {exc}"

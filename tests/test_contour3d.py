@@ -508,8 +508,8 @@ def test_energy_is_comparable_across_resolutions(wolf_pair):
     On the product graph a contour step longer than the mesh's edges pays the rest of its way within a layer
     (max metric), so a finer graph costs more: measured +13 % for a 4x subdivided wolf1 matched as given
     (60 points), while cat1 costs 21 % more than wolf1. Meshes finer than ``max_vertices`` are therefore
-    matched decimated to it (5,000 vertices, wolf1 has 4,344): +5.9 % for the subdivided wolf1, +3.8 % for a
-    16x Loop-subdivided (smoothed) one, 2 % apart; the curve is reported on the input mesh.
+    matched decimated to it (5,000 vertices, wolf1 has 4,344): +4.4 % for the subdivided wolf1, +5.7 % for a
+    16x Loop-subdivided (smoothed) one, 1.3 % apart; the curve is reported on the input mesh.
     """
     wolf0, wolf1 = wolf_pair
     contour, _ = silhouette_with_ground_truth(wolf0, resolution=200)
@@ -547,6 +547,19 @@ def test_a_decimated_match_does_not_depend_on_the_vertex_order(wolf_pair):
     other = solve("contour3d", contour, shuffled, n_contour=60)
     assert other.energy == pytest.approx(base.energy, rel=1e-3)
     assert np.mean(perm[other.map_xy] == base.map_xy) > 0.9
+
+
+@pytest.mark.slow
+def test_a_decimated_match_does_not_depend_on_units_or_position(wolf_pair):
+    """The collapse runs at unit area about the mesh's centre (the package's thresholds are absolute: before,
+    the same 20k cat in metres and in micrometres was decimated differently, 92.8 against 89.6). Equal up to
+    rounding, which can flip the order of two collapses of equal cost (measured 9e-4 at a factor of 1e-6)."""
+    wolf0, wolf1 = wolf_pair
+    contour, _ = silhouette_with_ground_truth(wolf0, resolution=200)
+    fine = trimesh.remesh.subdivide_loop(wolf1.vertices, wolf1.faces, iterations=1)
+    energies = [solve("contour3d", contour, TriMesh(fine[0] * scale + offset, fine[1], name="fine"),
+                      n_contour=60).energy for scale, offset in ((1.0, 0.0), (1e-6, 0.0), (1e3, 1e8))]
+    assert np.allclose(energies, energies[0], rtol=2e-3), energies
 
 
 def test_a_mesh_that_cannot_be_decimated_is_matched_as_given(wolf_pair, monkeypatch):

@@ -117,3 +117,18 @@ def test_relaxation_evens_out_the_edges_and_stays_on_the_surface():
     off_surface = cKDTree(fine.vertices).query(relaxed.vertices)[0]
     assert off_surface.max() < fine.edge_lengths.max() and off_surface.mean() < 0.5 * fine.edge_lengths.mean()
     assert relaxed.area == pytest.approx(fine.area, rel=0.02)
+
+
+def test_a_decimation_is_cached_by_the_mesh_content(sphere, tmp_path, monkeypatch):
+    from corrlib import cache
+
+    monkeypatch.setenv("CORRLIB_CACHE_DIR", str(tmp_path))
+    first = decimated(sphere, 1200)
+    assert len(list((tmp_path / "decimated").glob("*.npz"))) == 1
+    again = decimated(TriMesh(sphere.vertices, sphere.faces, name="same surface"), 1200)  # read from the cache
+    assert np.array_equal(again.mesh.vertices, first.mesh.vertices)
+    assert np.array_equal(again.mesh.faces, first.mesh.faces) and np.array_equal(again.to_original, first.to_original)
+    assert again.mesh.name.startswith("same surface")
+    decimated(sphere, 1300)  # another budget, another entry
+    assert len(list((tmp_path / "decimated").glob("*.npz"))) == 2
+    assert cache.cache_dir() == tmp_path

@@ -62,13 +62,43 @@ def decimated(mesh: TriMesh, max_vertices: int) -> Decimated | None:
         The decimated surface is not a valid mesh (e.g. an edge collapse left
         a non-manifold edge); the message names the input mesh.
     """
-    import fast_simplification
-    from scipy.spatial import cKDTree
+    from corrlib import cache
 
     if max_vertices < 4:
         raise ValueError(f"max_vertices must be at least 4, got {max_vertices}")
     if mesh.n_vertices <= max_vertices:
         return None
+    # on disk like the spectra: a retrieval decimates each mesh of its collection for every query
+    key = cache.make_key("decimated-v2", mesh.content_hash, max_vertices, RELAXATION_STEPS, RELAXATION_DAMPING)
+    entry = cache.load("decimated", key)
+    if entry is None:
+        points, faces, to_original = _decimate(mesh, max_vertices)
+        cache.store("decimated", key, {"points": points, "faces": faces, "to_original": to_original})
+    else:
+        points, faces, to_original = entry["points"], entry["faces"], entry["to_original"]
+    coarse = TriMesh(points, faces, name=f"{mesh.name} (decimated to {len(points)} vertices)")
+    if mesh.labels is not None:
+        coarse = coarse.with_labels(mesh.labels[to_original])
+    return Decimated(coarse, to_original, mesh.n_vertices)
+
+
+def _decimate(mesh: TriMesh, max_vertices: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`decimated` without the cache: ``(points (k, 3), faces, to_original (k,))``.
+
+    The collapse runs on the mesh centred and scaled to unit area (the package's error thresholds are
+    absolute): a mesh in other units or far from the origin is decimated alike.
+    """
+    centre, scale = mesh.vertices.mean(axis=0), np.sqrt(mesh.area)
+    unit = TriMesh((mesh.vertices - centre) / scale, mesh.faces, name=mesh.name, validate=False)
+    points, faces, to_original = _decimate_unit(unit, max_vertices)
+    return points * scale + centre, faces, to_original
+
+
+def _decimate_unit(mesh: TriMesh, max_vertices: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`_decimate` on a mesh at unit area."""
+    import fast_simplification
+    from scipy.spatial import cKDTree
+
     face_budget = max(4, round(mesh.n_faces * max_vertices / mesh.n_vertices))
     # writable copies: the extension refuses the mesh's read-only arrays
     points, faces = fast_simplification.simplify(np.array(mesh.vertices, dtype=np.float64),
@@ -82,9 +112,7 @@ def decimated(mesh: TriMesh, max_vertices: int) -> Decimated | None:
                         f"mesh ({err}); decimate it with another tool first, or raise the vertex budget") from None
     coarse = tangentially_relaxed(coarse, mesh)
     to_original = cKDTree(mesh.vertices).query(coarse.vertices)[1].astype(np.int64)
-    if mesh.labels is not None:
-        coarse = coarse.with_labels(mesh.labels[to_original])
-    return Decimated(coarse, to_original, mesh.n_vertices)
+    return np.asarray(coarse.vertices), np.asarray(coarse.faces), to_original
 
 
 #: tangential relaxation: iterations and step towards the neighbours' centroid (Botsch & Kobbelt 2004 use a few

@@ -18,9 +18,9 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from corrlib.errors import InputError
 from corrlib.descriptors import DESCRIPTOR_KINDS, mesh_descriptors
 from corrlib.descriptors.orientation import orientation_operators
+from corrlib.errors import InputError
 from corrlib.geometry.fmaps import functional_map, multiplication_operators, resolvent_mask, zoomout
 from corrlib.geometry.spectrum import available_eigenpairs, mesh_spectra
 from corrlib.methods.base import MatchResult, param

@@ -130,7 +130,7 @@ def test_two_axes_search_every_sign_reading():
     its own, and the reported signs are the winner's."""
     contour, mesh = capsule_and_ellipse()
     params = Contour3DParams(n_contour=24, k=12, axis_modes=2, model="half")
-    result = solve("contour3d", contour, mesh, n_contour=24, k=12, axis_modes=2, model="half")
+    result = solve("contour3d", contour, mesh, n_contour=24, k=12, mesh_vertices=0, axis_modes=2, model="half")
     query, target = prepare_query(contour, params), prepare_mesh(mesh, params)
     scales = axis_scales(query, target, "half", 1.0, params)
     assert scales.shape == (2,)
@@ -171,7 +171,7 @@ def test_both_axis_directions_are_solved_and_the_lower_energy_is_kept(energy):
     contour, mesh = capsule_and_ellipse()
     one_axis = {"model": "half", "axis_modes": 1}
     params = Contour3DParams(n_contour=24, k=12, energy=energy, **one_axis)
-    result = solve("contour3d", contour, mesh, n_contour=24, k=12, energy=energy, **one_axis)
+    result = solve("contour3d", contour, mesh, n_contour=24, k=12, mesh_vertices=0, energy=energy, **one_axis)
     query, target = prepare_query(contour, params), prepare_mesh(mesh, params)
     as_is, reversed_ = (solve_direction(query, target, mesh, params, (f,)) for f in (False, True))
     assert axis_scales(query, target, "half", 1.0, params)[0] > 0.3  # the axis term is active
@@ -180,7 +180,8 @@ def test_both_axis_directions_are_solved_and_the_lower_energy_is_kept(energy):
     assert result.search.optimal
     assert result.search.lower_bound == pytest.approx(result.energy, rel=1e-12)
     # the axis term is what made the two differ; without it there is one search
-    plain = solve("contour3d", contour, mesh, n_contour=24, k=12, energy=energy, axis_weight=0, **one_axis)
+    plain = solve("contour3d", contour, mesh, n_contour=24, k=12, mesh_vertices=0, energy=energy, axis_weight=0,
+                  **one_axis)
     assert plain.extras["axis_reversed"] is False
     assert plain.energy < result.energy
 
@@ -190,7 +191,7 @@ def test_auto_model_keeps_the_lower_energy_of_both_shape_models():
     its optimum is the lowest of the four searched independently, in one unit (the whole model's)."""
     contour, mesh = capsule_and_ellipse()
     params = Contour3DParams(n_contour=24, k=12, model="auto", axis_modes=1)
-    result = solve("contour3d", contour, mesh, n_contour=24, k=12, model="auto", axis_modes=1)
+    result = solve("contour3d", contour, mesh, n_contour=24, k=12, mesh_vertices=0, model="auto", axis_modes=1)
     query, target = prepare_query(contour, params), prepare_mesh(mesh, params)
     assert set(target.features) == {"whole", "half"}
     energies = {(model, flipped): solve_direction(query, target, mesh, params, (flipped,), model, "whole").energy
@@ -226,7 +227,7 @@ def test_paper_features_stay_selectable():
     assert wks_only.features.shape == (24, 100) and paper.features.shape == (24, 200)
     assert np.array_equal(paper.features[:, :100], wks_only.features)
     with pytest.raises(ParameterError, match="features"):
-        solve("contour3d", contour, mesh, n_contour=24, k=12, features="hks")
+        solve("contour3d", contour, mesh, n_contour=24, k=12, mesh_vertices=0, features="hks")
 
 
 def test_heuristics_computed_in_threads_equal_the_sequential_ones():

@@ -182,7 +182,7 @@ from corrlib.descriptors.symmetry import K_FINAL, even_spectrum, mesh_reflection
 from corrlib.errors import ContourError, InputError, MeshError, ParameterError
 from corrlib.geometry.cyclic_paths import (GraphTopology, ProductGraph, Relaxation, branch_and_bound_union,
                                            minimum_ratio_union, parallel_searches)
-from corrlib.geometry.decimation import Decimated, decimated
+from corrlib.geometry.remeshing import Remeshed, remeshed
 from corrlib.geometry.elastic_paths import ElasticProductGraph
 from corrlib.geometry.intrinsic_axis import IntrinsicAxis, axis_mismatch, spectral_axes
 from corrlib.geometry.laplacian import mesh_laplacian
@@ -215,11 +215,11 @@ VIEW_POINTS, VIEW_K = 200, 25
 MIN_CONTOUR_POINTS = 10
 #: the energies on the first-order product graph (the only ones that take directed edge costs)
 FIRST_ORDER_ENERGIES = ("paper", "ratio")
-#: the resolution meshes are matched at (``max_vertices``): the benchmarks' meshes (TOSCA and SHREC's 5k copies,
+#: the resolution meshes are matched at (``mesh_vertices``): the benchmarks' meshes (TOSCA and SHREC's 5k copies,
 #: FAUST's 6.9k and the bundled meshes have 4.3k–7.2k vertices) and the speed target (a 200-point query against a
 #: 5k mesh in 2 s) are at this size
-DEFAULT_MAX_VERTICES = 5000
-#: the smallest vertex budget ``max_vertices`` accepts (besides 0): the half model needs 75 eigenpairs, and a mesh
+DEFAULT_MESH_VERTICES = 5000
+#: the smallest vertex budget ``mesh_vertices`` accepts (besides 0): the half model needs 75 eigenpairs, and a mesh
 #: of fewer vertices would not show a limb
 MIN_MESH_VERTICES = 500
 
@@ -230,12 +230,13 @@ class Contour3DParams:
                            help="The contour is resampled by arc length to this many points (the product "
                                 "graph has n_contour layers); fewer where the mesh's mean edge is longer "
                                 "than that step.")
-    max_vertices: int = param(DEFAULT_MAX_VERTICES, label="Mesh vertices", low=0, high=10_000_000,
-                              help="A finer mesh is decimated to about this many vertices (quadric edge collapse, "
-                                   "then relaxed to even edges) before matching, and the curve is reported on its "
-                                   "nearest input vertices: the "
-                                   "product-graph energy grows with the vertex count, so energies compare across "
-                                   "meshes at one resolution, and a finer graph is slower. 0: never decimate.")
+    mesh_vertices: int = param(DEFAULT_MESH_VERTICES, label="Mesh vertices", low=0, high=10_000_000,
+                               help="Every mesh is remeshed to about this many vertices before matching "
+                                    "(subdivided if coarser, quadric edge collapse, then relaxed to even edges), "
+                                    "and the curve is reported on its nearest input vertices: the product-graph "
+                                    "energy depends on the resolution and the evenness of the mesh, so energies "
+                                    "compare across meshes remeshed alike, and a finer graph is slower. 0: match "
+                                    "the mesh as given.")
     k: int = param(25, label="Eigenpairs", low=5, high=500,
                    help="Laplace–Beltrami eigenpairs for HKS/WKS; the paper's sensitivity study chose 25.")
     n_scales: int = param(100, label="Scales", low=2, high=500, help="Times of the HKS and energies of the WKS.")
@@ -312,9 +313,9 @@ class Contour3DParams:
                                 help="Cap on branch-and-bound iterations (the bounds are reported).")
 
     def __post_init__(self):
-        if isinstance(self.max_vertices, int) and 0 < self.max_vertices < MIN_MESH_VERTICES:
-            raise ParameterError(f"max_vertices must be 0 (never decimate) or at least {MIN_MESH_VERTICES}, "
-                                 f"got {self.max_vertices}")
+        if isinstance(self.mesh_vertices, int) and 0 < self.mesh_vertices < MIN_MESH_VERTICES:
+            raise ParameterError(f"mesh_vertices must be 0 (match as given) or at least {MIN_MESH_VERTICES}, "
+                                 f"got {self.mesh_vertices}")
         if isinstance(self.k, int) and isinstance(self.axis_modes, int) and self.k < self.axis_modes + 2:
             raise ParameterError(f"axis_modes={self.axis_modes} needs at least k={self.axis_modes + 2} eigenpairs "
                                  f"(the eigenvalues around each axis give its confidence), got k={self.k}")
@@ -860,29 +861,29 @@ def _view_models(models, side_view: bool) -> list[str]:
 def match_prepared(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams, token):
     """Solver generator for a prepared query against one mesh (see :func:`solve_contour3d`).
 
-    A mesh of more than ``params.max_vertices`` vertices is matched decimated to that many
-    (:func:`~corrlib.geometry.decimation.decimated`), and the map and the curve are reported on the input
-    vertices nearest to the decimated ones (``extras["matched_vertices"]`` says how many were matched). Where
-    the decimation cannot give a valid mesh, the mesh is matched as given and ``extras["decimation_failed"]``
+    The mesh is matched remeshed to ``params.mesh_vertices`` vertices
+    (:func:`~corrlib.geometry.remeshing.remeshed`), and the map and the curve are reported on the input
+    vertices nearest to the remeshed ones (``extras["matched_vertices"]`` says how many were matched). Where
+    the remeshing cannot give a valid mesh, the mesh is matched as given and ``extras["remeshing_failed"]``
     says why.
     """
+    if not params.mesh_vertices:
+        return (yield from _match_mesh(query, mesh, params, token))
     try:
-        coarse = decimated(mesh, params.max_vertices) if params.max_vertices else None
+        coarse = remeshed(mesh, params.mesh_vertices)
     except MeshError as err:
         result = yield from _match_mesh(query, mesh, params, token)
-        return replace(result, extras={**result.extras, "decimation_failed": str(err)})
-    if coarse is None:
-        return (yield from _match_mesh(query, mesh, params, token))
+        return replace(result, extras={**result.extras, "remeshing_failed": str(err)})
     result = yield from _match_mesh(query, coarse.mesh, params, token)
     return on_input_vertices(result, coarse)
 
 
-def on_input_vertices(result: MatchResult, coarse: Decimated) -> MatchResult:
-    """A match on a decimated mesh with its map and curve on the input mesh's vertices."""
+def on_input_vertices(result: MatchResult, coarse: Remeshed) -> MatchResult:
+    """A match on a remeshed mesh with its map and curve on the input mesh's vertices."""
     to_original = coarse.to_original
     path = replace(result.path, vertices=to_original[result.path.vertices])
     extras = {**result.extras, "matched_vertices": coarse.mesh.n_vertices, "input_vertices": coarse.n_original}
-    meaning = (f"{result.energy_meaning}, on the mesh decimated from {coarse.n_original} to "
+    meaning = (f"{result.energy_meaning}, on the mesh remeshed from {coarse.n_original} to "
                f"{coarse.mesh.n_vertices} vertices")
     return replace(result, map_xy=to_original[result.map_xy], path=path, extras=extras, energy_meaning=meaning)
 

@@ -1,20 +1,25 @@
-"""Decimation of a mesh to a vertex budget, with the way back to its vertices.
+"""A mesh remeshed to a vertex budget, with the way back to its vertices.
 
-Quadric edge collapse (Garland & Heckbert, *Surface Simplification Using
-Quadric Error Metrics*, SIGGRAPH 1997), by the maintained ``fast-simplification``
-package, with the degenerate faces it leaves on flat regions repaired, then
-the vertices spread evenly over the input surface by tangential relaxation
-(the smoothing step of isotropic remeshing): quadric collapse leaves an
-adaptive mesh, the benchmarks' meshes are uniform. A method that works on a
-graph of the mesh's vertices (2D-to-3D matching's product graph) runs on the
-decimated mesh and reports its result on the input mesh through
-:attr:`Decimated.to_original`, the input vertex nearest to every decimated
+Every mesh is brought to one resolution the same way: a coarser mesh is
+first subdivided at its edge midpoints (the same piecewise-linear surface)
+until it is finer than the budget; then quadric edge collapse (Garland &
+Heckbert, *Surface Simplification Using Quadric Error Metrics*, SIGGRAPH
+1997, by the maintained ``fast-simplification`` package) brings it to the
+budget, the degenerate faces the collapse leaves on flat regions are
+repaired, and tangential relaxation spreads the vertices evenly over the
+surface (the smoothing step of isotropic remeshing): quadric collapse leaves
+an adaptive mesh, the benchmarks' meshes are uniform. A method that works on
+a graph of the mesh's vertices (2D-to-3D matching's product graph) runs on
+the remeshed mesh and reports its result on the input mesh through
+:attr:`Remeshed.to_original`, the input vertex nearest to every remeshed
 vertex.
 
-Why a method would decimate: a discretised energy whose value depends on the
-resolution (the product-graph energy of 2D-to-3D matching grows with the
-vertex count, see ``docs/decisions.md``) compares meshes only at one
-resolution, and its cost grows with the vertex count.
+Why a method would remesh: a discretised energy whose value depends on the
+resolution and on the evenness of the triangulation (the product-graph
+energy of 2D-to-3D matching grows with the vertex count, and edges longer
+than the contour's step push its curve short, see ``docs/decisions.md``)
+compares meshes only when they are meshed alike, and its cost grows with
+the vertex count.
 """
 
 from __future__ import annotations
@@ -25,20 +30,20 @@ import numpy as np
 import scipy.sparse as sp
 
 from corrlib.errors import MeshError
-from corrlib.shapes import TriMesh, area_weighted_normals
+from corrlib.shapes import TriMesh, area_weighted_normals, triangle_areas
 
 
 @dataclass(frozen=True)
-class Decimated:
-    """A mesh decimated from a finer one.
+class Remeshed:
+    """A mesh remeshed from another one.
 
     Attributes
     ----------
     mesh : TriMesh
-        The decimated mesh (k vertices), carrying the input's part labels at
-        :attr:`to_original` if the input had labels.
+        The remeshed surface (k vertices), carrying the input's part labels
+        at :attr:`to_original` if the input had labels.
     to_original : (k,) int
-        The input vertex nearest to every decimated vertex.
+        The input vertex nearest to every remeshed vertex.
     n_original : int
         The input's vertex count.
     """
@@ -48,71 +53,135 @@ class Decimated:
     n_original: int
 
 
-def decimated(mesh: TriMesh, max_vertices: int) -> Decimated | None:
-    """``mesh`` decimated to about ``max_vertices`` vertices, or None if it has no more than that.
+def remeshed(mesh: TriMesh, n_vertices: int) -> Remeshed:
+    """``mesh`` remeshed to about ``n_vertices`` vertices (see the module docstring).
 
-    The face budget is the input's faces in the ratio of the vertex budget
-    (``F ≈ 2V`` on a closed surface whatever its size), so the result has
-    about ``max_vertices`` vertices: ±1 %, or a few per cent fewer where the
-    repair merged coincident vertices (:func:`without_degenerate_faces`).
+    The face budget of the collapse is the (subdivided) input's faces in the
+    ratio of the vertex budget (``F ≈ 2V`` on a closed surface whatever its
+    size), so the result has about ``n_vertices`` vertices (±1 %; where the
+    repair merged coincident vertices, :func:`without_degenerate_faces`, the
+    collapse runs again with a corrected budget). The result does not depend on the
+    order of the input's vertices and faces (:func:`canonical_order`), nor on
+    its units or position (the collapse runs at unit area about the centre).
+    Cached on disk by the mesh's content, as the spectra are.
 
     Raises
     ------
     MeshError
-        The decimated surface is not a valid mesh (e.g. an edge collapse left
+        The remeshed surface is not a valid mesh (e.g. an edge collapse left
         a non-manifold edge); the message names the input mesh.
     """
     from corrlib import cache
 
-    if max_vertices < 4:
-        raise ValueError(f"max_vertices must be at least 4, got {max_vertices}")
-    if mesh.n_vertices <= max_vertices:
-        return None
-    # on disk like the spectra: a retrieval decimates each mesh of its collection for every query
-    key = cache.make_key("decimated-v2", mesh.content_hash, max_vertices, RELAXATION_STEPS, RELAXATION_DAMPING)
-    entry = cache.load("decimated", key)
+    if n_vertices < 4:
+        raise ValueError(f"n_vertices must be at least 4, got {n_vertices}")
+    # on disk like the spectra: a retrieval remeshes each mesh of its collection for every query
+    key = cache.make_key("remeshed-v2", mesh.content_hash, n_vertices, RELAXATION_STEPS, RELAXATION_DAMPING)
+    entry = cache.load("remeshed", key)
     if entry is None:
-        points, faces, to_original = _decimate(mesh, max_vertices)
-        cache.store("decimated", key, {"points": points, "faces": faces, "to_original": to_original})
+        points, faces, to_original = _remesh(mesh, n_vertices)
+        cache.store("remeshed", key, {"points": points, "faces": faces, "to_original": to_original})
     else:
         points, faces, to_original = entry["points"], entry["faces"], entry["to_original"]
-    coarse = TriMesh(points, faces, name=f"{mesh.name} (decimated to {len(points)} vertices)")
+    coarse = TriMesh(points, faces, name=f"{mesh.name} (remeshed to {len(points)} vertices)")
     if mesh.labels is not None:
         coarse = coarse.with_labels(mesh.labels[to_original])
-    return Decimated(coarse, to_original, mesh.n_vertices)
+    return Remeshed(coarse, to_original, mesh.n_vertices)
 
 
-def _decimate(mesh: TriMesh, max_vertices: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`decimated` without the cache: ``(points (k, 3), faces, to_original (k,))``.
+def _remesh(mesh: TriMesh, n_vertices: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """:func:`remeshed` without the cache: ``(points (k, 3), faces, to_original (k,))``.
 
     The collapse runs on the mesh centred and scaled to unit area (the package's error thresholds are
-    absolute): a mesh in other units or far from the origin is decimated alike.
+    absolute): a mesh in other units or far from the origin is remeshed alike.
     """
-    centre, scale = mesh.vertices.mean(axis=0), np.sqrt(mesh.area)
-    unit = TriMesh((mesh.vertices - centre) / scale, mesh.faces, name=mesh.name, validate=False)
-    points, faces, to_original = _decimate_unit(unit, max_vertices)
+    from scipy.spatial import cKDTree
+
+    # in the canonical order first: the centre and the area are sums, whose rounding depends on the order
+    points, faces, order = canonical_order(np.asarray(mesh.vertices), np.asarray(mesh.faces))
+    centre = points.mean(axis=0)
+    scale = np.sqrt(triangle_areas(points, faces).sum())
+    unit_points = (points - centre) / scale
+    fine = midpoint_subdivided_past(unit_points, faces, n_vertices)
+    try:
+        points, faces = _decimate_unit(fine, n_vertices)
+    except MeshError as err:
+        raise MeshError(f"{mesh.name}: {err}") from None
+    # a vertex of the subdivided surface that is not one of the input's goes to the input vertex nearest to it
+    to_original = order[cKDTree(unit_points).query(points)[1]].astype(np.int64)
     return points * scale + centre, faces, to_original
 
 
-def _decimate_unit(mesh: TriMesh, max_vertices: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """:func:`_decimate` on a mesh at unit area."""
-    import fast_simplification
-    from scipy.spatial import cKDTree
+def canonical_order(points: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The surface with its vertices sorted by position and its faces by their vertices.
 
-    face_budget = max(4, round(mesh.n_faces * max_vertices / mesh.n_vertices))
-    # writable copies: the extension refuses the mesh's read-only arrays
-    points, faces = fast_simplification.simplify(np.array(mesh.vertices, dtype=np.float64),
-                                                 np.array(mesh.faces, dtype=np.int32), target_count=face_budget)
-    points, faces = without_degenerate_faces(points, faces.astype(np.int64))
-    name = f"{mesh.name} (decimated to {points.shape[0]} vertices)"
+    Quadric edge collapse breaks ties between collapses of equal cost by the order of the input, so the
+    same surface given in another vertex or face order would be remeshed differently. Each face is
+    rotated to start at its smallest index (its orientation kept).
+
+    Parameters
+    ----------
+    points : (n, 3) float
+    faces : (f, 3) int
+
+    Returns
+    -------
+    points : (n, 3) float
+        Sorted lexicographically by (x, y, z).
+    faces : (f, 3) int
+        On the sorted points, sorted lexicographically.
+    order : (n,) int
+        The input index of every sorted point.
+    """
+    order = np.lexsort((points[:, 2], points[:, 1], points[:, 0]))
+    new_index = np.empty_like(order)
+    new_index[order] = np.arange(order.size)
+    faces = new_index[faces]
+    first = np.argmin(faces, axis=1)
+    faces = np.take_along_axis(faces, (first[:, None] + np.arange(3)) % 3, axis=1)
+    faces = faces[np.lexsort((faces[:, 2], faces[:, 1], faces[:, 0]))]
+    return points[order], faces, order
+
+
+def midpoint_subdivided_past(points: np.ndarray, faces: np.ndarray, n_vertices: int) -> TriMesh:
+    """The surface subdivided at its edge midpoints (every face into four, the same piecewise-linear
+    surface) until it has more than ``n_vertices`` vertices; as given if it already has."""
+    import trimesh
+
+    while len(points) <= n_vertices:
+        points, faces = trimesh.remesh.subdivide(points, faces)
+    return TriMesh(points, faces, name="surface to remesh", validate=False)
+
+
+#: how far below the vertex budget the repaired collapse may end before it runs again with a corrected
+#: budget, and how often it does
+BUDGET_TOLERANCE, BUDGET_ROUNDS = 0.01, 3
+
+
+def _decimate_unit(mesh: TriMesh, n_vertices: int) -> tuple[np.ndarray, np.ndarray]:
+    """``(points (k, 3), faces)``: ``mesh`` (at unit area, finer than the budget) decimated to about
+    ``n_vertices`` vertices, repaired and relaxed."""
+    import fast_simplification
+
+    # the face budget in the ratio of the vertex budget; where the repair merged coincident vertices (flat
+    # regions, e.g. of a subdivided coarse mesh) the collapse runs again with the budget corrected by that
+    # ratio: the energy of a graph on the mesh grows with its vertex count
+    face_budget = max(4, round(mesh.n_faces * n_vertices / mesh.n_vertices))
+    for _ in range(BUDGET_ROUNDS):
+        # writable copies: the extension refuses the mesh's read-only arrays
+        points, faces = fast_simplification.simplify(np.array(mesh.vertices, dtype=np.float64),
+                                                     np.array(mesh.faces, dtype=np.int32), target_count=face_budget)
+        points, faces = without_degenerate_faces(points, faces.astype(np.int64))
+        if len(points) >= (1 - BUDGET_TOLERANCE) * n_vertices or face_budget >= mesh.n_faces:
+            break
+        face_budget = min(mesh.n_faces, round(face_budget * n_vertices / len(points)))
     try:
-        coarse = TriMesh(points, faces, name=name)
+        coarse = TriMesh(points, faces, name="remeshed surface")
     except MeshError as err:
-        raise MeshError(f"{mesh.name}: decimating {mesh.n_vertices} to {max_vertices} vertices gave an invalid "
-                        f"mesh ({err}); decimate it with another tool first, or raise the vertex budget") from None
+        raise MeshError(f"remeshing to {n_vertices} vertices gave an invalid mesh ({err}); remesh it with "
+                        "another tool first, or change the vertex budget") from None
     coarse = tangentially_relaxed(coarse, mesh)
-    to_original = cKDTree(mesh.vertices).query(coarse.vertices)[1].astype(np.int64)
-    return np.asarray(coarse.vertices), np.asarray(coarse.faces), to_original
+    return np.asarray(coarse.vertices), np.asarray(coarse.faces)
 
 
 #: tangential relaxation: iterations and step towards the neighbours' centroid (Botsch & Kobbelt 2004 use a few
@@ -121,7 +190,7 @@ RELAXATION_STEPS, RELAXATION_DAMPING = 10, 0.5
 
 
 def tangentially_relaxed(coarse: TriMesh, surface: TriMesh) -> TriMesh:
-    """``coarse`` with its vertices spread evenly over ``surface`` (the mesh it was decimated from).
+    """``coarse`` with its vertices spread evenly over ``surface`` (the finer mesh it was decimated from).
 
     Quadric edge collapse keeps vertices where the surface bends and leaves long edges on flat regions; a
     graph on such a mesh is not the uniform one of a remeshed benchmark shape. Every step moves each vertex

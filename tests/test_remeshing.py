@@ -1,10 +1,10 @@
-"""Decimation to a vertex budget (corrlib.geometry.decimation)."""
+"""Decimation to a vertex budget (corrlib.geometry.remeshing)."""
 
 import numpy as np
 import pytest
 import trimesh
 
-from corrlib.geometry.decimation import decimated
+from corrlib.geometry.remeshing import remeshed
 from corrlib.shapes import TriMesh
 
 
@@ -14,13 +14,44 @@ def sphere():
     return TriMesh(ico.vertices, ico.faces, name="sphere")
 
 
-def test_a_mesh_within_the_budget_is_not_decimated(sphere):
-    assert decimated(sphere, sphere.n_vertices) is None
-    assert decimated(sphere, 10 * sphere.n_vertices) is None
+def test_a_coarser_mesh_is_subdivided_then_remeshed_on_the_same_surface():
+    """A mesh coarser than the budget is subdivided at its edge midpoints (the same piecewise-linear surface)
+    past the budget and then decimated: the result has the budget's vertices and lies on the input surface."""
+    from scipy.spatial import cKDTree
+
+    ico = trimesh.creation.icosphere(subdivisions=3, radius=2.0)  # 642 vertices
+    coarse_sphere = TriMesh(ico.vertices, ico.faces, name="coarse sphere")
+    result = remeshed(coarse_sphere, 2000)
+    # fewer by the coincident vertices merged on flat regions (the subdivision's)
+    assert 0.95 * 2000 <= result.mesh.n_vertices <= 2020 and result.n_original == 642
+    # on the input surface, up to the input's chord sagitta (the relaxation projects onto tangent planes)
+    radius = np.linalg.norm(result.mesh.vertices, axis=1)
+    sagitta = 2.0 - np.min(np.linalg.norm(ico.triangles_center, axis=1))
+    assert np.all(np.abs(radius - 2.0) <= sagitta)
+    assert result.mesh.area == pytest.approx(coarse_sphere.area, rel=0.01)
+    nearest = cKDTree(coarse_sphere.vertices).query(result.mesh.vertices)[1]
+    assert np.array_equal(result.to_original, nearest)
+    # a mesh at the budget is remeshed too (one triangulation for every mesh), to its own vertex count
+    again = remeshed(coarse_sphere, 642)
+    assert 0.95 * 642 <= again.mesh.n_vertices <= 649
+
+
+def test_the_remeshing_does_not_depend_on_the_order_of_vertices_and_faces(sphere):
+    """Quadric collapse breaks ties of equal cost by the input's order; the surface is put in a canonical
+    order first, so a shuffled copy (vertices, faces, and each face's rotation) gives the same mesh."""
+    rng = np.random.default_rng(3)
+    perm = rng.permutation(sphere.n_vertices)
+    faces = np.argsort(perm)[sphere.faces][rng.permutation(sphere.n_faces)]
+    faces = np.take_along_axis(faces, (rng.integers(0, 3, len(faces))[:, None] + np.arange(3)) % 3, axis=1)
+    shuffled = TriMesh(sphere.vertices[perm], faces, name="shuffled")
+    base, other = remeshed(sphere, 3000), remeshed(shuffled, 3000)
+    assert np.array_equal(base.mesh.vertices, other.mesh.vertices)
+    assert np.array_equal(base.mesh.faces, other.mesh.faces)
+    assert np.array_equal(perm[other.to_original], base.to_original)
 
 
 def test_the_decimated_sphere_keeps_its_surface_and_topology(sphere):
-    coarse = decimated(sphere, 2000)
+    coarse = remeshed(sphere, 2000)
     mesh = coarse.mesh
     assert coarse.n_original == sphere.n_vertices
     assert abs(mesh.n_vertices - 2000) <= 20
@@ -35,7 +66,7 @@ def test_the_decimated_sphere_keeps_its_surface_and_topology(sphere):
 
 
 def test_every_decimated_vertex_points_to_its_nearest_input_vertex(sphere):
-    coarse = decimated(sphere, 1000)
+    coarse = remeshed(sphere, 1000)
     distances = np.linalg.norm(coarse.mesh.vertices[:, None, :] - sphere.vertices[None, :, :], axis=2)
     chosen = np.linalg.norm(coarse.mesh.vertices - sphere.vertices[coarse.to_original], axis=1)
     assert np.allclose(chosen, distances.min(axis=1), rtol=0, atol=1e-12)  # the nearest, up to ties
@@ -45,7 +76,7 @@ def test_every_decimated_vertex_points_to_its_nearest_input_vertex(sphere):
 
 def test_part_labels_follow_the_nearest_input_vertex(sphere):
     labels = np.where(sphere.vertices[:, 0] > 0, 1, 2)
-    coarse = decimated(sphere.with_labels(labels), 1500)
+    coarse = remeshed(sphere.with_labels(labels), 1500)
     assert np.array_equal(coarse.mesh.labels, labels[coarse.to_original])
     away_from_the_border = np.abs(coarse.mesh.vertices[:, 0]) > 0.1
     expected = np.where(coarse.mesh.vertices[:, 0] > 0, 1, 2)
@@ -54,7 +85,7 @@ def test_part_labels_follow_the_nearest_input_vertex(sphere):
 
 def test_a_fin_and_coincident_vertices_are_removed(sphere):
     """A face folded onto its reverse (a fin) and a duplicated vertex are what edge collapse can leave."""
-    from corrlib.geometry.decimation import without_degenerate_faces
+    from corrlib.geometry.remeshing import without_degenerate_faces
 
     a, b = sphere.faces[0, :2]
     tip = sphere.vertices[[a, b]].mean(axis=0) * 1.5
@@ -86,7 +117,7 @@ def test_decimating_a_flat_subdivision_repairs_its_zero_area_faces():
     raw = fast_simplification.simplify(np.array(flat.vertices), np.array(flat.faces, dtype=np.int32),
                                        target_count=round(len(flat.faces) * 5000 / len(flat.vertices)))
     assert any(finding.code == "zero-area-face" for finding in inspect_mesh(*raw))  # what is repaired
-    coarse = decimated(TriMesh(flat.vertices, flat.faces, name="flat"), 5000).mesh
+    coarse = remeshed(TriMesh(flat.vertices, flat.faces, name="flat"), 5000).mesh
     assert 4500 < coarse.n_vertices <= 5000
     euler = lambda m: m.n_vertices - len(np.unique(np.sort(m.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1),
                                                    axis=0)) + m.n_faces
@@ -101,7 +132,7 @@ def test_relaxation_evens_out_the_edges_and_stays_on_the_surface():
     from scipy.spatial import cKDTree
 
     from _data import TOSCA
-    from corrlib.geometry.decimation import tangentially_relaxed
+    from corrlib.geometry.remeshing import tangentially_relaxed
     from corrlib.io import load_mesh
 
     wolf = load_mesh(TOSCA / "wolf1.off")
@@ -123,12 +154,12 @@ def test_a_decimation_is_cached_by_the_mesh_content(sphere, tmp_path, monkeypatc
     from corrlib import cache
 
     monkeypatch.setenv("CORRLIB_CACHE_DIR", str(tmp_path))
-    first = decimated(sphere, 1200)
-    assert len(list((tmp_path / "decimated").glob("*.npz"))) == 1
-    again = decimated(TriMesh(sphere.vertices, sphere.faces, name="same surface"), 1200)  # read from the cache
+    first = remeshed(sphere, 1200)
+    assert len(list((tmp_path / "remeshed").glob("*.npz"))) == 1
+    again = remeshed(TriMesh(sphere.vertices, sphere.faces, name="same surface"), 1200)  # read from the cache
     assert np.array_equal(again.mesh.vertices, first.mesh.vertices)
     assert np.array_equal(again.mesh.faces, first.mesh.faces) and np.array_equal(again.to_original, first.to_original)
     assert again.mesh.name.startswith("same surface")
-    decimated(sphere, 1300)  # another budget, another entry
-    assert len(list((tmp_path / "decimated").glob("*.npz"))) == 2
+    remeshed(sphere, 1300)  # another budget, another entry
+    assert len(list((tmp_path / "remeshed").glob("*.npz"))) == 2
     assert cache.cache_dir() == tmp_path

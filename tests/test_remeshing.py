@@ -163,3 +163,20 @@ def test_a_decimation_is_cached_by_the_mesh_content(sphere, tmp_path, monkeypatc
     remeshed(sphere, 1300)  # another budget, another entry
     assert len(list((tmp_path / "remeshed").glob("*.npz"))) == 2
     assert cache.cache_dir() == tmp_path
+
+
+def test_an_open_surface_keeps_its_boundary_and_its_area():
+    """The relaxation keeps boundary vertices in place: the centroid of a boundary vertex's neighbours lies
+    inside the surface, and moving towards it drew a hemisphere's rim in (6 % of its area, measured)."""
+    ico = trimesh.creation.icosphere(subdivisions=4)
+    half = ico.submesh([np.flatnonzero(ico.triangles_center[:, 2] > 0.0)], append=True)
+    hemisphere = TriMesh(half.vertices, half.faces, name="hemisphere")
+
+    def boundary_heights(mesh):
+        edges = np.sort(mesh.faces[:, [0, 1, 1, 2, 2, 0]].reshape(-1, 2), axis=1)
+        unique_edges, counts = np.unique(edges, axis=0, return_counts=True)
+        return mesh.vertices[np.unique(unique_edges[counts == 1]), 2]
+
+    result = remeshed(hemisphere, 3000).mesh
+    assert boundary_heights(result).max() <= boundary_heights(hemisphere).max() + 1e-9
+    assert result.area == pytest.approx(hemisphere.area, rel=0.005)

@@ -76,7 +76,7 @@ def remeshed(mesh: TriMesh, n_vertices: int) -> Remeshed:
     if n_vertices < 4:
         raise ValueError(f"n_vertices must be at least 4, got {n_vertices}")
     # on disk like the spectra: a retrieval remeshes each mesh of its collection for every query
-    key = cache.make_key("remeshed-v2", mesh.content_hash, n_vertices, RELAXATION_STEPS, RELAXATION_DAMPING)
+    key = cache.make_key("remeshed-v3", mesh.content_hash, n_vertices, RELAXATION_STEPS, RELAXATION_DAMPING)
     entry = cache.load("remeshed", key)
     if entry is None:
         points, faces, to_original = _remesh(mesh, n_vertices)
@@ -199,7 +199,8 @@ def tangentially_relaxed(coarse: TriMesh, surface: TriMesh) -> TriMesh:
     tangential smoothing of isotropic remeshing (Botsch & Kobbelt, *A Remeshing Approach to
     Multiresolution Modeling*, SGP 2004). The connectivity is kept. A vertex whose move would turn one of
     its faces over (its normal against the one before the step) stays for that step, so no face is turned
-    over; if the result is not a valid mesh, ``coarse`` is returned as it was.
+    over; a vertex on the boundary of an open surface stays where it is. If the result is not a valid mesh,
+    ``coarse`` is returned as it was.
     """
     from scipy.spatial import cKDTree
 
@@ -209,6 +210,12 @@ def tangentially_relaxed(coarse: TriMesh, surface: TriMesh) -> TriMesh:
     rows, cols = np.r_[edges[:, 0], edges[:, 1]], np.r_[edges[:, 1], edges[:, 0]]
     neighbours = sp.coo_matrix((np.ones(rows.size), (rows, cols)), shape=(n, n)).tocsr()
     valence = np.asarray(neighbours.sum(axis=1)).ravel()
+    # a boundary vertex stays: the centroid of its neighbours lies inside the surface, so it would draw the
+    # boundary in
+    half_edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
+    edge_rows, face_count = np.unique(half_edges, axis=0, return_counts=True)
+    on_boundary = np.zeros(n, dtype=bool)
+    on_boundary[edge_rows[face_count == 1].ravel()] = True
     nearest = cKDTree(surface.vertices)
     surface_normals = surface.vertex_normals
     points = np.array(coarse.vertices)
@@ -216,10 +223,12 @@ def tangentially_relaxed(coarse: TriMesh, surface: TriMesh) -> TriMesh:
         normals = area_weighted_normals(points, faces)
         move = (neighbours @ points) / valence[:, None] - points
         move -= np.sum(move * normals, axis=1, keepdims=True) * normals
+        move[on_boundary] = 0.0
         moved = points + RELAXATION_DAMPING * move
         foot = nearest.query(moved)[1]
         moved -= np.sum((moved - surface.vertices[foot]) * surface_normals[foot], axis=1,
                         keepdims=True) * surface_normals[foot]
+        moved[on_boundary] = points[on_boundary]
         # a vertex whose move would turn one of its faces over (against its normal before the step) stays;
         # a turned face has a moved vertex, so every round keeps at least one more vertex and this ends
         before = _face_normals(points, faces)

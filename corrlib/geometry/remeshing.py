@@ -1,8 +1,8 @@
 """A mesh remeshed to a vertex budget, with the way back to its vertices.
 
-Every mesh is brought to one resolution the same way: a coarser mesh is
-first subdivided at its edge midpoints (the same piecewise-linear surface)
-until it is finer than the budget; then quadric edge collapse (Garland &
+Every mesh is brought to one resolution the same way: a mesh that is not
+finer than the budget is first subdivided at its edge midpoints (the same
+piecewise-linear surface) until it is; then quadric edge collapse (Garland &
 Heckbert, *Surface Simplification Using Quadric Error Metrics*, SIGGRAPH
 1997, by the maintained ``fast-simplification`` package) brings it to the
 budget, the degenerate faces the collapse leaves on flat regions are

@@ -232,11 +232,11 @@ class Contour3DParams:
                                 "than that step.")
     mesh_vertices: int = param(DEFAULT_MESH_VERTICES, label="Mesh vertices", low=0, high=10_000_000,
                                help="Every mesh is remeshed to about this many vertices before matching "
-                                    "(subdivided if coarser, quadric edge collapse, then relaxed to even edges), "
-                                    "and the curve is reported on its nearest input vertices: the product-graph "
-                                    "energy depends on the resolution and the evenness of the mesh, so energies "
-                                    "compare across meshes remeshed alike, and a finer graph is slower. 0: match "
-                                    "the mesh as given.")
+                                    "(subdivided first unless finer, quadric edge collapse, then relaxed to even "
+                                    "edges), and the curve is reported on its nearest input vertices: the "
+                                    "product-graph energy depends on the resolution and the evenness of the mesh, "
+                                    "so energies compare across meshes remeshed alike, and a finer graph is "
+                                    "slower. 0: match the mesh as given.")
     k: int = param(25, label="Eigenpairs", low=5, high=500,
                    help="Laplace–Beltrami eigenpairs for HKS/WKS; the paper's sensitivity study chose 25.")
     n_scales: int = param(100, label="Scales", low=2, high=500, help="Times of the HKS and energies of the WKS.")

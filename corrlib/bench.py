@@ -451,9 +451,9 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
         Folder of meshes, classes named the same way (``horse0.off``).
     out : path
         Writes ``retrieval.csv`` (query, class, AP, rank of the first relevant
-        mesh, top hits), ``retrieval_ranking.csv`` (every query's whole
-        ranking: rank, mesh, its class, matching energy, seconds, why a mesh
-        failed; the margins between classes are read there),
+        mesh, class margin (:func:`~corrlib.retrieval.class_margin`), top hits),
+        ``retrieval_ranking.csv`` (every query's whole ranking: rank, mesh, its
+        class, matching energy, seconds, why a mesh failed),
         ``retrieval_summary.json`` and ``retrieval_summary.md``.
     params : Contour3DParams, optional
     jobs, scheduler
@@ -462,11 +462,13 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
     Returns
     -------
     dict
-        ``{"map": float, "per_class": {class: mean AP}, "queries": int, "failed": int}``.
+        ``{"map": float, "map_interval": [low, high]`` (95 % bootstrap interval over the queries,
+        :func:`~corrlib.retrieval.map_interval`), ``"median_margin": float, "right_class_first": int,
+        "per_class": {class: mean AP}, "queries": int, "failed": int, ...}``.
     """
     from corrlib.io import atomic_write, load_contour
     from corrlib.progress import run
-    from corrlib.retrieval import average_precision, class_of, mesh_files, retrieve
+    from corrlib.retrieval import average_precision, class_margin, class_of, map_interval, mesh_files, retrieve
 
     query_paths = sorted(p for p in Path(queries).iterdir() if p.suffix.lower() in CONTOUR_SUFFIXES)
     if not query_paths:
@@ -476,8 +478,8 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
     out.mkdir(parents=True, exist_ok=True)
     rows, ranking, failed_meshes = [], [], set()
     for number, q in enumerate(query_paths, 1):
-        row = {"query": q.name, "class": class_of(q), "ap": float("nan"), "first_relevant": "", "top": "",
-               "error": ""}
+        row = {"query": q.name, "class": class_of(q), "ap": float("nan"), "first_relevant": "",
+               "margin": float("nan"), "top": "", "error": ""}
         try:
             hits = run(retrieve(load_contour(q), meshes, params, jobs=jobs, scheduler=scheduler))
             ranking += [{"query": q.name, "rank": rank, "mesh": h.path.name, "class": h.label, "energy": h.energy,
@@ -492,6 +494,7 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
                 raise InputError(f"no mesh of class {row['class']!r} in the collection")
             row["ap"] = average_precision(labels, row["class"])
             row["first_relevant"] = labels.index(row["class"]) + 1
+            row["margin"] = class_margin(labels, [h.energy for h in hits], row["class"])
             row["top"] = " ".join(h.path.name for h in hits[:5])
         except Exception as exc:  # a failing query is recorded, the others go on
             row["error"] = f"{type(exc).__name__}: {exc}"
@@ -499,9 +502,9 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
         if callback is not None:
             callback(number, len(query_paths), row)
     with atomic_write(out / "retrieval.csv") as fh:
-        fh.write("query,class,ap,first_relevant,top,error\n")
-        for r in rows:
-            fh.write(",".join(csv_cell(r[c]) for c in ("query", "class", "ap", "first_relevant", "top", "error")) + "\n")
+        columns = ("query", "class", "ap", "first_relevant", "margin", "top", "error")
+        fh.write(",".join(columns) + "\n")
+        fh.writelines(",".join(csv_cell(r[c]) for c in columns) + "\n" for r in rows)
     columns = ("query", "rank", "mesh", "class", "energy", "seconds", "error")
     with atomic_write(out / "retrieval_ranking.csv") as fh:
         fh.write(",".join(columns) + "\n")
@@ -510,7 +513,11 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
     per_class = {}
     for r in ok:
         per_class.setdefault(r["class"], []).append(r["ap"])
+    margins = [r["margin"] for r in ok if np.isfinite(r["margin"])]
     summary = {"map": float(np.mean([r["ap"] for r in ok])) if ok else None,
+               "map_interval": list(map_interval([r["ap"] for r in ok])) if ok else None,
+               "median_margin": float(np.median(margins)) if margins else None,
+               "right_class_first": sum(m > 0 for m in margins),
                "per_class": {c: float(np.mean(v)) for c, v in sorted(per_class.items())},
                "queries": len(rows), "failed": len(rows) - len(ok), "collection": len(meshes),
                "failed_meshes": sorted(failed_meshes)}
@@ -520,6 +527,14 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
         head = (f"mean average precision: {summary['map']:.3f} over {len(ok)} queries" if ok else
                 "mean average precision: none (no query was ranked)")
         fh.write(f"{head} ({summary['failed']} failed), {len(meshes)} meshes\n")
+        if ok:
+            low, high = summary["map_interval"]
+            fh.write(f"95 % bootstrap interval over the queries: {low:.3f}–{high:.3f} (how much the MAP depends on "
+                     f"which queries the set holds)\n")
+        if margins:
+            fh.write(f"class margin (best other class's energy against the query class's, relative; retrieval.csv "
+                     f"per query): median {summary['median_margin']:+.3f}, the query's class first on "
+                     f"{summary['right_class_first']} of {len(margins)} queries\n")
         if failed_meshes:
             fh.write(f"meshes that could not be matched (ranked last; see retrieval_ranking.csv): "
                      f"{', '.join(sorted(failed_meshes))}\n")

@@ -177,6 +177,63 @@ def average_precision(ranked_labels: list[str], relevant: str) -> float:
     return total / hits if hits else 0.0
 
 
+#: resamples of the bootstrap interval of a MAP (:func:`map_interval`): enough for its 2.5 and 97.5
+#: percentiles to be stable to about 0.005 on a few dozen queries
+BOOTSTRAP_RESAMPLES = 4000
+
+
+def map_interval(aps, level: float = 0.95, resamples: int = BOOTSTRAP_RESAMPLES,
+                 seed: int = 0) -> tuple[float, float]:
+    """Percentile bootstrap interval of the mean of ``aps`` over the choice of queries.
+
+    The queries are drawn again with replacement ``resamples`` times and the interval holds the central
+    ``level`` of the resampled means (Efron & Tibshirani, *An Introduction to the Bootstrap*, 1993, ch. 13).
+    It says how much a MAP depends on which queries a benchmark happens to hold: two settings whose
+    intervals overlap widely are not told apart by that set. Deterministic (a fixed ``seed``).
+
+    Parameters
+    ----------
+    aps : (q,) float
+        Average precision of every answered query.
+
+    Returns
+    -------
+    (low, high) : float
+    """
+    aps = np.asarray(aps, dtype=float)
+    if aps.ndim != 1 or aps.size == 0 or not np.all(np.isfinite(aps)):
+        raise InputError(f"map_interval needs one finite AP per query, got {aps.size} values")
+    if not 0.0 < level < 1.0:
+        raise ParameterError(f"level must lie in (0, 1), got {level}")
+    rng = np.random.default_rng(seed)
+    means = aps[rng.integers(0, aps.size, size=(resamples, aps.size))].mean(axis=1)
+    low, high = np.quantile(means, [(1.0 - level) / 2.0, (1.0 + level) / 2.0])
+    return float(low), float(high)
+
+
+def class_margin(labels: list[str], energies, relevant: str) -> float:
+    """Relative margin of a ranking: ``(E_o − E_r) / ((E_o + E_r) / 2)``.
+
+    ``E_r`` is the lowest energy of a mesh of the query's class, ``E_o`` the lowest of any other class
+    (meshes that could not be matched, at infinite energy, do not count). Positive: the query's class
+    comes first, by that fraction of the energy; negative: another class does. It tells a decisive
+    ranking from a near-tie that the AP alone does not show.
+
+    Returns
+    -------
+    float
+        In ``(−2, 2)``; NaN where either class has no matched mesh.
+    """
+    energies = np.asarray(energies, dtype=float)
+    mine = np.array([label == relevant for label in labels], dtype=bool)
+    finite = np.isfinite(energies)
+    if not (np.any(mine & finite) and np.any(~mine & finite)):
+        return float("nan")
+    e_r, e_o = float(energies[mine & finite].min()), float(energies[~mine & finite].min())
+    mean = (e_o + e_r) / 2.0
+    return (e_o - e_r) / mean if mean > 0 else 0.0
+
+
 def mean_average_precision(rankings: list[tuple[str, list[str]]]) -> float:
     """Mean of :func:`average_precision` over ``(query class, ranked labels)`` pairs."""
     if not rankings:

@@ -158,13 +158,19 @@ def test_retrieval_benchmark_local_and_on_dask(tmp_path):
     assert code == 1  # one query failed
     summary = json.loads((out / "retrieval_summary.json").read_text())
     assert summary["queries"] == 3 and summary["failed"] == 1 and summary["collection"] == 2
-    rows = [r.split(",") for r in (out / "retrieval.csv").read_text().splitlines()[1:]]
-    aps = {r[0]: float(r[2]) for r in rows if r[2] != "nan"}
+    lines = (out / "retrieval.csv").read_text().splitlines()
+    rows = [dict(zip(lines[0].split(","), r.split(","))) for r in lines[1:]]
+    aps = {r["query"]: float(r["ap"]) for r in rows if r["ap"] != "nan"}
     for r in rows:
-        if r[0] in aps:
-            ranked = [class_of(n) for n in r[4].split()]
-            assert aps[r[0]] == pytest.approx(average_precision(ranked, r[1]))
+        if r["query"] in aps:
+            ranked = [class_of(n) for n in r["top"].split()]
+            assert aps[r["query"]] == pytest.approx(average_precision(ranked, r["class"]))
+            # the query's class first exactly where the margin is positive
+            assert (ranked[0] == r["class"]) == (float(r["margin"]) > 0)
     assert summary["map"] == pytest.approx(np.mean(list(aps.values())))
+    low, high = summary["map_interval"]
+    assert min(aps.values()) <= low <= summary["map"] <= high <= max(aps.values())
+    assert summary["right_class_first"] == sum(float(r["margin"]) > 0 for r in rows if r["query"] in aps)
     assert set(summary["per_class"]) == {"cat", "wolf"}
     # the whole ranking of every answered query, in increasing energy, gives the same AP
     ranking = [r.split(",") for r in (out / "retrieval_ranking.csv").read_text().splitlines()[1:]]

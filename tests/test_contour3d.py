@@ -675,6 +675,36 @@ def test_average_precision_by_hand():
     assert average_precision(["b", "b"], "a") == 0.0
 
 
+def test_map_interval_against_the_exact_bootstrap_distribution():
+    """The percentile bootstrap of a mean over two queries has an exact distribution: with APs 0 and 1 the
+    resampled mean is Binomial(q, 1/2) / q."""
+    from scipy.stats import binom
+
+    from corrlib.retrieval import map_interval
+
+    aps = [0.0, 1.0] * 5  # q = 10: the mean of a resample is k / 10, k ~ Binomial(10, 1/2)
+    low, high = map_interval(aps, resamples=20000)
+    assert (low, high) == (binom.ppf(0.025, 10, 0.5) / 10, binom.ppf(0.975, 10, 0.5) / 10)
+    assert map_interval([0.7] * 6) == (pytest.approx(0.7), pytest.approx(0.7))  # no spread, no interval
+    assert map_interval([0.2, 0.9, 0.5]) == map_interval([0.2, 0.9, 0.5])  # deterministic
+    with pytest.raises(InputError, match="one finite AP"):
+        map_interval([0.5, float("nan")])
+    with pytest.raises(ParameterError, match="level"):
+        map_interval([0.5], level=1.0)
+
+
+def test_class_margin_by_hand():
+    from corrlib.retrieval import class_margin
+
+    labels = ["cat", "wolf", "cat", "human"]
+    assert class_margin(labels, [100.0, 110.0, 120.0, 130.0], "cat") == pytest.approx(10 / 105)
+    assert class_margin(labels, [100.0, 110.0, 120.0, 130.0], "wolf") == pytest.approx(-10 / 105)
+    # a mesh that could not be matched (infinite energy) does not count; no matched mesh of a side: NaN
+    assert class_margin(labels, [np.inf, 110.0, 120.0, 130.0], "cat") == pytest.approx(-10 / 115)
+    assert np.isnan(class_margin(labels, [100.0, np.inf, 120.0, np.inf], "cat"))
+    assert np.isnan(class_margin(["cat", "cat"], [1.0, 2.0], "cat"))
+
+
 def test_bad_inputs(wolf_pair):
     wolf1 = wolf_pair[1]
     t = np.linspace(0, 2 * np.pi, 40, endpoint=False)

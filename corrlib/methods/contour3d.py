@@ -236,7 +236,8 @@ class Contour3DParams:
                                     "edges), and the curve is reported on its nearest input vertices: the "
                                     "product-graph energy depends on the resolution and the evenness of the mesh, "
                                     "so energies compare across meshes remeshed alike, and a finer graph is "
-                                    "slower. 0: match the mesh as given.")
+                                    "slower. 0: match the mesh as given (for man-made meshes with sharp edges, "
+                                    "which the relaxation does not keep).")
     k: int = param(25, label="Eigenpairs", low=5, high=500,
                    help="Laplace–Beltrami eigenpairs for HKS/WKS; the paper's sensitivity study chose 25.")
     n_scales: int = param(100, label="Scales", low=2, high=500, help="Times of the HKS and energies of the WKS.")

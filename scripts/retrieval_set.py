@@ -35,11 +35,12 @@ def _fail(message: str) -> None:
     sys.exit(2)
 
 
-def main(out: Path) -> None:
-    from corrlib.contour_bench import silhouette_query
+def new_benchmark_folders(out: Path) -> tuple[Path, Path]:
+    """``OUT/collection`` (the bundled retrieval collection) and an empty ``OUT/queries``; exits with a named
+    error where either exists and is not empty or cannot be written."""
     from corrlib.errors import CorrError
-    from corrlib.io import ensure_output_folder, load_mesh
-    from corrlib.resources import resource, retrieval_collection
+    from corrlib.io import ensure_output_folder
+    from corrlib.resources import retrieval_collection
 
     collection, queries = out / "collection", out / "queries"
     for folder in (collection, queries):
@@ -50,6 +51,15 @@ def main(out: Path) -> None:
         except CorrError as exc:
             _fail(str(exc))
     retrieval_collection(collection)
+    return collection, queries
+
+
+def main(out: Path) -> None:
+    from corrlib.contour_bench import silhouette_query
+    from corrlib.io import load_mesh
+    from corrlib.resources import resource
+
+    collection, queries = new_benchmark_folders(out)
 
     count = 0
 

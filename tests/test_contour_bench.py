@@ -9,7 +9,7 @@ import scipy.sparse as sp
 import trimesh
 from scipy.sparse.csgraph import dijkstra
 
-from _data import TOSCA
+from _data import ROOT, TOSCA
 from corrlib.cli import main
 from corrlib.contour_bench import (_vts_transfer, contour_benchmark, contour_jobs, cut_query, match_cut_query,
                                    principal_frame, score_curve, silhouette_query, symmetry_normal)
@@ -570,3 +570,23 @@ def test_the_papers_sketches_find_the_body_parts_of_a_person(tmp_path, capsys):
     row = match_sketch_query(sketch_a, data / "human1.off", data / "human1_segmentation.txt", {},
                              mirror_rows=(load_vts(data / "human1.vts"), load_vts(data / "human1.sym.vts")))
     assert row["part_agreement_sym"] < 0.6, row
+
+
+def test_the_view_set_turns_the_side_view_about_the_vertical_axis():
+    """``scripts/retrieval_views.py``: azimuth turns the side view (least-variance axis) about the vertical
+    principal axis towards the other horizontal one, elevation towards the vertical."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("retrieval_views", ROOT / "scripts" / "retrieval_views.py")
+    views = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(views)
+    axes = np.linalg.qr(np.random.default_rng(3).normal(size=(3, 3)))[0].T  # rows: an orthonormal frame
+    for vertical, horizontal in ((1, 0), (0, 1)):  # a quadruped's height, a person's height
+        assert np.allclose(views.view_direction(axes, vertical, 0, 0), axes[2])
+        assert np.allclose(views.view_direction(axes, vertical, 90, 0), axes[horizontal])
+        assert np.allclose(views.view_direction(axes, vertical, 0, 90), axes[vertical])
+        d = views.view_direction(axes, vertical, 30, 30)
+        assert np.linalg.norm(d) == pytest.approx(1.0)
+        assert d @ axes[vertical] == pytest.approx(0.5)  # elevation 30°
+        level = d - (d @ axes[vertical]) * axes[vertical]
+        assert level @ axes[2] / np.linalg.norm(level) == pytest.approx(np.cos(np.radians(30)))

@@ -177,8 +177,8 @@ def average_precision(ranked_labels: list[str], relevant: str) -> float:
     return total / hits if hits else 0.0
 
 
-#: resamples of the bootstrap interval of a MAP (:func:`map_interval`): enough for its 2.5 and 97.5
-#: percentiles to be stable to about 0.005 on a few dozen queries
+#: resamples of the bootstrap interval of a MAP (:func:`map_interval`): with another seed its ends move by a
+#: standard deviation of 0.001-0.003 on the bundled retrieval sets (21 and 60 queries)
 BOOTSTRAP_RESAMPLES = 4000
 
 
@@ -201,8 +201,11 @@ def map_interval(aps, level: float = 0.95, resamples: int = BOOTSTRAP_RESAMPLES,
     (low, high) : float
     """
     aps = np.asarray(aps, dtype=float)
-    if aps.ndim != 1 or aps.size == 0 or not np.all(np.isfinite(aps)):
-        raise InputError(f"map_interval needs one finite AP per query, got {aps.size} values")
+    if aps.ndim != 1 or aps.size == 0:
+        raise InputError(f"map_interval needs one finite AP per query, got an array of shape {aps.shape}")
+    if not np.all(np.isfinite(aps)):
+        raise InputError(f"map_interval needs one finite AP per query, got {int(np.sum(~np.isfinite(aps)))} "
+                         f"that are not finite")
     if not 0.0 < level < 1.0:
         raise ParameterError(f"level must lie in (0, 1), got {level}")
     rng = np.random.default_rng(seed)

@@ -23,15 +23,23 @@ from pathlib import Path
 
 import numpy as np
 
-sys.path.insert(0, str(Path(__file__).resolve().parent))  # the set's folders are built as retrieval_set.py's
-from retrieval_set import _fail, new_benchmark_folders  # noqa: E402
-
 #: (azimuth, elevation) in degrees, see the module docstring
 VIEWS = ((0, 0), (30, 0), (60, 0), (0, 30), (30, 30), (0, 60))
 #: principal axis (0: largest variance) that is vertical, per class; other classes: 1
 VERTICAL_AXIS = {"human": 0}
 #: pixels along the longer side of a rendered outline (the retrieval set's top views use the same)
 RESOLUTION = 256
+
+
+def _retrieval_set():
+    """``scripts/retrieval_set.py`` as a module (its folders and its error exit), imported when the script runs
+    (not when a test imports :func:`view_direction`, so that importing this file leaves ``sys.path`` alone)."""
+    import importlib.util
+
+    spec = importlib.util.spec_from_file_location("retrieval_set", Path(__file__).resolve().parent / "retrieval_set.py")
+    module = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(module)
+    return module
 
 
 def view_direction(axes: np.ndarray, vertical: int, azimuth: float, elevation: float) -> np.ndarray:
@@ -50,7 +58,7 @@ def main(out: Path) -> None:
     from corrlib.io import load_mesh, save_contour
     from corrlib.retrieval import class_of
 
-    collection, queries = new_benchmark_folders(out)
+    collection, queries = _retrieval_set().new_benchmark_folders(out)
     lines = []
     for path in sorted(collection.glob("*.off")):
         mesh = load_mesh(path)
@@ -70,5 +78,5 @@ def main(out: Path) -> None:
 
 if __name__ == "__main__":
     if len(sys.argv) != 2:
-        _fail("usage: python scripts/retrieval_views.py OUT")
+        _retrieval_set()._fail("usage: python scripts/retrieval_views.py OUT")
     main(Path(sys.argv[1]))

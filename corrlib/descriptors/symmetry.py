@@ -356,9 +356,9 @@ def mesh_reflections(meshes, spectra) -> list[np.ndarray]:
     with two-threaded BLAS; the maps are the same (:func:`reflection_map` is deterministic). Meshes of equal
     content are computed once.
     """
-    from concurrent.futures import ThreadPoolExecutor
-
     from threadpoolctl import threadpool_limits
+
+    from corrlib.parallel import side_threads
 
     meshes, spectra = list(meshes), list(spectra)
     found = [_cached_reflection(mesh) for mesh in meshes]
@@ -367,7 +367,7 @@ def mesh_reflections(meshes, spectra) -> list[np.ndarray]:
         first_of.setdefault(mesh.content_hash, i)
     todo = [i for i, mirror in enumerate(found) if mirror is None and first_of[meshes[i].content_hash] == i]
     if len(todo) >= 2:
-        with threadpool_limits(1), ThreadPoolExecutor(2) as pool:
+        with threadpool_limits(1), side_threads(2) as pool:
             for i, mirror in zip(todo, pool.map(lambda i: _stored_reflection(meshes[i], spectra[i]), todo)):
                 found[i] = mirror
     for i, mesh in enumerate(meshes):

@@ -115,7 +115,6 @@ Map convention: ``map_xy[i]`` = vertex of Y matched to vertex i of X.
 from __future__ import annotations
 
 import functools
-from concurrent.futures import ThreadPoolExecutor
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -139,6 +138,7 @@ from corrlib.methods.registry import MethodSpec, register
 from corrlib.methods.reorientation import (can_reorient, mean_agreement, orientation_blocks, reorient,
                                            standardised, turned_anything, with_first_pass)
 from corrlib.methods.resolution import keep_input_partners, kernel_width, nearest_partners, surplus_partners
+from corrlib.parallel import InlineExecutor, side_threads
 from corrlib.progress import Progress, Stopwatch, scaled_progress
 
 #: threads solving the cells of a refinement pass: the auction releases the GIL, so cells can overlap; two,
@@ -418,7 +418,7 @@ def _solve_cells(x_cells, y_cells, psi, phi, c, decay_y, decay_x, params, cancel
     # reverse map, merged over overlapping cells: an assigned source beats an unassigned one, then the score
     rank_y = np.full((n_y, 2), -np.inf)
     map_yx = -np.ones(n_y, dtype=np.int64)
-    with ThreadPoolExecutor(max_workers=CELL_THREADS) as pool:
+    with side_threads(CELL_THREADS) as pool:
         for cid, out in enumerate(pool.map(cell, range(len(x_cells)))):
             xs, ys = x_cells[cid], y_cells[cid]
             if out is None:
@@ -815,8 +815,8 @@ def prepare(source, target, params: KernelMatchingParams, token):
 
     yield Progress("eigenpairs", 0.0, f"{k} eigenpairs per shape")
     # the samples need the geometry only: they are drawn beside the eigensolvers, on the core that the first
-    # of the two decompositions to finish leaves idle
-    with ThreadPoolExecutor(2) as pool:
+    # of the two decompositions to finish leaves idle (in a pool's worker with one core: before them)
+    with side_threads(2) as pool:
         sampled = [pool.submit(samples, mesh) for mesh in (source, target)]
         with watch("eigen"):
             spec_x, spec_y = mesh_spectra((source, target), k)
@@ -1024,7 +1024,8 @@ def choose_start(state: KernelState):
 
     The aligned start's score and assignment do not depend on the first start's iterations, so they run on
     a thread beside them (the auctions release the GIL; two cores each take one); their time is reported
-    as ``"second start (concurrent)"``.
+    as ``"second start (concurrent)"``. A pool's worker with one core's share runs them first instead
+    (:func:`~corrlib.parallel.side_threads`), reported as ``"second start"``.
 
     Landmarks have the aligned start only (the kernel score of the landmarks alone): the seeds they do not fix
     have no partner of their own to start from (:func:`fixed_seeds`).
@@ -1046,7 +1047,7 @@ def _better_of_two_starts(state: KernelState):
     :func:`aligned_start`'s; returns the better :class:`DCRun`, its auction prices and the start's name."""
     prices = np.zeros(state.problem.n_columns)  # auction prices carried from one assignment to the next
     start_map = state.seed_map
-    with ThreadPoolExecutor(max_workers=1) as pool:
+    with side_threads(1) as pool:
         second_watch = Stopwatch()
         second = pool.submit(aligned_start, state, start_map, second_watch) if state.has_second_start else None
         best = yield from dc_iterations(state, start_map, prices, 0, None)
@@ -1056,7 +1057,9 @@ def _better_of_two_starts(state: KernelState):
                     f"kernel score of the most similar {state.params.init_fraction:.0%} of the initial matches")
             yield Progress("initial alignment", PROGRESS_DC[0] + PROGRESS_DC[1] * state.step / state.total_steps, what)
             other_start, other_prices = second.result()
-            state.watch.times["second start (concurrent)"] = sum(second_watch.times.values())
+            concurrent = not isinstance(pool, InlineExecutor)
+            state.watch.times["second start (concurrent)" if concurrent else "second start"] = \
+                sum(second_watch.times.values())
             other = yield from dc_iterations(state, other_start, other_prices, 0, best.kernel_scale)
             if other.value > best.value:
                 best, prices = other, other_prices

@@ -817,7 +817,8 @@ def prepare(source, target, params: KernelMatchingParams, token):
     # the samples need the geometry only: they are drawn beside the eigensolvers, on the core that the first
     # of the two decompositions to finish leaves idle (in a pool's worker with one core: before them)
     with side_threads(2) as pool:
-        sampled = [pool.submit(samples, mesh) for mesh in (source, target)]
+        with watch("sampling"):  # a thread's start; inline, the samples themselves
+            sampled = [pool.submit(samples, mesh) for mesh in (source, target)]
         with watch("eigen"):
             spec_x, spec_y = mesh_spectra((source, target), k)
         with watch("sampling"):

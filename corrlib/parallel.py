@@ -2,7 +2,7 @@
 
 Local process pools by default. Workers limit BLAS to one thread each,
 numba to their share of the cores, and the methods' side threads to that
-share too (:func:`side_threads`): the pool already uses the cores, and two
+share too (:mod:`corrlib.cores`): the pool already uses the cores, and two
 multi-threaded BLAS per core collapse.
 """
 
@@ -10,52 +10,19 @@ from __future__ import annotations
 
 import multiprocessing
 import os
-from concurrent.futures import Executor, Future, ProcessPoolExecutor, ThreadPoolExecutor
+from concurrent.futures import ProcessPoolExecutor
 
+from corrlib.cores import set_core_share
 from corrlib.errors import CorrError, ParameterError
-
-#: the cores a pool's worker may keep busy (set by :func:`process_pool`'s initializer); None outside a pool
-_core_share: int | None = None
 
 
 def _limit_threads(share: int):
     import numba
     from threadpoolctl import threadpool_limits
 
-    global _core_share
-    _core_share = max(1, int(share))
+    share = set_core_share(share)
     threadpool_limits(1)
-    numba.set_num_threads(max(1, min(_core_share, numba.config.NUMBA_NUM_THREADS)))
-
-
-def core_share() -> int:
-    """The cores this process may keep busy: a pool worker's share of the machine (:func:`process_pool`: the
-    cores divided by the workers, at least one), every core elsewhere."""
-    return _core_share or os.cpu_count() or 1
-
-
-class InlineExecutor(Executor):
-    """An executor that runs every call at once in the calling thread and returns it as a finished future
-    (its exception, if it raised, comes out of ``result()``, as from a thread)."""
-
-    def submit(self, fn, /, *args, **kwargs) -> Future:
-        future = Future()
-        try:
-            future.set_result(fn(*args, **kwargs))
-        except BaseException as exc:  # noqa: BLE001 - handed to the caller through the future, as a thread would
-            future.set_exception(exc)
-        return future
-
-
-def side_threads(max_workers: int) -> Executor:
-    """Threads for work beside the calling thread (kernels that release the GIL), or none.
-
-    A :class:`~concurrent.futures.ThreadPoolExecutor` of ``max_workers`` threads where this process may use
-    more than one core (:func:`core_share`); an :class:`InlineExecutor` in a worker with one core's share,
-    where threads would only take turns on that core, each evicting the other's data from its caches
-    (``docs/decisions.md``). The results are the same either way; only the order of the work changes.
-    """
-    return ThreadPoolExecutor(max_workers=max_workers) if core_share() > 1 else InlineExecutor()
+    numba.set_num_threads(max(1, min(share, numba.config.NUMBA_NUM_THREADS)))
 
 
 def process_pool(jobs: int | None = None) -> ProcessPoolExecutor:

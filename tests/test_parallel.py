@@ -8,13 +8,13 @@ from concurrent.futures import ThreadPoolExecutor
 import numpy as np
 import pytest
 
-from corrlib import parallel
+from corrlib import cores, parallel
 from corrlib.methods import solve
 
 
 def test_inline_executor_runs_every_call_at_once_and_hands_exceptions_to_result():
     calls = []
-    with parallel.InlineExecutor() as pool:
+    with cores.InlineExecutor() as pool:
         future = pool.submit(lambda a, b: calls.append((a, b)) or a + b, 2, b=3)
         assert future.done() and calls == [(2, 3)]  # ran before submit returned
         assert future.result() == 5
@@ -26,20 +26,20 @@ def test_inline_executor_runs_every_call_at_once_and_hands_exceptions_to_result(
 
 
 def test_side_threads_are_threads_only_with_more_than_one_core(monkeypatch):
-    monkeypatch.setattr(parallel, "_core_share", 1)
-    assert parallel.core_share() == 1
-    assert isinstance(parallel.side_threads(2), parallel.InlineExecutor)
-    monkeypatch.setattr(parallel, "_core_share", 2)
-    with parallel.side_threads(2) as pool:
+    monkeypatch.setattr(cores, "_core_share", 1)
+    assert cores.core_share() == 1
+    assert isinstance(cores.side_threads(2), cores.InlineExecutor)
+    monkeypatch.setattr(cores, "_core_share", 2)
+    with cores.side_threads(2) as pool:
         assert isinstance(pool, ThreadPoolExecutor) and pool._max_workers == 2
-    monkeypatch.setattr(parallel, "_core_share", None)  # outside a pool: every core of the machine
-    assert parallel.core_share() == (os.cpu_count() or 1)
+    monkeypatch.setattr(cores, "_core_share", None)  # outside a pool: every core of the machine
+    assert cores.core_share() == (os.cpu_count() or 1)
 
 
 @pytest.mark.parametrize("jobs", [1, 2, 64])
 def test_pool_workers_know_their_share_of_the_cores(jobs):
     with parallel.process_pool(jobs) as pool:
-        share = pool.submit(parallel.core_share).result()
+        share = pool.submit(cores.core_share).result()
     assert share == max(1, (os.cpu_count() or 1) // jobs)  # never 0, even with more workers than cores
 
 
@@ -48,7 +48,7 @@ def test_kernel_matching_in_a_one_core_worker_gives_the_same_map(wolf_pair, monk
     thread instead of beside it: the same computations in another order, so the same map."""
     fast = dict(n_eigs=150, n_seeds=800, n_times=5, iters_per_time=2)
     threaded = solve("kernel-matching", *wolf_pair, **fast)
-    monkeypatch.setattr(parallel, "_core_share", 1)
+    monkeypatch.setattr(cores, "_core_share", 1)
     inline = solve("kernel-matching", *wolf_pair, **fast)
     np.testing.assert_array_equal(inline.map_xy, threaded.map_xy)
     assert inline.energy == threaded.energy

@@ -358,7 +358,7 @@ def mesh_reflections(meshes, spectra) -> list[np.ndarray]:
     """
     from threadpoolctl import threadpool_limits
 
-    from corrlib.parallel import side_threads
+    from corrlib.cores import side_threads
 
     meshes, spectra = list(meshes), list(spectra)
     found = [_cached_reflection(mesh) for mesh in meshes]

@@ -121,6 +121,7 @@ import numpy as np
 from scipy.sparse.csgraph import dijkstra
 
 from corrlib.assignment import area_capacities, linear_assignment
+from corrlib.cores import InlineExecutor, side_threads
 from corrlib.descriptors import DESCRIPTOR_KINDS, mesh_descriptors
 from corrlib.errors import ParameterError
 from corrlib.geometry.fmaps import pointwise_from_basis, repeated_pointwise_from_basis, resolved_eigenpairs
@@ -138,7 +139,6 @@ from corrlib.methods.registry import MethodSpec, register
 from corrlib.methods.reorientation import (can_reorient, mean_agreement, orientation_blocks, reorient,
                                            standardised, turned_anything, with_first_pass)
 from corrlib.methods.resolution import keep_input_partners, kernel_width, nearest_partners, surplus_partners
-from corrlib.parallel import InlineExecutor, side_threads
 from corrlib.progress import Progress, Stopwatch, scaled_progress
 
 #: threads solving the cells of a refinement pass: the auction releases the GIL, so cells can overlap; two,
@@ -1026,7 +1026,7 @@ def choose_start(state: KernelState):
     The aligned start's score and assignment do not depend on the first start's iterations, so they run on
     a thread beside them (the auctions release the GIL; two cores each take one); their time is reported
     as ``"second start (concurrent)"``. A pool's worker with one core's share runs them first instead
-    (:func:`~corrlib.parallel.side_threads`), reported as ``"second start"``.
+    (:func:`~corrlib.cores.side_threads`), reported as ``"second start"``.
 
     Landmarks have the aligned start only (the kernel score of the landmarks alone): the seeds they do not fix
     have no partner of their own to start from (:func:`fixed_seeds`).

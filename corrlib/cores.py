@@ -30,8 +30,10 @@ def core_share() -> int:
 
 
 class InlineExecutor(Executor):
-    """An executor that runs every call at once in the calling thread and returns it as a finished future
-    (its exception, if it raised, comes out of ``result()``, as from a thread)."""
+    """An executor that runs every call in the calling thread: ``submit`` at once, returning a finished future
+    (its exception, if it raised, comes out of ``result()``, as from a thread); ``map`` lazily, each call when
+    its result is asked for, so that no more than one result is held at a time (a thread pool's ``map`` holds
+    only those its threads are ahead by; computing them all first would hold every one)."""
 
     def submit(self, fn, /, *args, **kwargs) -> Future:
         future = Future()
@@ -40,6 +42,9 @@ class InlineExecutor(Executor):
         except BaseException as exc:  # noqa: BLE001 - handed to the caller through the future, as a thread would
             future.set_exception(exc)
         return future
+
+    def map(self, fn, *iterables, timeout=None, chunksize=1):
+        return (fn(*args) for args in zip(*iterables))
 
 
 def side_threads(max_workers: int) -> Executor:

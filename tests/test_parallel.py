@@ -12,7 +12,7 @@ from corrlib import cores, parallel
 from corrlib.methods import solve
 
 
-def test_inline_executor_runs_every_call_at_once_and_hands_exceptions_to_result():
+def test_inline_executor_submits_at_once_maps_lazily_and_hands_exceptions_to_result():
     calls = []
     with cores.InlineExecutor() as pool:
         future = pool.submit(lambda a, b: calls.append((a, b)) or a + b, 2, b=3)
@@ -22,7 +22,11 @@ def test_inline_executor_runs_every_call_at_once_and_hands_exceptions_to_result(
         assert failed.done()
         with pytest.raises(ZeroDivisionError):
             failed.result()
-        assert list(pool.map(lambda v: v * v, [3, 1, 2])) == [9, 1, 4]  # in order
+        calls.clear()
+        squares = pool.map(lambda v: calls.append(v) or v * v, [3, 1, 2])
+        assert calls == []  # lazily: a result is computed when it is asked for, not all of them first
+        assert next(squares) == 9 and calls == [3]
+        assert list(squares) == [1, 4]  # in order
 
 
 def test_side_threads_are_threads_only_with_more_than_one_core(monkeypatch):

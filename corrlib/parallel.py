@@ -22,7 +22,7 @@ def _limit_threads(share: int):
 
     share = set_core_share(share)
     threadpool_limits(1)
-    numba.set_num_threads(max(1, min(share, numba.config.NUMBA_NUM_THREADS)))
+    numba.set_num_threads(min(share, numba.config.NUMBA_NUM_THREADS))  # share >= 1
 
 
 def process_pool(jobs: int | None = None) -> ProcessPoolExecutor:

@@ -57,3 +57,13 @@ def test_kernel_matching_in_a_one_core_worker_gives_the_same_map(wolf_pair, monk
     np.testing.assert_array_equal(inline.map_xy, threaded.map_xy)
     assert inline.energy == threaded.energy
     assert "second start" in inline.timings and "second start (concurrent)" not in inline.timings
+
+
+def test_a_worker_with_one_core_decomposes_both_shapes_itself(monkeypatch):
+    """The eigensolver's second process is one more busy core: not where the process has one core's share."""
+    from corrlib.geometry import spectrum
+
+    monkeypatch.setattr(cores, "_core_share", 1)
+    assert not spectrum._second_process_allowed()
+    monkeypatch.setattr(cores, "_core_share", 2)
+    assert spectrum._second_process_allowed()  # the test process is no pool's child

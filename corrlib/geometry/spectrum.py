@@ -427,12 +427,14 @@ PARALLEL_MIN_WORK = 1_000_000
 
 
 def _second_process_allowed() -> bool:
-    """Whether a second process may take a core: two or more cores, and this process is not already one of
-    a pool's workers (which share the cores among themselves)."""
+    """Whether a second process may take a core: this process may keep two or more busy
+    (:func:`~corrlib.cores.core_share`), and it is not a child process of any pool (a corrlib pool's worker
+    records its share; another pool's, e.g. Dask's, shares the cores without saying so)."""
     import multiprocessing
-    import os
 
-    return (os.cpu_count() or 1) >= 2 and multiprocessing.parent_process() is None
+    from corrlib.cores import core_share
+
+    return core_share() >= 2 and multiprocessing.parent_process() is None
 
 
 def _start_decomposition(mesh, k: int, stiffness, mass_mat, folder: str):

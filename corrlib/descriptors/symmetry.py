@@ -62,6 +62,7 @@ from corrlib import cache
 from corrlib.descriptors.orientation import orientation_descriptors
 from corrlib.descriptors.spectral import biharmonic_embedding, hks, wks
 from corrlib.errors import InputError, ParameterError
+from corrlib.geometry.distortion import GEODESIC_SAMPLES, geodesic_distortions as pair_distortions
 from corrlib.geometry.fmaps import functional_map, pointwise_to_functional, resolvent_mask, zoomout
 
 #: scales of the even probes (HKS and WKS each) and of the HKS whose pairs give the odd probes
@@ -210,10 +211,6 @@ def reflection_distortion(mirror: np.ndarray, embedding: np.ndarray) -> float:
     return _distortion(cdist(embedding[rows], embedding[rows]), embedding[np.asarray(mirror)[rows]])
 
 
-#: vertices (farthest points) between which :func:`geodesic_distortion` measures the distances
-GEODESIC_SAMPLES = 100
-
-
 def geodesic_distortion(mesh, mirror: np.ndarray) -> float:
     """Mean ``|d(x, y) − d(S x, S y)|`` of the geodesic distances (shortest edge paths) between farthest-point
     samples, divided by √area.
@@ -234,7 +231,8 @@ def geodesic_distortion(mesh, mirror: np.ndarray) -> float:
 
 
 def geodesic_distortions(mesh, mirrors) -> list[float]:
-    """:func:`geodesic_distortion` of several self-maps of one mesh, the sample's own distances computed once.
+    """:func:`geodesic_distortion` of several self-maps of one mesh, the sample's own distances computed once
+    (:func:`corrlib.geometry.distortion.geodesic_distortions` with the mesh as source and target).
 
     Parameters
     ----------
@@ -246,18 +244,7 @@ def geodesic_distortions(mesh, mirrors) -> list[float]:
     list of float
         One distortion per map, in their order.
     """
-    from corrlib.geometry.geodesics import GeodesicSolver
-    from corrlib.geometry.sampling import outermost_farthest_points
-
-    sample = outermost_farthest_points(mesh.vertices, min(GEODESIC_SAMPLES, mesh.n_vertices))
-    solver = GeodesicSolver(mesh)
-    before = solver.distances(sample, method="graph")[:, sample]
-    out = []
-    for mirror in mirrors:
-        images = np.asarray(mirror)[sample]
-        after = solver.distances(images, method="graph")[:, images]
-        out.append(float(np.mean(np.abs(before - after)) / np.sqrt(mesh.area)))
-    return out
+    return pair_distortions(mesh, mesh, mirrors)
 
 
 def distortion_sample(n: int) -> np.ndarray:

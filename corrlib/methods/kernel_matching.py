@@ -37,7 +37,9 @@ The stages, each a function below sharing one :class:`KernelState`:
    (:mod:`.reorientation`); final energy, optional pointwise smoothing, result.
 8. :func:`reoptimised` — where stage 7 turned anything, stages 2–7 once more
    from the turned map (a turn by a computed reflection is a start, not an
-   optimum).
+   optimum). Where it turned regions or limbs, or released limbs, the result
+   stands only if it is nearer an isometry than the map without those turns
+   (:func:`declined_partial_turns`, the geodesic distortion).
 
 Design choices, in brief (the measurements behind them are in
 ``docs/decisions.md``, "Kernel matching: measured design choices"):
@@ -124,6 +126,7 @@ from corrlib.assignment import area_capacities, linear_assignment
 from corrlib.cores import InlineExecutor, side_threads
 from corrlib.descriptors import DESCRIPTOR_KINDS, mesh_descriptors
 from corrlib.errors import ParameterError
+from corrlib.geometry.distortion import geodesic_distortions
 from corrlib.geometry.fmaps import pointwise_from_basis, repeated_pointwise_from_basis, resolved_eigenpairs
 from corrlib.geometry.sampling import (
     SurfaceSample,
@@ -733,6 +736,9 @@ class KernelState:
     step: int = 0  # DC iterations counted for the progress bar
     seed_vertices_x: np.ndarray | None = None  # the seeds' matches snapped to vertices (reported)
     seed_vertices_y: np.ndarray | None = None
+    # the final map as it was before the orientation stage turned regions or parts or released limbs (after a
+    # whole-map turn, if any), (map_xy, map_yx): the alternative a second pass must beat (:func:`reoptimised`)
+    before_partial_turns: tuple | None = None
 
     def prepared(self) -> "KernelState":
         """A state as :func:`prepare` left it (spectra, times, seeds, sample orders), with the descriptors (plain
@@ -1215,12 +1221,12 @@ def multiscale_refinement(state: KernelState):
     return full_map_xy, cell_map_yx
 
 
-def kernel_result(state: KernelState, full_map_xy: np.ndarray, full_map_yx: np.ndarray):
+def kernel_result(state: KernelState, full_map_xy: np.ndarray, full_map_yx: np.ndarray, orient: bool = True):
     """Stage 7: the turns of reversed regions, the final ZoomOut steps
     (:func:`~corrlib.geometry.fmaps.pointwise_from_basis`, repeated by
     :func:`~corrlib.geometry.fmaps.repeated_pointwise_from_basis` unless the map came from outside the solver),
     the kernel energy ``<Π, K_Y Π K_X>`` of the final map at the smallest time, the :class:`MatchResult`. A
-    generator."""
+    generator. ``orient=False`` skips the orientation stage (a map the stage has seen already)."""
     params, k, watch = state.params, state.k, state.watch
     psi, phi, trace = state.psi, state.phi, state.trace
     monotone, dc_start, n_seed = state.monotone, state.dc_start, state.n_seed
@@ -1229,11 +1235,14 @@ def kernel_result(state: KernelState, full_map_xy: np.ndarray, full_map_yx: np.n
     turned = turned_regions = turned_parts = released = None
     released_regions = ()
     # landmarks fix the orientation themselves; a cut changes a shape's reflection and biharmonic distances
-    if params.reorient and state.anchors_x.size == 0 and not params.partial and \
+    if orient and params.reorient and state.anchors_x.size == 0 and not params.partial and \
             can_reorient(state.source, state.target, state.spec_y):
         with watch("orientation"):
             done = reorient(state.source, state.target, state.spec_x, state.spec_y, full_map_xy, full_map_yx,
                             state.orientation_blocks)
+        if done.turned_regions is not None or done.turned_parts is not None or done.released is not None:
+            state.before_partial_turns = (full_map_xy, full_map_yx) if done.turned is None else \
+                (done.turned.map_xy, done.turned.map_yx)
         full_map_xy, full_map_yx = done.map_xy, done.map_yx
         turned, turned_regions, turned_parts = done.turned, done.turned_regions, done.turned_parts
         released, released_regions = done.released, done.released_regions
@@ -1315,6 +1324,13 @@ def reoptimised(state: KernelState, turned: MatchResult):
     :class:`~corrlib.methods.base.InitialMatch`), so the kernel energy places the limbs by their heat-kernel
     relation to the body, whose left and right the landmarks fix. A landmark run has no orientation stage,
     so there is no third pass here either.
+
+    Turned regions and parts and released limbs are hypotheses: the region rule reads a region whose
+    orientation is reversed as a left–right flip, but on a body with a second near-symmetry (an upper body
+    alike in front and behind) it can be the other flip, which the left–right reflection turns into a half
+    turn with the arms swapped. The result of this pass is therefore kept only where it is nearer an isometry
+    than the map without those turns (:func:`declined_partial_turns`). A turn of the whole map is not judged
+    so: it composes the map with a reflection, an isometry, which leaves the distortion as it was.
     """
     # the first pass reports at most PROGRESS_SMOOTHING: the second fills the rest of the bar, which never goes back
     yield Progress("re-optimising", PROGRESS_SMOOTHING, "the turned map, refined once more")
@@ -1331,7 +1347,42 @@ def reoptimised(state: KernelState, turned: MatchResult):
     result = yield from scaled_progress(solve_prepared(fresh, start, compete=False),
                                         PROGRESS_SMOOTHING, 1.0, "second pass")
     with_first_pass(result.extras, turned.extras, turned.map_xy, turned.energy)
+    if state.before_partial_turns is not None:
+        kept = yield from declined_partial_turns(state, turned, result)
+        if kept is not None:
+            return kept
     return result
+
+
+def declined_partial_turns(state: KernelState, first: MatchResult, second: MatchResult):
+    """The first pass's map without its partial turns, where the second pass made the map farther from an
+    isometry; else None (a generator).
+
+    Compares the geodesic distortion :math:`D` (:func:`~corrlib.geometry.distortion.geodesic_distortions`) of
+    the map before the orientation stage turned regions or parts or released limbs
+    (``state.before_partial_turns``; after a whole-map turn, if any) with that of the second pass's result. A
+    right turn removes a mirror-inverted stretch of the map and lowers :math:`D`; a turn by the wrong
+    symmetry swaps limbs and raises it. The kernel energy cannot decide: it is higher after either (the second
+    pass optimises further in any case). The distortions go to ``extras`` of the map returned
+    (``distortion_before_turns``, ``distortion_after_turns``); a declined result also holds
+    ``declined_turns`` (the counts of the turns undone) and is the first pass's map through the final ZoomOut
+    steps, with its energy and trace.
+    """
+    before_xy, before_yx = state.before_partial_turns
+    with state.watch("orientation"):
+        distortion_before, distortion_after = geodesic_distortions(state.source, state.target,
+                                                                   (before_xy, second.map_xy))
+    measured = {"distortion_before_turns": distortion_before, "distortion_after_turns": distortion_after}
+    second.extras.update(measured)
+    if not distortion_before < distortion_after:
+        return None
+    kept = yield from scaled_progress(kernel_result(state, before_xy, before_yx, orient=False), 1.0, 1.0,
+                                      "the turns undone")
+    kept.extras.update(measured, turned=bool(first.extras.get("turned")),
+                       agreement_before_turn=first.extras.get("agreement_before_turn"),
+                       declined_turns={key: int(first.extras.get(key) or 0)
+                                       for key in ("turned_regions", "turned_parts", "released_regions")})
+    return kept
 
 
 def solve_prepared(state: KernelState, initial: InitialMatch | None, compete: bool = True):
@@ -1394,6 +1445,15 @@ def turn_note(extras: dict) -> str | None:
         said.append(f"{extras['released_regions']} regions (a mirror pair of limbs with the body beside them) were "
                     f"matched swapped, each onto the other's mirror image; they were matched again with the rest "
                     f"of the map as landmarks")
+    declined = extras.get("declined_turns") or {}
+    if any(declined.values()):
+        what = [f"{declined[key]} {name}{'s' if declined[key] > 1 else ''}" for key, name in
+                (("turned_regions", "turned region"), ("turned_parts", "turned limb"),
+                 ("released_regions", "released region")) if declined.get(key)]
+        said.append(f"the orientation stage turned or released parts of the map ({', '.join(what)}), but the map "
+                    f"optimised after that was farther from an isometry (geodesic distortion "
+                    f"{extras['distortion_after_turns']:.4f} against {extras['distortion_before_turns']:.4f} "
+                    f"√area), so the map as found before those turns was kept")
     if extras.get("swapped_regions"):
         said.append(f"{extras['swapped_regions']} regions (a mirror pair of limbs with the body beside them) are "
                     f"matched swapped, each onto the other's mirror image, and were left as found (kernel matching "

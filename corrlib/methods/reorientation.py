@@ -80,7 +80,13 @@ posed unlike their mirror limbs, can be poor while the other shape's is
 exact. The distortion of a region's distances to the regions that keep their
 orientation, the parts' test, does not decide here: an arm is about as far
 from either leg, so turning a mirrored arm back changed it by less than the
-poses do, and in either direction.
+poses do, and in either direction. The rule assumes that a reversed region
+is a left–right flip. On a body with a second near-symmetry (an upper body
+alike in front and behind, feet the only front) it can be the other flip,
+which the left–right reflection turns into a half turn with the arms
+swapped; kernel matching therefore keeps a turned and re-optimised map only
+where it is nearer an isometry than the map as found
+(:func:`corrlib.methods.kernel_matching.declined_partial_turns`).
 
 **Crossed limbs.** A map of a complete shape onto a complete one sends every
 limb onto a limb of its own. A single reversed region whose limb shares its

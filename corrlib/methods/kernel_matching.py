@@ -126,7 +126,6 @@ from corrlib.assignment import area_capacities, linear_assignment
 from corrlib.cores import InlineExecutor, side_threads
 from corrlib.descriptors import DESCRIPTOR_KINDS, mesh_descriptors
 from corrlib.errors import ParameterError
-from corrlib.geometry.distortion import geodesic_distortions
 from corrlib.geometry.fmaps import pointwise_from_basis, repeated_pointwise_from_basis, resolved_eigenpairs
 from corrlib.geometry.sampling import (
     SurfaceSample,
@@ -139,8 +138,9 @@ from corrlib.geometry.sampling import (
 from corrlib.geometry.spectrum import Spectrum, mesh_spectra
 from corrlib.methods.base import InitialMatch, MatchResult, param
 from corrlib.methods.registry import MethodSpec, register
-from corrlib.methods.reorientation import (can_reorient, mean_agreement, orientation_blocks, reorient,
-                                           standardised, turned_anything, with_first_pass)
+from corrlib.methods.reorientation import (can_reorient, declined_extras, mean_agreement, nearer_isometry,
+                                           orientation_blocks, reorient, standardised, turned_anything,
+                                           with_first_pass)
 from corrlib.methods.resolution import keep_input_partners, kernel_width, nearest_partners, surplus_partners
 from corrlib.progress import Progress, Stopwatch, scaled_progress
 
@@ -1240,9 +1240,7 @@ def kernel_result(state: KernelState, full_map_xy: np.ndarray, full_map_yx: np.n
         with watch("orientation"):
             done = reorient(state.source, state.target, state.spec_x, state.spec_y, full_map_xy, full_map_yx,
                             state.orientation_blocks)
-        if done.turned_regions is not None or done.turned_parts is not None or done.released is not None:
-            state.before_partial_turns = (full_map_xy, full_map_yx) if done.turned is None else \
-                (done.turned.map_xy, done.turned.map_yx)
+        state.before_partial_turns = done.before_partial
         full_map_xy, full_map_yx = done.map_xy, done.map_yx
         turned, turned_regions, turned_parts = done.turned, done.turned_regions, done.turned_parts
         released, released_regions = done.released, done.released_regions
@@ -1358,30 +1356,23 @@ def declined_partial_turns(state: KernelState, first: MatchResult, second: Match
     """The first pass's map without its partial turns, where the second pass made the map farther from an
     isometry; else None (a generator).
 
-    Compares the geodesic distortion :math:`D` (:func:`~corrlib.geometry.distortion.geodesic_distortions`) of
-    the map before the orientation stage turned regions or parts or released limbs
-    (``state.before_partial_turns``; after a whole-map turn, if any) with that of the second pass's result. A
-    right turn removes a mirror-inverted stretch of the map and lowers :math:`D`; a turn by the wrong
-    symmetry swaps limbs and raises it. The kernel energy cannot decide: it is higher after either (the second
-    pass optimises further in any case). The distortions go to ``extras`` of the map returned
-    (``distortion_before_turns``, ``distortion_after_turns``); a declined result also holds
-    ``declined_turns`` (the counts of the turns undone) and is the first pass's map through the final ZoomOut
-    steps, with its energy and trace.
+    Compares the geodesic distortion of the map before the orientation stage turned regions or parts or
+    released limbs (``state.before_partial_turns``; after a whole-map turn, if any) with that of the second
+    pass's result (:func:`~corrlib.methods.reorientation.nearer_isometry`: a right turn removes a
+    mirror-inverted stretch of the map and lowers it; a turn by the wrong symmetry swaps limbs and raises it;
+    the kernel energy is higher after either). The distortions go to ``extras`` of the map returned; a
+    declined result is the first pass's map through the final ZoomOut steps, with its energy and trace, and
+    ``declined_turns`` (:func:`~corrlib.methods.reorientation.declined_extras`).
     """
     before_xy, before_yx = state.before_partial_turns
     with state.watch("orientation"):
-        distortion_before, distortion_after = geodesic_distortions(state.source, state.target,
-                                                                   (before_xy, second.map_xy))
-    measured = {"distortion_before_turns": distortion_before, "distortion_after_turns": distortion_after}
+        keep_after, measured = nearer_isometry(state.source, state.target, before_xy, second.map_xy)
     second.extras.update(measured)
-    if not distortion_before < distortion_after:
+    if keep_after:
         return None
     kept = yield from scaled_progress(kernel_result(state, before_xy, before_yx, orient=False), 1.0, 1.0,
                                       "the turns undone")
-    kept.extras.update(measured, turned=bool(first.extras.get("turned")),
-                       agreement_before_turn=first.extras.get("agreement_before_turn"),
-                       declined_turns={key: int(first.extras.get(key) or 0)
-                                       for key in ("turned_regions", "turned_parts", "released_regions")})
+    kept.extras.update(declined_extras(first.extras, measured))
     return kept
 
 

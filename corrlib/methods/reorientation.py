@@ -66,8 +66,10 @@ area than it wrongs (:func:`reversed_on_most`): one strongly mirrored region
 can make the mean negative while the rest is right, and a wholly mirrored
 map can keep a weakly positive agreement on a thin limb. The region rule
 turns a region together with its mirror region (``S_X(R)``, the other arm; the
-head is its own): a mirrored part of a bilaterally symmetric map is closed
-under the reflection, a single limb with a negative agreement is not (that
+head is its own; paired through the target's reflection where that one is
+nearer an isometry, :func:`pairing_reflection`): a mirrored part of a
+bilaterally symmetric map is closed under the reflection, a single limb with
+a negative agreement is not (that
 is a crossed limb, the parts' case, or noise). A region that is its own
 mirror region (a head, a tail) is turned only with a pair: alone, a thin
 part on the plane of symmetry carries weak orientation descriptors, and a
@@ -142,6 +144,7 @@ from corrlib.descriptors.orientation import orientation_descriptors
 from corrlib.descriptors.spectral import biharmonic_embedding
 from corrlib.descriptors.symmetry import K_FINAL as REFLECTION_EIGENPAIRS
 from corrlib.descriptors.symmetry import mesh_reflections, reflection_distortion
+from corrlib.geometry.distortion import geodesic_distortions
 
 
 @dataclass(frozen=True)
@@ -295,6 +298,27 @@ class TurnedParts:
 def _majority(values: np.ndarray) -> int:
     """The most frequent non-negative label (ties: the smaller)."""
     return int(np.argmax(np.bincount(values))) if values.size else 0
+
+
+def pairing_reflection(map_xy: np.ndarray, map_yx: np.ndarray | None, mirror_x: Callable[[], np.ndarray],
+                       mirror_y: Callable[[], np.ndarray], target_nearer: bool) -> np.ndarray:
+    """(n_X,) int: the reflection that pairs the source's regions with their mirror regions.
+
+    The source's own, ``S_X``, unless the target's is nearer an isometry (``target_nearer``, the choice
+    :func:`mirrored_map` makes for the turn itself) and the backward map is given: then the target's carried
+    onto the source through the map, ``m⁻¹ ∘ S_Y ∘ m``, which is a reflection of ``X`` for any isometry ``m``
+    (flipped or not) and exact where ``S_Y`` is. A posed person's computed reflection can be far off (a capsule
+    body's, whose limbs are nearly surfaces of revolution: 0.25 √area) while the other pose's is exact, and a
+    wrong pairing leaves a mirrored pair of limbs unturned. Vertices whose chain meets an unmatched vertex
+    keep ``S_X``. ``mirror_x`` and ``mirror_y`` are called only when used.
+    """
+    if not target_nearer or map_yx is None:
+        return mirror_x()
+    map_xy, map_yx = np.asarray(map_xy), np.asarray(map_yx)
+    through = np.full(map_xy.size, -1, dtype=np.int64)
+    matched = map_xy >= 0
+    through[matched] = map_yx[np.asarray(mirror_y())[map_xy[matched]]]
+    return np.where(through >= 0, through, mirror_x())
 
 
 def mirror_region(regions: np.ndarray, mirror_x: np.ndarray, region: int) -> int:
@@ -481,7 +505,8 @@ def turn_reversed_regions(map_xy: np.ndarray, map_yx: np.ndarray | None, parts_x
         ``(map_xy, map_yx) -> (turned_xy, turned_yx)``: the maps turned by a reflection (:func:`mirrored_map`);
         called only if a region's agreement is negative.
     mirror_x : callable returning (n_X,) int
-        The source's reflection, which pairs every region with its mirror region.
+        The reflection of the source that pairs every region with its mirror region
+        (:func:`pairing_reflection`).
     local_agreement : callable
         ``(n_X,) int map -> (n_X,) float``: every source vertex's agreement ``⟨O_X(x), O_Y(m(x))⟩`` (any
         value where unmatched; those vertices are left out).
@@ -557,7 +582,8 @@ def swapped_pairs(map_xy: np.ndarray, parts_x: ShapeParts, parts_y: ShapeParts, 
     reading : dict of int -> float
         The same with :func:`map_orientation`.
     mirror_x : callable returning (n_X,) int
-        The source's reflection, which pairs every region with its mirror region.
+        The reflection of the source that pairs every region with its mirror region
+        (:func:`pairing_reflection`).
     areas : dict of int -> float
         :func:`region_areas` of the source.
     """
@@ -690,6 +716,10 @@ class Reoriented:
         from the rest of the map; None when there are none.
     released_regions : tuple of int
         Their regions (:func:`shoulder_regions` labels).
+    before_partial : tuple or None
+        ``(map_xy, map_yx)`` before regions or parts were turned or limbs released (after the whole-map turn,
+        if any): the alternative that the re-optimised map must beat (:func:`nearer_isometry`); None when
+        nothing partial was done.
     """
 
     map_xy: np.ndarray
@@ -699,6 +729,7 @@ class Reoriented:
     turned_parts: TurnedParts | None
     released: np.ndarray | None = None
     released_regions: tuple = ()
+    before_partial: tuple | None = None
 
 
 def can_reorient(source, target, spec_y) -> bool:
@@ -749,9 +780,13 @@ def reorient(source, target, spec_x, spec_y, map_xy: np.ndarray, map_yx: np.ndar
     if turned is not None:
         map_xy, map_yx = turned.map_xy, turned.map_yx
         before = region_agreements(map_xy, parts_x, local)
+    whole_xy, whole_yx = map_xy, map_yx
+    target_nearer = functools.cache(lambda: reflection_distortion(mirror_y(), parts_y.embedding) <
+                                    reflection_distortion(mirror_x(), parts_x.embedding))
+    pair_x = functools.cache(lambda: pairing_reflection(whole_xy, whole_yx, mirror_x, mirror_y, target_nearer()))
     turned_regions = turn_reversed_regions(
         map_xy, map_yx, parts_x, before,
-        lambda m, m_yx: mirrored_map(m, m_yx, mirror_x(), mirror_y(), parts_x, parts_y), mirror_x, local,
+        lambda m, m_yx: mirrored_map(m, m_yx, mirror_x(), mirror_y(), parts_x, parts_y), pair_x, local,
         parts_y, mirror_y)
     if turned_regions is not None:
         map_xy, map_yx = turned_regions.map_xy, turned_regions.map_yx
@@ -759,10 +794,52 @@ def reorient(source, target, spec_x, spec_y, map_xy: np.ndarray, map_yx: np.ndar
     if turned_parts is not None:
         map_xy, map_yx = turned_parts.map_xy, turned_parts.map_yx
     own = region_agreements(map_xy, parts_x, lambda m: map_orientation(source, target, m))
-    swapped = swapped_pairs(map_xy, parts_x, parts_y, region_agreements(map_xy, parts_x, local), own, mirror_x,
+    final_xy, final_yx = map_xy, map_yx
+    pair_x = functools.cache(lambda: pairing_reflection(final_xy, final_yx, mirror_x, mirror_y, target_nearer()))
+    swapped = swapped_pairs(map_xy, parts_x, parts_y, region_agreements(map_xy, parts_x, local), own, pair_x,
                             areas)
     released = np.isin(shoulder_regions(parts_x), swapped) if swapped else None
-    return Reoriented(map_xy, map_yx, turned, turned_regions, turned_parts, released, tuple(swapped))
+    partial = turned_regions is not None or turned_parts is not None or released is not None
+    return Reoriented(map_xy, map_yx, turned, turned_regions, turned_parts, released, tuple(swapped),
+                      (whole_xy, whole_yx) if partial else None)
+
+
+def nearer_isometry(source, target, before_xy: np.ndarray, after_xy: np.ndarray) -> tuple[bool, dict]:
+    """Whether a map re-optimised after partial turns (``after_xy``) is nearer an isometry than the map before
+    them (``before_xy``, :attr:`Reoriented.before_partial`), by the geodesic distortion
+    (:func:`~corrlib.geometry.distortion.geodesic_distortions`).
+
+    The region rule reads a reversed region as a left–right flip (module docstring); on a body with a second
+    near-symmetry it can be the other flip, which the left–right reflection turns into a half turn with limbs
+    swapped. An intrinsic energy is higher after either (the solver optimises further in any case); the
+    distortion is the definition of an isometry, and a swap of limbs changes the paths between them by the
+    body's width. Not for a whole-map turn: composing with a reflection, an isometry, leaves it unchanged.
+
+    It judges the turn, not the map before it: that map can be a clean image of another near-symmetry with as
+    low a distortion, and a turn that rights only *part* of a wholly mirrored map raises the distortion while
+    it lowers the error. Kernel matching's second pass re-optimises the whole map from the turn, and there a
+    right turn halved the distortion on every pair measured; product-manifold refinement from a poor input
+    met the second case, so it does not use this judge (``docs/decisions.md``).
+
+    Returns
+    -------
+    keep_after : bool
+        True unless the distortion before is lower.
+    measured : dict
+        ``distortion_before_turns`` and ``distortion_after_turns`` (per √area), for a result's ``extras``.
+    """
+    before, after = geodesic_distortions(source, target, (before_xy, after_xy))
+    return not before < after, {"distortion_before_turns": before, "distortion_after_turns": after}
+
+
+def declined_extras(first: dict, measured: dict) -> dict:
+    """``extras`` entries of a result whose partial turns were undone (:func:`nearer_isometry` kept the map
+    before them): the whole-map turn as the first pass made it, no partial turns, ``declined_turns`` (the
+    counts undone) and the two distortions."""
+    return {**measured, "turned": bool(first.get("turned")), "agreement_before_turn": first.get("agreement_before_turn"),
+            "turned_regions": 0, "turned_parts": 0, "released_regions": 0,
+            "declined_turns": {key: int(first.get(key) or 0)
+                               for key in ("turned_regions", "turned_parts", "released_regions")}}
 
 
 #: the first pass's decisions that a result optimised once more after a turn keeps (``extras["first_pass"]``)

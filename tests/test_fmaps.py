@@ -66,6 +66,26 @@ def test_functional_map_is_the_least_squares_minimiser():
         functional_map(coef_x, coef_y, mask, pairs, (1.0, 1.0))
 
 
+def test_commutator_gram_against_the_explicit_commutators():
+    """The Gram matrix of ``Σ_d ‖C X_d − Y_d C‖²`` from Kronecker identities equals the one formed from the
+    explicit commutator matrices ``I ⊗ X_dᵀ − Y_d ⊗ I`` (non-square C), and it is the quadratic form of the
+    term."""
+    from corrlib.geometry.fmaps import _commutator_gram
+
+    rng = np.random.default_rng(1)
+    k_x, k_y, d = 4, 3, 5
+    ops_x, ops_y = rng.normal(size=(d, k_x, k_x)), rng.normal(size=(d, k_y, k_y))
+    explicit = np.zeros((k_y * k_x, k_y * k_x))
+    for op_x, op_y in zip(ops_x, ops_y):
+        commutator = np.kron(np.eye(k_y), op_x.T) - np.kron(op_y, np.eye(k_x))
+        explicit += commutator.T @ commutator
+    gram = _commutator_gram(ops_x, ops_y)
+    np.testing.assert_allclose(gram, explicit, rtol=1e-12, atol=1e-12)
+    c = rng.normal(size=(k_y, k_x))
+    energy = sum(np.linalg.norm(c @ op_x - op_y @ c) ** 2 for op_x, op_y in zip(ops_x, ops_y))
+    assert c.ravel() @ gram @ c.ravel() == pytest.approx(energy, rel=1e-12)
+
+
 def test_pointwise_to_functional_against_the_explicit_permutation_matrix():
     """``C_yx = Ψᵀ M_Y Π_yx Φ`` with Π built entry by entry (unmatched rows zero); the identity map of a
     shape onto itself gives the identity (M-orthonormal eigenfunctions), a sparse or a lumped mass alike."""

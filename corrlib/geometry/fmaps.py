@@ -113,14 +113,19 @@ def multiplication_operators(evecs: np.ndarray, mass: np.ndarray, functions: np.
 
 
 def _commutator_gram(ops_x: np.ndarray, ops_y: np.ndarray) -> np.ndarray:
-    """Hessian of ``Σ_d ‖C X_d − Y_d C‖²`` in row-major ``vec(C)`` ((k_Y k_X, k_Y k_X) float)."""
+    """Hessian of ``Σ_d ‖C X_d − Y_d C‖²`` in row-major ``vec(C)`` ((k_Y k_X, k_Y k_X) float).
+
+    With ``vec(C X) = (I ⊗ Xᵀ) vec(C)`` and ``vec(Y C) = (Y ⊗ I) vec(C)``, the commutator is
+    ``K_d = I ⊗ X_dᵀ − Y_d ⊗ I`` and its Gram matrix, by ``(A ⊗ B)(C ⊗ D) = AC ⊗ BD``,
+    ``K_dᵀ K_d = I ⊗ X_d X_dᵀ − Y_d ⊗ X_d − Y_dᵀ ⊗ X_dᵀ + Y_dᵀ Y_d ⊗ I``: the sums of the outer terms
+    are three Kronecker-shaped sums in all, and no ``(k_Y k_X)²`` product of commutators is formed.
+    """
     k_y, k_x = ops_y.shape[1], ops_x.shape[1]
-    eye_x, eye_y = np.eye(k_x), np.eye(k_y)
-    gram = np.zeros((k_y * k_x, k_y * k_x))
-    for op_x, op_y in zip(ops_x, ops_y):
-        # vec(C X) = (I ⊗ Xᵀ) vec(C), vec(Y C) = (Y ⊗ I) vec(C)
-        commutator = np.kron(eye_y, op_x.T) - np.kron(op_y, eye_x)
-        gram += commutator.T @ commutator
+    gram = np.kron(np.eye(k_y), np.einsum("dij,dkj->ik", ops_x, ops_x))
+    gram += np.kron(np.einsum("dji,djk->ik", ops_y, ops_y), np.eye(k_x))
+    # Σ_d Y_d ⊗ X_d, entry ((a, c), (b, e)) = Σ_d Y_d[a, b] X_d[c, e]
+    cross = np.einsum("dab,dce->acbe", ops_y, ops_x, optimize=True).reshape(k_y * k_x, k_y * k_x)
+    gram -= cross + cross.T  # (Y ⊗ X)ᵀ = Yᵀ ⊗ Xᵀ
     return gram
 
 

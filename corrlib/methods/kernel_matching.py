@@ -91,10 +91,13 @@ Design choices, in brief (the measurements behind them are in
   permutation: with capacities the QAP gains by piling seeds onto one target
   (``k_Y(y, y)`` is the kernel's maximum).
 * ``init="best"`` (:func:`best_of_both_starts`): the whole pipeline from the
-  descriptors and from the functional-maps baseline, keeping the map whose
-  orientation-aware descriptors agree best (:func:`orientation_agreement`).
-  The kernel energy is the wrong judge here: maps that differ by a
-  reflection of a symmetric shape have nearly equal kernel energies.
+  descriptors and from the functional-maps baseline (sharing the spectra,
+  samples and descriptors), keeping the functional map's start only where
+  its map is better by every measure there is: a higher kernel energy, a
+  higher orientation agreement (:func:`orientation_agreement`) and a lower
+  geodesic distortion. Each alone is blind somewhere (the energy to a
+  reflection of a symmetric shape, the agreement to a small flipped part,
+  the distortion to the detail of a non-isometric pair).
 * ``smooth_k``: a last pointwise step, one ZoomOut step (Melzi et al.
   2019): the map is projected onto the first eigenfunctions and every vertex
   takes its nearest partner in them (no longer bijective, which suits
@@ -180,8 +183,10 @@ class KernelMatchingParams:
                         help="Laplace–Beltrami eigenpairs of the heat kernels (spectral form).")
     init: str = param("descriptors", label="Initialisation", choices=("descriptors", "fmap", "best"),
                       help="Linear assignment on descriptors, or the functional-maps baseline's map, or both "
-                           "(\"best\": the final map whose orientation-aware descriptors agree best is kept; "
-                           "twice the time). A given map or landmarks can be passed to the solver instead.")
+                           "(\"best\": the functional map's start is kept where its final map is better by "
+                           "kernel energy, orientation agreement and geodesic distortion alike; for "
+                           "non-isometric or noisy pairs, about 3 s more). A given map or landmarks can be "
+                           "passed to the solver instead.")
     descriptor: str = param("shot", label="Descriptor", choices=DESCRIPTOR_KINDS,
                             help="Descriptor of the initial assignment and of the μ term (SHOT tells left "
                                  "from right, the spectral ones do not).")
@@ -1291,10 +1296,17 @@ def kernel_matching(source, target, params: KernelMatchingParams, token, initial
     optimised once more (:func:`reoptimised`).
     """
     state = yield from prepare(source, target, params, token)
+    result = yield from solved(state, initial)
+    yield Progress("done", 1.0, f"energy {result.energy:.6g}")
+    return result
+
+
+def solved(state: KernelState, initial: InitialMatch | None = None):
+    """Stages 2–7 on a prepared :class:`KernelState` and, where the orientation stage turned anything, the
+    second pass (:func:`reoptimised`); a generator, returns the :class:`MatchResult`."""
     result = yield from solve_prepared(state, initial)
     if turned_anything(result.extras):
         result = yield from reoptimised(state, result)
-    yield Progress("done", 1.0, f"energy {result.energy:.6g}")
     return result
 
 
@@ -1479,28 +1491,63 @@ def reversal_note(extras: dict) -> str | None:
             "matched to right); try init=best, landmarks (--init), or check the target is not a mirror image")
 
 
-def best_of_both_starts(source, target, params: KernelMatchingParams, token):
-    """``init="best"``: kernel matching from the descriptor start and from the functional-maps baseline; the
-    map with the higher :func:`orientation_agreement` is returned.
+def start_measures(source, target, results: dict) -> dict:
+    """The three measures by which :func:`best_of_both_starts` compares its maps, per start.
 
-    Why not the kernel energy: the two starts fail differently — a half-flipped map from the descriptors, a
-    whole reflection or another symmetric turn from the functional map — and maps that differ by a
-    symmetry have nearly the same kernel energy (on the people the reflected map's is even higher). The
-    orientation-aware descriptors are odd under a reflection, so their agreement decides (see
-    ``docs/decisions.md``). ``extras["init"]`` names the start kept, ``extras["start_agreements"]``
-    holds both scores; the timings are those of the map kept plus ``"other start"`` (the other run's sum).
+    Returns ``{init: {"energy", "agreement", "distortion"}}``: the final kernel energy (higher is better;
+    both runs share the spectra and times, so the energies compare), the :func:`orientation_agreement`
+    (higher) and the geodesic distortion per √area
+    (:func:`~corrlib.geometry.distortion.geodesic_distortions`, lower).
     """
-    results = {}
+    from corrlib.geometry.distortion import geodesic_distortions
+
+    inits = list(results)
+    distortions = geodesic_distortions(source, target, [results[init].map_xy for init in inits])
+    return {init: {"energy": float(results[init].energy),
+                   "agreement": float(results[init].extras["orientation_agreement"]),
+                   "distortion": float(d)} for init, d in zip(inits, distortions)}
+
+
+def dominates(a: dict, b: dict) -> bool:
+    """Whether the measures ``a`` are better than ``b`` in all three (:func:`start_measures`)."""
+    return a["energy"] > b["energy"] and a["agreement"] > b["agreement"] and a["distortion"] < b["distortion"]
+
+
+def best_of_both_starts(source, target, params: KernelMatchingParams, token):
+    """``init="best"``: kernel matching from the descriptor start and from the functional-maps baseline's
+    map; the latter is kept only where its map is better by all three measures of :func:`start_measures`
+    (higher kernel energy, higher orientation agreement, lower geodesic distortion), else the descriptor
+    start's.
+
+    Why both: the descriptor start (SHOT and the orientation-aware descriptors, point by point) can commit
+    part of a non-isometric pair, or of a noisy one, to the wrong limb, where the functional map (a
+    spectral fit of the whole shape, :mod:`~corrlib.methods.baselines`) holds; on a symmetric body the
+    functional map can be a half turn or a partial flip that the descriptor start avoids. Why all three:
+    each measure alone is blind somewhere — the kernel energy to maps that differ by a symmetry, the
+    orientation agreement to a flip of a small part, the distortion to the detail of a non-isometric
+    pair — so the default start gives way only to a map that no measure finds worse (see
+    ``docs/decisions.md``). ``extras["init"]`` names the start kept and ``extras["start_measures"]`` holds
+    both starts' measures; the timings are those of the map kept plus ``"other start"`` (the other run's
+    sum).
+    """
+    state = yield from prepare(source, target, params, token)
+    results, shared = {}, state
     for index, init in enumerate(("descriptors", "fmap")):
-        sub = replace(params, init=init)
-        results[init] = yield from scaled_progress(kernel_matching(source, target, sub, token), index / 2,
-                                                   (index + 1) / 2, f"start {index + 1}/2 ({init})")
-    scores = {init: r.extras["orientation_agreement"] for init, r in results.items()}  # each run's own
-    kept = max(scores, key=lambda init: scores[init])  # descriptors first: a tie keeps the default start
+        start = shared.prepared()  # the spectra and samples, and the descriptors once the first start has them
+        start.params, start.watch = replace(params, init=init), Stopwatch()  # each start times itself
+        results[init] = yield from scaled_progress(solved(start), index / 2, (index + 1) / 2,
+                                                   f"start {index + 1}/2 ({init})")
+        shared = start
+    with state.watch("orientation"):
+        measures = start_measures(source, target, results)
+    kept = "fmap" if dominates(measures["fmap"], measures["descriptors"]) else "descriptors"
     other = "fmap" if kept == "descriptors" else "descriptors"
     result = results[kept]
-    result.extras.update({"init": kept, "start_agreements": scores})
+    for stage, seconds in state.watch.times.items():  # the shared stages: spectra, samples, the judge
+        result.timings[stage] = result.timings.get(stage, 0.0) + seconds
+    result.extras.update({"init": kept, "start_measures": measures})
     result.timings["other start"] = float(sum(results[other].timings.values()))
+    yield Progress("done", 1.0, f"{kept} start kept, energy {result.energy:.6g}")
     return result
 
 

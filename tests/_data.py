@@ -1,6 +1,9 @@
-"""Location of the test shapes: ``../shared/data`` beside the repository, else the bundled copy."""
+"""Location of the test shapes: ``../shared/data`` beside the repository, else the bundled copy; and the
+vertex noise the robustness tests add to them."""
 
 from pathlib import Path
+
+import numpy as np
 
 ROOT = Path(__file__).resolve().parents[1]
 _SHARED = ROOT.parent / "shared" / "data"
@@ -10,3 +13,13 @@ SUMNER = DATA / "sumner"
 SKETCH2D = DATA / "sketch2d"
 SILHOUETTES = DATA / "silhouettes"
 assert TOSCA.is_dir(), f"test data not found in {DATA}"
+
+
+def with_vertex_noise(mesh, seed: int, fraction: float = 1e-3):
+    """``mesh`` (a TriMesh) with Gaussian noise on every vertex, of standard deviation ``fraction`` of its
+    bounding-box diagonal; the same faces."""
+    from corrlib.shapes import TriMesh
+
+    diagonal = np.linalg.norm(mesh.vertices.max(axis=0) - mesh.vertices.min(axis=0))
+    noise = np.random.default_rng(seed).normal(scale=fraction * diagonal, size=mesh.vertices.shape)
+    return TriMesh(mesh.vertices + noise, mesh.faces, name=f"{mesh.name}-noise{seed}")

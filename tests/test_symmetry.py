@@ -13,7 +13,7 @@ from corrlib.io import load_mesh, load_vts
 from corrlib.resources import resource
 from corrlib.shapes import TriMesh
 
-from tests._data import TOSCA
+from tests._data import TOSCA, with_vertex_noise
 
 
 def one_mirror_blob():
@@ -132,10 +132,7 @@ def test_reflection_of_a_posed_person_with_vertex_noise(seed):
     from tests._humanoid import humanoids
 
     shapes, mirror = humanoids(front=True)
-    vertices, faces = shapes["human2"]
-    diagonal = np.linalg.norm(vertices.max(axis=0) - vertices.min(axis=0))
-    noisy = vertices + np.random.default_rng(seed).normal(scale=1e-3 * diagonal, size=vertices.shape)
-    mesh = TriMesh(noisy, faces, name=f"human2-noise{seed}")
+    mesh = with_vertex_noise(TriMesh(*shapes["human2"], name="human2"), seed)
     reflection = reflection_map(mesh, mesh_spectrum(mesh, 75, use_cache=False))
     assert geodesic_errors(reflection, mesh, np.arange(mesh.n_vertices), mirror).summary()["mean"] < 0.1
 
@@ -149,9 +146,7 @@ def test_reflection_of_a_noisy_wolf_is_judged_by_geodesic_distances():
     from corrlib.descriptors.symmetry import geodesic_distortion
 
     clean = load_mesh(TOSCA / "wolf1.off")
-    diagonal = np.linalg.norm(clean.vertices.max(axis=0) - clean.vertices.min(axis=0))
-    noisy = TriMesh(clean.vertices + np.random.default_rng(2).normal(scale=1e-3 * diagonal, size=clean.vertices.shape),
-                    clean.faces, name="wolf1-noise2")
+    noisy = with_vertex_noise(clean, 2)
     truth = reflection_map(clean, mesh_spectrum(clean, 60))
     reflection = reflection_map(noisy, mesh_spectrum(noisy, 60, use_cache=False))
     assert geodesic_errors(reflection, clean, np.arange(clean.n_vertices), truth).summary()["mean"] < 0.02

@@ -575,6 +575,16 @@ def _polygon_area(p: np.ndarray) -> float:
     return 0.5 * abs(float(np.sum(p[:, 0] * np.roll(p[:, 1], -1) - np.roll(p[:, 0], -1) * p[:, 1])))
 
 
+def _largest_polygon(polylines: list[np.ndarray]) -> np.ndarray:
+    """The polyline enclosing the largest area. The areas are compared at one common scale (the largest
+    coordinate), so that coordinates whose products overflow are still compared; such a contour is then
+    refused by :class:`~corrlib.shapes.Contour2D` with a message."""
+    scale = max(float(np.abs(p).max()) for p in polylines)
+    if not 0 < scale < np.inf:  # all zero, or infinite or NaN coordinates: Contour2D names the problem
+        return polylines[0]
+    return max(polylines, key=lambda p: _polygon_area(p / scale))
+
+
 def contour_from_mask(mask: np.ndarray, *, name: str = "image") -> np.ndarray:
     """Outer boundary of the largest foreground region of a binary mask.
 
@@ -693,7 +703,7 @@ def load_contour(path, n_points: int | None = None, *, assume_closed: bool = Fal
                                              min_points=min_points)
     elif suffix in SVG_SUFFIXES:
         polylines = _svg_polylines(path)
-        best = max(polylines, key=_polygon_area)
+        best = _largest_polygon(polylines)
         best = best * np.array([1.0, -1.0])
         contour = Contour2D.from_open_points(best, name=name, assume_closed=True, min_points=min_points)
     elif suffix in IMAGE_SUFFIXES:

@@ -136,6 +136,20 @@ def test_svg_path_with_curves(tmp_path):
         load_contour(tmp_path / "broken.svg")
 
 
+@pytest.mark.parametrize("d, message", [("M 0 0 L 1e308 0 L 0 10 Z", "overflow squared lengths"),
+                                        ("Q 1e308 0x10 3.", "overflow squared lengths"),
+                                        ("M 0 0 L 1e400 0 L 0 1 Z", "NaN or infinite")])
+def test_svg_with_coordinates_too_large_is_refused_by_name(tmp_path, d, message):
+    """Found by the fuzzing test: the largest of an SVG's polygons was chosen by an area that overflowed (a
+    RuntimeWarning, not a message). The areas are compared at a common scale; the contour is then refused."""
+    (tmp_path / "huge.svg").write_text(f'<svg xmlns="http://www.w3.org/2000/svg"><path d="{d}"/></svg>')
+    (tmp_path / "two.svg").write_text('<svg><polygon points="0,0 1e-3,0 0,1e-3"/>'
+                                      '<polygon points="0,0 1,0 2,0 2,1 2,2 1,2 0,2 0,1.5 0,1 0,0.5"/></svg>')
+    with pytest.raises(ContourError, match=message):
+        load_contour(tmp_path / "huge.svg")
+    assert load_contour(tmp_path / "two.svg").area == pytest.approx(4.0, rel=0.05)  # the larger polygon
+
+
 @pytest.mark.parametrize("dark_on_light", [True, False])
 def test_silhouette_image_disk(tmp_path, dark_on_light):
     yy, xx = np.mgrid[:200, :300]

@@ -605,7 +605,7 @@ def test_a_map_that_reverses_orientation_is_reported(wolf_pair, wolf_result, cap
     assert wolf_result.extras["orientation_agreement"] > 1.0  # wolf0 -> wolf1, the right orientation
     assert reversal_note(wolf_result.extras) is None and reversal_note({}) is None
     note = reversal_note({"orientation_agreement": -4.64})
-    assert "reverses orientation" in note and "-4.64" in note and "init=best" in note
+    assert "reverses orientation" in note and "-4.64" in note and "landmarks" in note
 
     class Flipped:
         extras = {"orientation_agreement": -0.5}
@@ -648,6 +648,66 @@ def test_a_start_gives_way_only_to_a_map_better_by_every_measure():
     assert not dominates(base, base)
     for measure, worse in (("energy", 0.9), ("agreement", 4.0), ("distortion", 0.06)):
         assert not dominates({"energy": 1.1, "agreement": 6.0, "distortion": 0.04, measure: worse}, base)
+
+
+def _starts_side_by_side(wolf_pair, monkeypatch, first_start_raises: bool):
+    """Run init="best" on the wolves (small settings) until the descriptor start (the calling thread's) has
+    made its first DC iteration, then cancel the caller's token as the studio does (through ``run``) or, with
+    ``first_start_raises``, let that start raise. Returns the exception's type and message, the functional
+    map's start state and the threads left over."""
+    import gc
+    import threading
+
+    import corrlib.methods.kernel_matching as km
+    from corrlib.methods import solve_iter
+    from corrlib.progress import CancelToken, run
+
+    states, solved = {}, km.solved
+
+    def recording(state, initial=None):  # a generator, as km.solved
+        states[state.params.init] = state
+        if first_start_raises and state.params.init == "descriptors":
+            raise ValueError("the first start failed")
+        return (yield from solved(state, initial))
+
+    monkeypatch.setattr(km, "solved", recording)
+    threads = threading.active_count()
+    token = CancelToken()
+
+    def cancel_at_the_first_iteration(report):
+        if "start 1/2" in report.message and "iteration" in report.message:
+            token.cancel()  # the run stops at its next check of the token
+
+    steps = solve_iter("kernel-matching", *wolf_pair, token=token, init="best", n_eigs=150, n_seeds=800, n_times=5,
+                       iters_per_time=2)
+    try:
+        run(steps, callback=cancel_at_the_first_iteration, token=token)
+        raised = None
+    except Exception as exc:  # noqa: BLE001 - its kind and message go to the test (not its traceback, which
+        raised = (type(exc), str(exc))  # would keep the generator, and so its thread, alive)
+    del steps
+    gc.collect()
+    return raised, states.get("fmap"), threading.active_count() - threads
+
+
+def test_both_starts_stop_together_when_cancelled(wolf_pair, monkeypatch):
+    """init="best" runs the functional map's start on a thread beside the calling one (two cores): a
+    cancellation of the caller's token stops both, and no thread is left running."""
+    from corrlib.errors import Cancelled
+
+    raised, beside, threads_left = _starts_side_by_side(wolf_pair, monkeypatch, first_start_raises=False)
+    assert raised is not None and raised[0] is Cancelled
+    assert beside is not None and beside.token.cancelled  # its own token, set when the first start ended
+    assert threads_left == 0
+
+
+def test_an_error_of_one_start_stops_the_other(wolf_pair, monkeypatch):
+    """The first start's error reaches the caller without waiting for the second start to finish: the second
+    is cancelled (its own token) and its thread ends."""
+    raised, beside, threads_left = _starts_side_by_side(wolf_pair, monkeypatch, first_start_raises=True)
+    assert raised == (ValueError, "the first start failed")
+    assert beside is not None and beside.token.cancelled
+    assert threads_left == 0
 
 
 @pytest.mark.slow

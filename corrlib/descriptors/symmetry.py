@@ -53,6 +53,7 @@ the features of the whole closed surface are not.
 from __future__ import annotations
 
 import itertools
+import threading
 
 import numpy as np
 from scipy.spatial import cKDTree
@@ -311,6 +312,10 @@ def _parity_spectrum(spectrum, mirror: np.ndarray, k: int, even: bool) -> tuple[
     return evals[:k], phi @ (basis @ ritz[:, :k])
 
 
+#: held while reflections are computed or read (:func:`mesh_reflections`)
+_REFLECTING = threading.Lock()
+
+
 def _reflection_key(mesh) -> str:
     return cache.make_key("reflection-v5", mesh.content_hash, K_INIT, K_FINAL, EVEN_SCALES, ODD_SCALES, ZOOMOUT_STEP,
                           COMMUTATIVITY, SIGN_MODES, REFLECTION_SAMPLES, GEODESIC_SAMPLES)
@@ -341,13 +346,19 @@ def mesh_reflections(meshes, spectra) -> list[np.ndarray]:
     ZoomOut's nearest-row searches are half matrix products and half a single-threaded arg-min, so two
     reflections on two threads with single-threaded BLAS each take less wall time than one after the other
     with two-threaded BLAS; the maps are the same (:func:`reflection_map` is deterministic). Meshes of equal
-    content are computed once.
+    content are computed once, and so are concurrent calls for the same meshes (the two starts of kernel
+    matching): one call at a time, so the second finds the first one's maps in the cache.
     """
+    with _REFLECTING:
+        return _reflections(list(meshes), list(spectra))
+
+
+def _reflections(meshes: list, spectra: list) -> list[np.ndarray]:
+    """:func:`mesh_reflections` without its lock."""
     from threadpoolctl import threadpool_limits
 
     from corrlib.cores import side_threads
 
-    meshes, spectra = list(meshes), list(spectra)
     found = [_cached_reflection(mesh) for mesh in meshes]
     first_of = {}
     for i, mesh in enumerate(meshes):

@@ -90,9 +90,10 @@ Design choices, in brief (the measurements behind them are in
   vertex counts (for differently meshed shapes). The seeds stay matched by a
   permutation: with capacities the QAP gains by piling seeds onto one target
   (``k_Y(y, y)`` is the kernel's maximum).
-* ``init="best"`` (:func:`best_of_both_starts`): the whole pipeline from the
-  descriptors and from the functional-maps baseline (sharing the spectra,
-  samples and descriptors), keeping the functional map's start only where
+* ``init="best"`` (the default, :func:`best_of_both_starts`): the whole
+  pipeline from the descriptors and from the functional-maps baseline
+  (sharing the spectra, samples and descriptors; side by side on two cores,
+  :func:`both_starts`), keeping the functional map's start only where
   its map is better by every measure there is: a higher kernel energy, a
   higher orientation agreement (:func:`orientation_agreement`) and a lower
   geodesic distortion. Each alone is blind somewhere (the energy to a
@@ -120,6 +121,7 @@ Map convention: ``map_xy[i]`` = vertex of Y matched to vertex i of X.
 from __future__ import annotations
 
 import functools
+from concurrent.futures import wait
 from dataclasses import dataclass, field, replace
 
 import numpy as np
@@ -145,8 +147,10 @@ from corrlib.methods.reorientation import (can_reorient, declined_extras, mean_a
                                            orientation_blocks, reorient, standardised, turned_anything,
                                            with_first_pass)
 from corrlib.methods.resolution import keep_input_partners, kernel_width, nearest_partners, surplus_partners
-from corrlib.progress import Progress, Stopwatch, scaled_progress
+from corrlib.progress import CancelToken, Progress, Stopwatch, run, scaled_progress
 
+#: seconds between checks of the caller's cancellation while one start waits for the other (:func:`both_starts`)
+WAIT_POLL = 0.1
 #: threads solving the cells of a refinement pass: the auction releases the GIL, so cells can overlap; two,
 #: for the two-core development machine (every cell in flight also holds its dense score block)
 CELL_THREADS = 2
@@ -181,12 +185,13 @@ DEFAULT_TAU_MIN = 5.18e-4
 class KernelMatchingParams:
     n_eigs: int = param(DEFAULT_EIGENPAIRS, label="Eigenpairs", low=10, high=3000,
                         help="Laplace–Beltrami eigenpairs of the heat kernels (spectral form).")
-    init: str = param("descriptors", label="Initialisation", choices=("descriptors", "fmap", "best"),
-                      help="Linear assignment on descriptors, or the functional-maps baseline's map, or both "
-                           "(\"best\": the functional map's start is kept where its final map is better by "
-                           "kernel energy, orientation agreement and geodesic distortion alike; for "
-                           "non-isometric or noisy pairs, about 3 s more). A given map or landmarks can be "
-                           "passed to the solver instead.")
+    init: str = param("best", label="Initialisation", choices=("best", "descriptors", "fmap"),
+                      help="Both starts (\"best\"): a linear assignment on descriptors and the functional-maps "
+                           "baseline's map, each solved to the end (side by side on two cores); the functional "
+                           "map's start is kept only where its final map is better by kernel energy, "
+                           "orientation agreement and geodesic distortion alike. Or one of the two alone "
+                           "(\"descriptors\", \"fmap\"). A given map or landmarks can be passed to the solver "
+                           "instead.")
     descriptor: str = param("shot", label="Descriptor", choices=DESCRIPTOR_KINDS,
                             help="Descriptor of the initial assignment and of the μ term (SHOT tells left "
                                  "from right, the spectral ones do not).")
@@ -755,6 +760,22 @@ class KernelState:
         fresh.desc_x, fresh.desc_y, fresh.seed_similarity = self.desc_x, self.desc_y, self.seed_similarity
         return fresh
 
+    def descriptors(self) -> tuple[np.ndarray, np.ndarray]:
+        """The standardised plain descriptors of both shapes, (n_x, d) and (n_y, d) (computed once)."""
+        if self.desc_x is None:
+            with self.watch("descriptors"):
+                self.desc_x, self.desc_y = _descriptors(self.source, self.target, self.spec_x, self.spec_y,
+                                                        self.params.descriptor)
+        return self.desc_x, self.desc_y
+
+    def seed_descriptor_similarity(self) -> np.ndarray:
+        """The seeds' plain descriptor similarity (n_seed, n_seed), computed once."""
+        if self.seed_similarity is None:
+            desc_x, desc_y = self.descriptors()
+            self.seed_similarity = _descriptor_similarity(self.seeds_x.interpolate(self.source, desc_x),
+                                                          self.seeds_y.interpolate(self.target, desc_y))
+        return self.seed_similarity
+
     def orientation_blocks(self) -> tuple[np.ndarray, np.ndarray]:
         """The standardised orientation-aware descriptors (computed once: initial assignment and result)."""
         if self.orientation is None:
@@ -870,7 +891,6 @@ def initial_seed_map(state: KernelState, initial: InitialMatch | None, compete: 
             state.seed_map = _nearest_point(state.seeds_y.points, target.vertices[partner])
     elif params.init == "fmap":
         from corrlib.methods.baselines import FmapZoomOutParams, solve_fmap_zoomout
-        from corrlib.progress import run
 
         yield Progress("initial map", PROGRESS_INIT, "functional maps + ZoomOut")
         with state.watch("init"):
@@ -880,9 +900,7 @@ def initial_seed_map(state: KernelState, initial: InitialMatch | None, compete: 
         state.seed_map = _nearest_point(state.seeds_y.points, target.vertices[partner])
     else:
         yield Progress("descriptors", PROGRESS_INIT, params.descriptor)
-        with state.watch("descriptors"):
-            state.desc_x, state.desc_y = _descriptors(source, target, state.spec_x, state.spec_y,
-                                                      params.descriptor)
+        state.descriptors()
         state.seed_map, state.confidence = descriptor_assignment(state, state.watch)
     state.token.raise_if_cancelled()
 
@@ -925,15 +943,7 @@ def seed_problem(state: KernelState) -> SeedProblem:
     params, source, target = state.params, state.source, state.target
     psi_s = state.seeds_y.interpolate(target, state.psi)
     phi_s = state.seeds_x.interpolate(source, state.phi)
-    desc_block = None
-    if params.mu > 0:
-        if state.desc_x is None:
-            state.desc_x, state.desc_y = _descriptors(source, target, state.spec_x, state.spec_y,
-                                                      params.descriptor)
-        if state.seed_similarity is None:
-            state.seed_similarity = _descriptor_similarity(state.seeds_x.interpolate(source, state.desc_x),
-                                                           state.seeds_y.interpolate(target, state.desc_y))
-        desc_block = state.seed_similarity  # (seed x, seed y)
+    desc_block = state.seed_descriptor_similarity() if params.mu > 0 else None  # (seed x, seed y)
     anchor_c = _alignment(state.psi[state.anchors_y], state.phi[state.anchors_x]) if state.anchors_x.size else 0.0
     state.problem = SeedProblem(phi_s, psi_s, anchor_c, desc_block, params.mu, state.free_x, state.free_y)
     return state.problem
@@ -1488,7 +1498,7 @@ def reversal_note(extras: dict) -> str | None:
     if agreement is None or not agreement < 0:
         return None
     return (f"the map reverses orientation on most of the shape (orientation agreement {agreement:.2f} < 0: left "
-            "matched to right); try init=best, landmarks (--init), or check the target is not a mirror image")
+            "matched to right); try landmarks (--init), or check the target is not a mirror image")
 
 
 def start_measures(source, target, results: dict) -> dict:
@@ -1513,6 +1523,40 @@ def dominates(a: dict, b: dict) -> bool:
     return a["energy"] > b["energy"] and a["agreement"] > b["agreement"] and a["distortion"] < b["distortion"]
 
 
+def both_starts(first: KernelState, second: KernelState):
+    """Kernel matching from two prepared states: ``first`` in the calling thread (its progress reported),
+    ``second`` on a thread beside it where this process may use two cores, else after it. A generator; returns
+    ``{init: MatchResult}``.
+
+    After the spectra the solver keeps one core busy (assignments, score products, cells), so the second
+    start costs no wall time on two cores, provided that BLAS does not spread either start over both cores
+    as well: within the two runs it is limited to one thread (the same maps; sums may differ in the last bit).
+    The second start has its own cancel token, set when the first ends in any way (the caller's
+    cancellation included), so that neither an error nor a cancellation waits for the second run.
+    """
+    from threadpoolctl import threadpool_limits
+
+    inits = (first.params.init, second.params.init)
+    with side_threads(1) as pool:
+        if isinstance(pool, InlineExecutor):  # one core's share: one start after the other
+            mine = yield from scaled_progress(solved(first), 0.0, 0.5, f"start 1/2 ({inits[0]})")
+            theirs = yield from scaled_progress(solved(second), 0.5, 1.0, f"start 2/2 ({inits[1]})")
+            return dict(zip(inits, (mine, theirs)))
+        caller, second.token = second.token, CancelToken()
+        try:
+            with threadpool_limits(1):
+                other = pool.submit(run, solved(second), None, second.token)
+                mine = yield from scaled_progress(solved(first), 0.0, 1.0,
+                                                  f"start 1/2 ({inits[0]}; {inits[1]} beside it)")
+                while not wait([other], timeout=WAIT_POLL).done:
+                    caller.raise_if_cancelled()
+                    yield Progress("kernel matching", 1.0, f"waiting for the {inits[1]} start")
+                theirs = other.result()
+        finally:
+            second.token.cancel()  # a finished run ignores it; a running one stops at its next check
+    return dict(zip(inits, (mine, theirs)))
+
+
 def best_of_both_starts(source, target, params: KernelMatchingParams, token):
     """``init="best"``: kernel matching from the descriptor start and from the functional-maps baseline's
     map; the latter is kept only where its map is better by all three measures of :func:`start_measures`
@@ -1531,13 +1575,17 @@ def best_of_both_starts(source, target, params: KernelMatchingParams, token):
     sum).
     """
     state = yield from prepare(source, target, params, token)
-    results, shared = {}, state
-    for index, init in enumerate(("descriptors", "fmap")):
-        start = shared.prepared()  # the spectra and samples, and the descriptors once the first start has them
-        start.params, start.watch = replace(params, init=init), Stopwatch()  # each start times itself
-        results[init] = yield from scaled_progress(solved(start), index / 2, (index + 1) / 2,
-                                                   f"start {index + 1}/2 ({init})")
-        shared = start
+    yield Progress("descriptors", 0.0, f"{params.descriptor}, shared by both starts")  # each start reports from 0
+    state.descriptors()
+    if params.mu > 0:
+        state.seed_descriptor_similarity()
+    with state.watch("orientation"):
+        state.orientation_blocks()
+    starts = {}
+    for init in ("descriptors", "fmap"):
+        starts[init] = state.prepared()  # the spectra, samples and descriptors
+        starts[init].params, starts[init].watch = replace(params, init=init), Stopwatch()  # each times itself
+    results = yield from both_starts(starts["descriptors"], starts["fmap"])
     with state.watch("orientation"):
         measures = start_measures(source, target, results)
     kept = "fmap" if dominates(measures["fmap"], measures["descriptors"]) else "descriptors"

@@ -710,6 +710,31 @@ def test_an_error_of_one_start_stops_the_other(wolf_pair, monkeypatch):
     assert threads_left == 0
 
 
+@pytest.mark.parametrize("share", [1, 2])
+def test_a_failed_functional_map_start_leaves_the_descriptor_starts_map(wolf_pair, monkeypatch, share):
+    """Both starts are the default, so the functional map's failing (here its descriptors refused, as on a
+    shape too regular for them) must not fail the match: the descriptor start's map is returned, the same as
+    init="descriptors" gives, and the user is told why. Side by side (two cores) and one after the other."""
+    import corrlib.methods.baselines as baselines
+    from corrlib import cores
+    from corrlib.errors import InputError
+    from corrlib.methods.kernel_matching import start_note
+
+    def refused(source, target, params, token):
+        raise InputError(f"{source.name}: the wks descriptors are the same at every vertex")
+        yield  # a generator, as the solver
+
+    monkeypatch.setattr(baselines, "solve_fmap_zoomout", refused)
+    monkeypatch.setattr(cores, "_core_share", share)
+    fast = dict(n_eigs=150, n_seeds=800, n_times=5, iters_per_time=2)
+    result = solve("kernel-matching", *wolf_pair, **fast)
+    alone = solve("kernel-matching", *wolf_pair, init="descriptors", **fast)
+    assert result.extras["init"] == "descriptors" and result.extras["start_measures"] is None
+    assert "the same at every vertex" in result.extras["other_start_error"]
+    assert "functional map's start failed" in start_note(result.extras)
+    np.testing.assert_array_equal(result.map_xy, alone.map_xy)
+
+
 @pytest.mark.slow
 @pytest.mark.parametrize("case", ["cat to lion", "noisy lion to cat"])
 def test_both_starts_hold_on_non_isometric_and_noisy_pairs(case):

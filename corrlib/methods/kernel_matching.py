@@ -130,7 +130,7 @@ from scipy.sparse.csgraph import dijkstra
 from corrlib.assignment import area_capacities, linear_assignment
 from corrlib.cores import InlineExecutor, side_threads
 from corrlib.descriptors import DESCRIPTOR_KINDS, mesh_descriptors
-from corrlib.errors import ParameterError
+from corrlib.errors import Cancelled, CorrError, ParameterError
 from corrlib.geometry.fmaps import pointwise_from_basis, repeated_pointwise_from_basis, resolved_eigenpairs
 from corrlib.geometry.sampling import (
     SurfaceSample,
@@ -1480,7 +1480,11 @@ def turn_note(extras: dict) -> str | None:
 
 def start_note(extras: dict) -> str | None:
     """What the user is told when a refined map's own start lost to the descriptor assignment
-    (``extras["start"] == "descriptors"``, :func:`choose_start`), else None."""
+    (``extras["start"] == "descriptors"``, :func:`choose_start`), or when the functional map's start of
+    ``init="best"`` failed (``extras["other_start_error"]``), else None."""
+    if extras and extras.get("other_start_error"):
+        return (f"the functional map's start failed ({extras['other_start_error']}), so the map is the descriptor "
+                "start's alone")
     if not extras or extras.get("start") != "descriptors":
         return None
     return ("the given map reached a lower kernel objective than the method's own start (the descriptor "
@@ -1526,7 +1530,8 @@ def dominates(a: dict, b: dict) -> bool:
 def both_starts(first: KernelState, second: KernelState):
     """Kernel matching from two prepared states: ``first`` in the calling thread (its progress reported),
     ``second`` on a thread beside it where this process may use two cores, else after it. A generator; returns
-    ``{init: MatchResult}``.
+    ``{init: MatchResult}``, where the second start's value is its :class:`~corrlib.errors.CorrError` if it
+    failed (the first start's errors, and a cancellation, are raised).
 
     After the spectra the solver keeps one core busy (assignments, score products, cells), so the second
     start costs no wall time on two cores, provided that BLAS does not spread either start over both cores
@@ -1540,7 +1545,12 @@ def both_starts(first: KernelState, second: KernelState):
     with side_threads(1) as pool:
         if isinstance(pool, InlineExecutor):  # one core's share: one start after the other
             mine = yield from scaled_progress(solved(first), 0.0, 0.5, f"start 1/2 ({inits[0]})")
-            theirs = yield from scaled_progress(solved(second), 0.5, 1.0, f"start 2/2 ({inits[1]})")
+            try:
+                theirs = yield from scaled_progress(solved(second), 0.5, 1.0, f"start 2/2 ({inits[1]})")
+            except Cancelled:
+                raise
+            except CorrError as exc:  # the first start's map stands (:func:`best_of_both_starts`)
+                theirs = exc
             return dict(zip(inits, (mine, theirs)))
         caller, second.token = second.token, CancelToken()
         try:
@@ -1551,7 +1561,12 @@ def both_starts(first: KernelState, second: KernelState):
                 while not wait([other], timeout=WAIT_POLL).done:
                     caller.raise_if_cancelled()
                     yield Progress("kernel matching", 1.0, f"waiting for the {inits[1]} start")
-                theirs = other.result()
+                try:
+                    theirs = other.result()
+                except Cancelled:
+                    raise
+                except CorrError as exc:
+                    theirs = exc
         finally:
             second.token.cancel()  # a finished run ignores it; a running one stops at its next check
     return dict(zip(inits, (mine, theirs)))
@@ -1572,7 +1587,9 @@ def best_of_both_starts(source, target, params: KernelMatchingParams, token):
     pair — so the default start gives way only to a map that no measure finds worse (see
     ``docs/decisions.md``). ``extras["init"]`` names the start kept and ``extras["start_measures"]`` holds
     both starts' measures; the timings are those of the map kept plus ``"other start"`` (the other run's
-    sum).
+    sum). Where the functional map's start fails (a :class:`~corrlib.errors.CorrError`, e.g. descriptors that
+    are the same at every vertex of a very regular shape), the descriptor start's map is returned with
+    ``extras["other_start_error"]`` (the message; :func:`start_note` tells the user).
     """
     state = yield from prepare(source, target, params, token)
     yield Progress("descriptors", 0.0, f"{params.descriptor}, shared by both starts")  # each start reports from 0
@@ -1586,15 +1603,19 @@ def best_of_both_starts(source, target, params: KernelMatchingParams, token):
         starts[init] = state.prepared()  # the spectra, samples and descriptors
         starts[init].params, starts[init].watch = replace(params, init=init), Stopwatch()  # each times itself
     results = yield from both_starts(starts["descriptors"], starts["fmap"])
-    with state.watch("orientation"):
-        measures = start_measures(source, target, results)
-    kept = "fmap" if dominates(measures["fmap"], measures["descriptors"]) else "descriptors"
-    other = "fmap" if kept == "descriptors" else "descriptors"
-    result = results[kept]
+    if isinstance(results["fmap"], CorrError):  # e.g. descriptors that cannot tell a shape's points apart
+        kept, result = "descriptors", results["descriptors"]
+        result.extras.update({"init": kept, "start_measures": None, "other_start_error": str(results["fmap"])})
+    else:
+        with state.watch("orientation"):
+            measures = start_measures(source, target, results)
+        kept = "fmap" if dominates(measures["fmap"], measures["descriptors"]) else "descriptors"
+        other = "fmap" if kept == "descriptors" else "descriptors"
+        result = results[kept]
+        result.extras.update({"init": kept, "start_measures": measures})
+        result.timings["other start"] = float(sum(results[other].timings.values()))
     for stage, seconds in state.watch.times.items():  # the shared stages: spectra, samples, the judge
         result.timings[stage] = result.timings.get(stage, 0.0) + seconds
-    result.extras.update({"init": kept, "start_measures": measures})
-    result.timings["other start"] = float(sum(results[other].timings.values()))
     yield Progress("done", 1.0, f"{kept} start kept, energy {result.energy:.6g}")
     return result
 

@@ -1479,12 +1479,20 @@ def turn_note(extras: dict) -> str | None:
 
 
 def start_note(extras: dict) -> str | None:
-    """What the user is told when a refined map's own start lost to the descriptor assignment
-    (``extras["start"] == "descriptors"``, :func:`choose_start`), or when the functional map's start of
-    ``init="best"`` failed (``extras["other_start_error"]``), else None."""
+    """What the user is told about the start of a map: for ``init="best"``, that the functional map's start
+    was kept (``extras["init"] == "fmap"``, with the measures that kept it) or failed
+    (``extras["other_start_error"]``); for a refined map, that its own start lost to the descriptor assignment
+    (``extras["start"] == "descriptors"``, :func:`choose_start`); else None (the descriptor start kept, as
+    usual)."""
     if extras and extras.get("other_start_error"):
         return (f"the functional map's start failed ({extras['other_start_error']}), so the map is the descriptor "
                 "start's alone")
+    if extras and extras.get("init") == "fmap" and extras.get("start_measures"):
+        kept, other = extras["start_measures"]["fmap"], extras["start_measures"]["descriptors"]
+        return ("of the two starts the functional map's was kept, its map being better by every measure: kernel "
+                f"energy {kept['energy'] / other['energy']:.4f}× the descriptor start's, orientation agreement "
+                f"{kept['agreement']:.2f} against {other['agreement']:.2f}, geodesic distortion "
+                f"{kept['distortion']:.4f} against {other['distortion']:.4f} √area")
     if not extras or extras.get("start") != "descriptors":
         return None
     return ("the given map reached a lower kernel objective than the method's own start (the descriptor "
@@ -1556,8 +1564,8 @@ def both_starts(first: KernelState, second: KernelState):
         try:
             with threadpool_limits(1):
                 other = pool.submit(run, solved(second), None, second.token)
-                mine = yield from scaled_progress(solved(first), 0.0, 1.0,
-                                                  f"start 1/2 ({inits[0]}; {inits[1]} beside it)")
+                yield Progress("kernel matching", 0.0, f"the {inits[1]} start runs beside this one, on the other core")
+                mine = yield from scaled_progress(solved(first), 0.0, 1.0, f"start 1/2 ({inits[0]})")
                 while not wait([other], timeout=WAIT_POLL).done:
                     caller.raise_if_cancelled()
                     yield Progress("kernel matching", 1.0, f"waiting for the {inits[1]} start")

@@ -1535,6 +1535,18 @@ def dominates(a: dict, b: dict) -> bool:
     return a["energy"] > b["energy"] and a["agreement"] > b["agreement"] and a["distortion"] < b["distortion"]
 
 
+def _or_its_error(solver):
+    """A solver generator that returns its :class:`~corrlib.errors.CorrError` instead of raising it (a
+    cancellation is still raised): the second start's failure leaves the first start's map
+    (:func:`best_of_both_starts`)."""
+    try:
+        return (yield from solver)
+    except Cancelled:
+        raise
+    except CorrError as exc:
+        return exc
+
+
 def both_starts(first: KernelState, second: KernelState):
     """Kernel matching from two prepared states: ``first`` in the calling thread (its progress reported),
     ``second`` on a thread beside it where this process may use two cores, else after it. A generator; returns
@@ -1553,28 +1565,18 @@ def both_starts(first: KernelState, second: KernelState):
     with side_threads(1) as pool:
         if isinstance(pool, InlineExecutor):  # one core's share: one start after the other
             mine = yield from scaled_progress(solved(first), 0.0, 0.5, f"start 1/2 ({inits[0]})")
-            try:
-                theirs = yield from scaled_progress(solved(second), 0.5, 1.0, f"start 2/2 ({inits[1]})")
-            except Cancelled:
-                raise
-            except CorrError as exc:  # the first start's map stands (:func:`best_of_both_starts`)
-                theirs = exc
+            theirs = yield from scaled_progress(_or_its_error(solved(second)), 0.5, 1.0, f"start 2/2 ({inits[1]})")
             return dict(zip(inits, (mine, theirs)))
         caller, second.token = second.token, CancelToken()
         try:
             with threadpool_limits(1):
-                other = pool.submit(run, solved(second), None, second.token)
+                other = pool.submit(run, _or_its_error(solved(second)), None, second.token)
                 yield Progress("kernel matching", 0.0, f"the {inits[1]} start runs beside this one, on the other core")
                 mine = yield from scaled_progress(solved(first), 0.0, 1.0, f"start 1/2 ({inits[0]})")
                 while not wait([other], timeout=WAIT_POLL).done:
                     caller.raise_if_cancelled()
                     yield Progress("kernel matching", 1.0, f"waiting for the {inits[1]} start")
-                try:
-                    theirs = other.result()
-                except Cancelled:
-                    raise
-                except CorrError as exc:
-                    theirs = exc
+                theirs = other.result()
         finally:
             second.token.cancel()  # a finished run ignores it; a running one stops at its next check
     return dict(zip(inits, (mine, theirs)))

@@ -107,6 +107,34 @@ def scaled_progress(generator: Generator[Progress, None, T], low: float, high: f
         yield Progress(report.stage, fraction, message)
 
 
+class LatestReport:
+    """A progress callback that keeps the last report of a run on another thread (``report``, None before the
+    first) and its last known fraction (``fraction``), for the calling thread to relay
+    (:func:`~corrlib.methods.kernel_matching.both_starts`)."""
+
+    def __init__(self):
+        self.report: Progress | None = None
+        self.fraction = 0.0
+
+    def __call__(self, report: Progress) -> None:
+        if report.fraction >= 0:
+            self.fraction = report.fraction
+        self.report = report
+
+
+def paired_progress(generator: Generator[Progress, None, T], other: LatestReport) -> Generator[Progress, None, T]:
+    """Re-yield a solver generator's reports with the fraction of the two runs' work done, ``(f + f_other) / 2``
+    (``f_other`` the other run's last known fraction; an unknown fraction stays unknown), and return its result.
+    Both runs' fractions only grow, so the combined one does too."""
+    while True:
+        try:
+            report = next(generator)
+        except StopIteration as stop:
+            return stop.value
+        fraction = (report.fraction + other.fraction) / 2 if report.fraction >= 0 else report.fraction
+        yield Progress(report.stage, fraction, report.message)
+
+
 def peak_rss_mb() -> float:
     """Peak resident memory of this process so far, in MB (Linux ``ru_maxrss`` is in kB)."""
     return resource.getrusage(resource.RUSAGE_SELF).ru_maxrss / 1024.0

@@ -716,6 +716,43 @@ def test_an_error_of_one_start_stops_the_other(wolf_pair, monkeypatch):
     assert threads_left == 0
 
 
+def test_while_one_start_waits_for_the_other_each_of_its_reports_is_relayed_once(wolf_pair, monkeypatch):
+    """Side by side, the descriptor start may end first and wait for the functional map's: the user then sees
+    that start's own reports, each once (a report per poll of the wait filled the log with one line every
+    0.1 s, for minutes on large meshes), and the bar shows both runs' work, never going back."""
+    import time
+
+    import corrlib.methods.kernel_matching as km
+
+    solved, second_reports = km.solved, []
+
+    def slowed(state, initial=None):  # the functional map's start made slower than the descriptor start
+        generator = solved(state, initial)
+        while True:
+            try:
+                report = next(generator)
+            except StopIteration as stop:
+                return stop.value
+            if state.params.init == "fmap":
+                second_reports.append(report)
+                time.sleep(0.05)
+            yield report
+
+    monkeypatch.setattr(km, "solved", slowed)
+    reports = []
+    result = solve("kernel-matching", *wolf_pair, callback=reports.append, n_eigs=150, n_seeds=800, n_times=5,
+                   iters_per_time=2)
+    assert result.extras["start_measures"] is not None  # both starts ran to the end
+    relayed = [r for r in reports if r.message.startswith("start 2/2 (fmap)")]
+    assert 0 < len(relayed) <= len(second_reports)
+    assert all(a is not b and (a.message, a.fraction) != (b.message, b.fraction)
+               for a, b in zip(relayed, relayed[1:]))
+    known = [r.fraction for r in reports if r.fraction >= 0]
+    assert np.all(np.diff(known) >= -1e-12) and known[-1] == 1.0
+    first_done = max(r.fraction for r in reports if r.message.startswith("start 1/2"))
+    assert first_done < 1.0  # half the bar is the other start's work
+
+
 @pytest.mark.parametrize("share", [1, 2])
 def test_a_failed_functional_map_start_leaves_the_descriptor_starts_map(wolf_pair, monkeypatch, share):
     """Both starts are the default, so the functional map's failing (here its descriptors refused, as on a

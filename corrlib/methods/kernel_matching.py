@@ -147,7 +147,8 @@ from corrlib.methods.reorientation import (can_reorient, declined_extras, mean_a
                                            orientation_blocks, reorient, standardised, turned_anything,
                                            with_first_pass)
 from corrlib.methods.resolution import keep_input_partners, kernel_width, nearest_partners, surplus_partners
-from corrlib.progress import CancelToken, Progress, Stopwatch, run, scaled_progress
+from corrlib.progress import (CancelToken, LatestReport, Progress, Stopwatch, paired_progress, run,
+                              scaled_progress)
 
 #: seconds between checks of the caller's cancellation while one start waits for the other (:func:`both_starts`)
 WAIT_POLL = 0.1
@@ -1557,25 +1558,34 @@ def both_starts(first: KernelState, second: KernelState):
     start costs no wall time on two cores, provided that BLAS does not spread either start over both cores
     as well: within the two runs it is limited to one thread (the same maps; sums may differ in the last bit).
     The second start has its own cancel token, set when the first ends in any way (the caller's
-    cancellation included), so that neither an error nor a cancellation waits for the second run.
+    cancellation included), so that neither an error nor a cancellation waits for the second run. Side by side,
+    the fraction reported is that of both runs' work (:func:`~corrlib.progress.paired_progress`); once the first
+    has ended, each report of the second is relayed once, labelled with its start.
     """
     from threadpoolctl import threadpool_limits
 
     inits = (first.params.init, second.params.init)
+    labels = (f"start 1/2 ({inits[0]})", f"start 2/2 ({inits[1]})")
     with side_threads(1) as pool:
         if isinstance(pool, InlineExecutor):  # one core's share: one start after the other
-            mine = yield from scaled_progress(solved(first), 0.0, 0.5, f"start 1/2 ({inits[0]})")
-            theirs = yield from scaled_progress(_or_its_error(solved(second)), 0.5, 1.0, f"start 2/2 ({inits[1]})")
+            mine = yield from scaled_progress(solved(first), 0.0, 0.5, labels[0])
+            theirs = yield from scaled_progress(_or_its_error(solved(second)), 0.5, 1.0, labels[1])
             return dict(zip(inits, (mine, theirs)))
         caller, second.token = second.token, CancelToken()
+        latest = LatestReport()
         try:
             with threadpool_limits(1):
-                other = pool.submit(run, _or_its_error(solved(second)), None, second.token)
+                other = pool.submit(run, _or_its_error(solved(second)), latest, second.token)
                 yield Progress("kernel matching", 0.0, f"the {inits[1]} start runs beside this one, on the other core")
-                mine = yield from scaled_progress(solved(first), 0.0, 1.0, f"start 1/2 ({inits[0]})")
+                mine = yield from paired_progress(scaled_progress(solved(first), 0.0, 1.0, labels[0]), latest)
+                relayed = None
                 while not wait([other], timeout=WAIT_POLL).done:
                     caller.raise_if_cancelled()
-                    yield Progress("kernel matching", 1.0, f"waiting for the {inits[1]} start")
+                    report = latest.report
+                    if report is not relayed:  # each of its reports once, not one per poll
+                        relayed = report
+                        yield Progress(report.stage, (1.0 + latest.fraction) / 2,
+                                       f"{labels[1]}: {report.message}" if report.message else labels[1])
                 theirs = other.result()
         finally:
             second.token.cancel()  # a finished run ignores it; a running one stops at its next check

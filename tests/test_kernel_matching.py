@@ -738,7 +738,10 @@ def test_while_one_start_waits_for_the_other_each_of_its_reports_is_relayed_once
                 time.sleep(0.05)
             yield report
 
+    from corrlib import cores
+
     monkeypatch.setattr(km, "solved", slowed)
+    monkeypatch.setattr(cores, "_core_share", 2)  # side by side, as on the two-core machine
     reports = []
     result = solve("kernel-matching", *wolf_pair, callback=reports.append, n_eigs=150, n_seeds=800, n_times=5,
                    iters_per_time=2)

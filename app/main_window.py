@@ -944,7 +944,7 @@ class MainWindow(QMainWindow):
     def export_frames(self, suffix: str = ".obj", folder: str | None = None) -> list[Path]:
         """Write :data:`N_EXPORT_FRAMES` frames from t = 0 to t max with the source's connectivity,
         ``animation.glb`` (glTF morph-target animation) and ``volumes.csv`` (asks before overwriting)."""
-        from corrlib.morph import export_sequence
+        from corrlib.morph import export_sequence, largest_volume_change
 
         if self.sequence_view.positions is None:
             self.show_error("no sequence to export (run a method on two meshes)")
@@ -965,9 +965,9 @@ class MainWindow(QMainWindow):
         except (CorrError, OSError) as exc:
             self.show_error(str(exc))
             return []
-        volumes = written["volume"]
-        note = (f"largest volume change {max(abs(v / volumes[0] - 1) for v in volumes):.2e}"
-                if volumes[0] is not None else "volume does not apply (open mesh)")
+        change = largest_volume_change(written["volume"], self.source.area)
+        note = (f"largest volume change {change:.2e}" if change is not None
+                else "volume does not apply (open mesh, or a closed one that encloses none)")
         self.job_panel.write(f"wrote {len(frames)} frames, animation.glb and volumes.csv to {folder} ({note})")
         return written["frames"]
 

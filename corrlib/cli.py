@@ -471,7 +471,7 @@ def cmd_morph(args) -> int:
     import numpy as np
 
     from corrlib.methods import get_method, solve
-    from corrlib.morph import export_sequence, frame_positions, has_deformation
+    from corrlib.morph import export_sequence, frame_positions, has_deformation, largest_volume_change
     from corrlib.shapes import TriMesh
 
     if not 2 <= args.frames <= MAX_FRAMES:
@@ -497,9 +497,11 @@ def cmd_morph(args) -> int:
     written["animation"] = written["animation"] and out / Path(written["animation"]).name
     kind = "divergence-free flow" if has_deformation(result) else "linear interpolation through the map"
     print(f"{len(frames)} frames t = 0 .. {args.t_max:g} ({kind}) in {out}/, animation {written['animation']}")
-    if source.is_closed:
-        vols = np.array(written["volume"])
-        print(f"enclosed volume: largest relative change {np.abs(vols / vols[0] - 1).max():.2e} over the frames")
+    change = largest_volume_change(written["volume"], source.area)
+    if change is not None:
+        print(f"enclosed volume: largest relative change {change:.2e} over the frames")
+    elif source.is_closed:
+        print(f"enclosed volume: {source.name} encloses none (a flat closed mesh), so no relative change")
     else:
         print("enclosed volume: not applicable (the source mesh is not closed)")
     return 0

@@ -788,9 +788,10 @@ def _integers(values: np.ndarray, path: Path, what: str, entry: str = "vertex in
         raise FileFormatError(f"{path}: the {what} must hold {entry}, found {values.dtype} values")
     values = values.astype(np.float64)
     bad = ~np.isfinite(values) | (values != np.round(values)) | (np.abs(values) > _LARGEST_INDEX)
-    if np.any(bad):
-        first = int(np.argmax(bad))
-        raise FileFormatError(f"{path}: the {what} must hold integer {entry}; entry {first} is "
+    if np.any(bad):  # named by its position in the file: row and column where the values form a table
+        first = np.unravel_index(int(np.argmax(bad)), values.shape)
+        where = f"data line {first[0] + 1}, column {first[1] + 1}" if values.ndim == 2 else f"entry {first[0]}"
+        raise FileFormatError(f"{path}: the {what} must hold integer {entry}; {where} is "
                               f"{float(values[first])!r}")
     return values.astype(np.int64)
 
@@ -993,8 +994,8 @@ def load_result(stem) -> tuple[dict[str, np.ndarray], dict]:
     try:
         with np.load(npz, allow_pickle=False) as data:
             arrays = {k: data[k] for k in data.files}
-    except (OSError, ValueError) as exc:
-        raise FileFormatError(f"{npz}: cannot read result: {exc}") from exc
+    except Exception as exc:  # numpy and zipfile raise many types on damaged archives
+        raise FileFormatError(f"{npz}: cannot read result ({type(exc).__name__}: {exc})") from None
     meta = {}
     js = stem.with_name(stem.name + ".json")
     if js.exists():

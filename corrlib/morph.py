@@ -78,6 +78,16 @@ def frame_volumes(frames, faces, closed: bool) -> list[float | None]:
     return [signed_volume(f, faces) if closed else None for f in frames]
 
 
+def largest_volume_change(volumes: list[float | None], area: float) -> float | None:
+    """The largest ``|V(t) / V(0) − 1|`` over frames' enclosed volumes (:func:`frame_volumes`), or None where a
+    relative change does not apply (an open mesh, or a closed one that encloses nothing;
+    :func:`~corrlib.shapes.relative_volume_change`)."""
+    from corrlib.shapes import relative_volume_change
+
+    changes = [relative_volume_change(v, volumes[0], area) for v in volumes] if volumes else [None]
+    return None if changes[0] is None else max(abs(c) for c in changes)
+
+
 def export_sequence(folder, frames, faces, times, *, fmt: str = "obj", animation: bool = True,
                     closed: bool = True, name: str = "frame") -> dict:
     """Write a mesh sequence: one mesh per frame, a glTF animation and a volume table.

@@ -504,6 +504,19 @@ class TriMesh:
         return signed_volume(self.vertices, self.faces)
 
 
+#: an enclosed volume below this fraction of ``area^{3/2}`` is rounding, not volume (a flat closed mesh)
+VOLUME_TOLERANCE = 1e-9
+
+
+def relative_volume_change(volume: float, reference: float | None, area: float) -> float | None:
+    """``volume / reference − 1``, or None where it does not apply: no reference volume (an open mesh), or one
+    that is rounding rather than volume (a closed mesh that encloses nothing, e.g. flat), relative to the
+    surface ``area`` (:data:`VOLUME_TOLERANCE`)."""
+    if reference is None or not abs(reference) > VOLUME_TOLERANCE * area ** 1.5:
+        return None
+    return float(volume / reference - 1.0)
+
+
 # ----------------------------------------------------------------------------- contours
 
 

@@ -216,6 +216,8 @@ def test_bad_files_give_named_errors(tmp_path, capsys):
     (t / "cut.npz").write_bytes(whole[: len(whole) // 2])
     np.savetxt(t / "short.txt", np.arange(100), fmt="%d")
     (t / "landmarks.txt").write_text("0 0\n5 5\n99999 3\n")
+    (t / "fraction.txt").write_text("0 12.5\n100 200\n")
+    (t / "nan.txt").write_text("0 1\n100 200\n300 nan\n")
     lines = (TOSCA / "wolf0.off").read_text().splitlines()
     lines[-1] = "3 0 1 99999999999999999999"
     (t / "bigindex.off").write_text("\n".join(lines) + "\n")
@@ -239,6 +241,9 @@ def test_bad_files_give_named_errors(tmp_path, capsys):
         ("refine", WOLF0, WOLF1, "--init", t / "folder", *out): "folder: not a file",
         ("refine", WOLF0, WOLF1, "--init", t / "landmarks.txt", *out):
             "landmarks.txt: landmark 2: source vertex 99999 is out of range for a 4344-vertex source",
+        ("refine", WOLF0, WOLF1, "--init", t / "fraction.txt", *out):
+            "fraction.txt: the --init landmarks file must hold integer vertex indices; data line 1, column 2 is 12.5",
+        ("refine", WOLF0, WOLF1, "--init", t / "nan.txt", *out): "data line 3, column 2 is nan",
         ("eval", t / "frac.npz", *gt): "must hold integer target indices; entry 0 is 0.7",
         ("eval", t / "wide.npz", *gt): "found shape (4344, 2)",
         ("eval", t / "nan.npz", *gt): "entry 0 is nan",
@@ -257,6 +262,40 @@ def test_bad_files_give_named_errors(tmp_path, capsys):
         message = error_of(capsys, argv)
         assert expected in message, (argv, message)
     assert files_in(t / "out") == []
+
+
+def test_a_flat_closed_mesh_has_no_relative_volume_change_and_no_section(tmp_path, capsys):
+    """A closed mesh pressed flat (every z = 0) encloses no volume: a morph from it reports no relative volume
+    change (it divided by zero), and its section across the flat side encloses no area (it divided by zero in
+    the contour's scaling); both are said, by name."""
+    from corrlib.contour_bench import cut_query
+    from corrlib.errors import InputError
+    from corrlib.io import load_mesh, load_result, save_mesh
+
+    wolf = load_mesh(WOLF0)
+    flat = wolf.vertices * [1.0, 1.0, 0.0]
+    save_mesh(tmp_path / "flat.off", flat, wolf.faces)
+    argv = ["morph", tmp_path / "flat.off", WOLF1, "--param", "n_samples=300", "--param", "n_fields=100",
+            "--param", "max_iter=2", "--frames", 3, "-o", tmp_path / "m", "-q"]
+    assert main(list(map(str, argv))) == 0
+    output = capsys.readouterr()
+    assert "flat.off encloses none (a flat closed mesh)" in output.out and "Traceback" not in output.err
+    result = load_result(tmp_path / "m" / "result")[1]
+    assert "volume_change" not in result.get("extras", {})
+    with pytest.raises(InputError, match="flat.off: the section of the cross plane encloses no area"):
+        cut_query(load_mesh(tmp_path / "flat.off"), "cross")
+
+
+def test_a_damaged_result_file_is_refused_by_name(tmp_path):
+    """A result archive cut short (a full disk, a copy interrupted) raised zipfile's BadZipFile."""
+    from corrlib.errors import FileFormatError
+    from corrlib.methods.base import MatchResult
+
+    MatchResult("descriptor-nn", np.arange(10), np.arange(10), 1.0, {}).save(tmp_path / "r")
+    whole = (tmp_path / "r.npz").read_bytes()
+    (tmp_path / "r.npz").write_bytes(whole[: len(whole) // 2])
+    with pytest.raises(FileFormatError, match=r"r\.npz: cannot read result"):
+        MatchResult.load(tmp_path / "r")
 
 
 def test_a_hugely_negative_slack_is_no_slack():

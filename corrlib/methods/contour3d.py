@@ -596,6 +596,8 @@ def canonical_outline(contour: Contour2D, n_points: int, area_ratio: float) -> t
     reflection that keeps every length and the intrinsic geometry): the triangulation of the canonical
     outline, hence its features, do not depend on the input's position, orientation or units."""
     resampled = contour.ccw().resample(n_points)
+    if not resampled.area > 0:  # a contour made without validation (Contour2D(validate=False)) may fold flat
+        raise ContourError(f"{contour.name}: the contour encloses no area (it folds back on itself)")
     pts = resampled.points - resampled.points.mean(axis=0)
     pts = pts * np.sqrt(area_ratio / resampled.area)
     _, _, vt = np.linalg.svd(pts, full_matrices=False)

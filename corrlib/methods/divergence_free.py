@@ -93,7 +93,7 @@ from corrlib.methods.kernel_matching import DEFAULT_EIGENPAIRS, DEFAULT_TAU_MIN
 from corrlib.methods.registry import MethodSpec, register
 from corrlib.neighbours import nearest_rows
 from corrlib.progress import Progress, Stopwatch
-from corrlib.shapes import signed_volume
+from corrlib.shapes import relative_volume_change, signed_volume
 
 #: eigenpairs computed for the final ZoomOut steps: kernel matching's default count, so that a pair's spectra
 #: are computed once for both methods (the on-disk cache truncates a larger decomposition)
@@ -664,9 +664,9 @@ def solve_divergence_free(source, target, params: DivergenceFreeParams, token, *
         "converged": bool(fitted.converged),
         "feature_factor": fitted.feature_factor,
     }
-    volume = source.enclosed_volume()
-    if volume is not None:
-        extras["volume_change"] = float(signed_volume(morphed, source.faces) / volume - 1.0)
+    change = relative_volume_change(signed_volume(morphed, source.faces), source.enclosed_volume(), source.area)
+    if change is not None:
+        extras["volume_change"] = change
     yield Progress("done", 1.0, f"{fitted.iterations} EM iterations, energy {fitted.energy_trace[-1]:.6g}")
     return MatchResult("divergence-free", map_xy, map_yx, fitted.energy_trace[-1], watch.times,
                        energy_meaning="EM objective: weighted data term plus the Eq. 10.18 prior",

@@ -334,6 +334,8 @@ def cmd_match(args) -> int:
     if plotting is not None:
         plotting.join()
     print(f"method {result.method}: energy {result.energy}, {result.timings.get('total', 0):.2f} s")
+    if result.search is not None:
+        print(f"path search: {result.search.describe()}")
     _print_reversal_note(result)
     if result.energy_trace is not None:
         trace = result.energy_trace
@@ -588,7 +590,7 @@ def cmd_match_contour(args) -> int:
     result = solve("contour3d", contour, mesh, _contour3d_params(args), callback=_progress_printer(args.quiet))
     search, path = result.search, result.path
     print(f"energy {result.energy:.6g} (lower bound {search.lower_bound:.6g}, "
-          f"{'optimal' if search.optimal else 'within the ε bound'}), {search.iterations} branch-and-bound "
+          f"{search.describe()}), {search.iterations} branch-and-bound "
           f"iterations, {search.dijkstra_runs} layered Dijkstra runs of {search.seconds_per_dijkstra:.3f} s, "
           f"{result.timings['total']:.2f} s in total")
     from corrlib.io import staged_output

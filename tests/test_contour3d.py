@@ -185,6 +185,39 @@ def test_branch_and_bound_equals_brute_force(seed, metric):
         assert approx.lower_bound <= exact + 1e-12
 
 
+@pytest.mark.parametrize("seed", range(3))
+def test_the_certificate_says_what_the_search_proves(seed):
+    """Optimal, within the ε bound, or stopped at the iteration cap: the last was reported as "within the ε
+    bound" (with ε = 0), so a capped search passed for an answer (brute force says which it is)."""
+    from corrlib.methods.base import SearchCertificate
+
+    exact = explicit_product_optimum(ProductGraph(*tiny_instance(seed)))
+    full = SearchCertificate.of(run(branch_and_bound(ProductGraph(*tiny_instance(seed)))))
+    assert full.optimal and full.within_bound and full.describe() == "proven optimal"
+    eps = 0.3
+    approx = SearchCertificate.of(run(branch_and_bound(ProductGraph(*tiny_instance(seed)), eps=eps)), eps)
+    assert approx.within_bound and approx.upper_bound <= (1 + eps) * exact + 1e-12
+    assert approx.optimal or "within the ε = 0.3 bound" in approx.describe()
+    capped = SearchCertificate.of(run(branch_and_bound(ProductGraph(*tiny_instance(seed)), max_iterations=1)))
+    assert capped.lower_bound <= exact + 1e-12 <= capped.upper_bound + 2e-12  # valid bounds
+    assert capped.within_bound == capped.optimal == (capped.lower_bound >= capped.upper_bound)  # ε = 0
+    assert ("NOT proven optimal" in capped.describe()) == (not capped.within_bound)
+    if seed < 2:  # on these instances one iteration finds the optimum but cannot prove it
+        assert not capped.within_bound
+
+
+def test_a_capped_search_is_reported_as_not_proven(capsys, tmp_path):
+    """Through the CLI, a contour matched with too few iterations is said to be not proven optimal."""
+    from _data import SKETCH2D
+    from corrlib.cli import main
+
+    argv = ["match-contour", SKETCH2D / "human_sketch_a_contour.txt", TOSCA / "wolf0.off", "--param",
+            "max_iterations=1", "-o", tmp_path / "r", "-q"]
+    assert main(list(map(str, argv))) == 0
+    out = capsys.readouterr().out
+    assert "NOT proven optimal: the search stopped at its iteration cap" in out
+
+
 def directed_penalties(seed, adjacency) -> sp.csr_matrix:
     """Random non-negative penalties per unit length, different for j -> k and k -> j (half of them zero)."""
     rng = np.random.default_rng(100 + seed)

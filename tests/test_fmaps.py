@@ -203,3 +203,14 @@ def test_baselines_match_a_pair_in_different_units_as_the_same_pair(wolf_pair, m
     assert np.mean(plain == scaled) > 0.995
     if method == "fmap-zoomout":  # and that map is the wolves' identity up to a few near misses
         assert np.linalg.norm(y.vertices[plain] - y.vertices, axis=1).mean() < 0.01 * np.sqrt(y.area)
+
+
+def test_a_zoomout_that_would_shrink_the_map_is_refused():
+    """k_init above k_final was accepted and quietly solved a 2 × 2 map (mean error 0.46 on the cats)."""
+    from corrlib.errors import ParameterError
+    from corrlib.methods.base import make_params
+    from corrlib.methods.baselines import FmapZoomOutParams
+
+    with pytest.raises(ParameterError, match=r"k_init \(200\) must not exceed k_final \(2\)"):
+        make_params(FmapZoomOutParams, k_init=200, k_final=2)
+    assert make_params(FmapZoomOutParams, k_init=30, k_final=30).k_final == 30

@@ -211,6 +211,9 @@ class SearchCertificate:
     dijkstra_runs : int
         Layered shortest-path computations.
     seconds_per_dijkstra : float
+    eps : float
+        The approximation asked for: the search stops once ``lower_bound · (1 + eps) ≥ upper_bound``, or at its
+        iteration cap before that.
     """
 
     lower_bound: float
@@ -218,17 +221,35 @@ class SearchCertificate:
     iterations: int
     dijkstra_runs: int = 0
     seconds_per_dijkstra: float = 0.0
+    eps: float = 0.0
 
     @classmethod
-    def of(cls, search) -> "SearchCertificate":
-        """The certificate of a :class:`~corrlib.geometry.cyclic_paths.BranchAndBoundResult`."""
+    def of(cls, search, eps: float = 0.0) -> "SearchCertificate":
+        """The certificate of a :class:`~corrlib.geometry.cyclic_paths.BranchAndBoundResult` searched with
+        approximation ``eps``."""
         return cls(float(search.lower_bound), float(search.upper_bound), int(search.iterations),
-                   int(search.dijkstra_runs), float(search.seconds_per_run))
+                   int(search.dijkstra_runs), float(search.seconds_per_run), float(eps))
 
     @property
     def optimal(self) -> bool:
         """Whether the path is proven globally optimal (not only within the ε bound)."""
         return bool(self.lower_bound >= self.upper_bound)
+
+    @property
+    def within_bound(self) -> bool:
+        """Whether the path is proven within the asked factor ``1 + eps`` of the optimum (False: the search
+        stopped at its iteration cap first)."""
+        return bool(self.lower_bound * (1.0 + self.eps) >= self.upper_bound)
+
+    def describe(self) -> str:
+        """What the search proves, in words: optimal, within the ε bound, or neither (stopped at the cap)."""
+        if self.optimal:
+            return "proven optimal"
+        if self.within_bound:
+            return f"within the ε = {self.eps:g} bound of the optimum"
+        return (f"NOT proven optimal: the search stopped at its iteration cap ({self.iterations} iterations) "
+                f"with the optimum between {self.lower_bound:.6g} and {self.upper_bound:.6g} "
+                f"({100 * self.gap / max(abs(self.upper_bound), 1e-300):.2g} % of the energy)")
 
     @property
     def gap(self) -> float:

@@ -20,7 +20,7 @@ import numpy as np
 
 from corrlib.descriptors import DESCRIPTOR_KINDS, mesh_descriptors
 from corrlib.descriptors.orientation import orientation_operators
-from corrlib.errors import InputError
+from corrlib.errors import InputError, ParameterError
 from corrlib.geometry.fmaps import functional_map, multiplication_operators, resolvent_mask, zoomout
 from corrlib.geometry.spectrum import available_eigenpairs, mesh_spectra
 from corrlib.methods.base import MatchResult, param
@@ -114,6 +114,11 @@ class FmapZoomOutParams:
     orientation: float = param(1.0, label="Orientation term", low=0.0, high=1e6,
                                help="Weight of the commutativity with orientation-preserving operators (Ren et "
                                     "al. 2018): keeps left on left; 0 leaves the map free to mirror.")
+
+    def __post_init__(self):
+        if isinstance(self.k_init, int) and isinstance(self.k_final, int) and self.k_init > self.k_final:
+            raise ParameterError(f"k_init ({self.k_init}) must not exceed k_final ({self.k_final}): ZoomOut grows "
+                                 "the functional map from k_init eigenfunctions to k_final")
 
 
 #: every n-th descriptor function also gives an orientation operator (they are close neighbours in scale)

@@ -98,7 +98,7 @@ def solve_contour2d(source, target, params: Contour2DParams, token):
                        target_points=qb.contour.points, product_functions=functions)
     yield Progress("done", 1.0, f"energy {bb.energy:.6g}")
     return MatchResult("contour2d", map_xy, map_yx, bb.energy, watch.times, path=path,
-                       search=SearchCertificate.of(bb), extras=extras,
+                       search=SearchCertificate.of(bb, params.eps), extras=extras,
                        energy_meaning="path energy on the product torus (unit areas)")
 
 

@@ -959,12 +959,14 @@ def _match_mesh(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams, to
               "intrinsic_asymmetry": query.intrinsic_asymmetry, "mesh_seen_from_side": seen_from_side,
               "near_half": int(near), "sided": sided is not None and model == "whole",
               "contour_points": len(query.points), "contour_points_asked": params.n_contour}
-    yield Progress("done", 1.0, f"energy {bb.energy:.6g} after {bb.iterations} iterations")
+    certificate = SearchCertificate.of(bb, params.eps)
+    yield Progress("done", 1.0, f"energy {bb.energy:.6g} after {bb.iterations} iterations, {certificate.describe()}"
+                   + ("" if certificate.within_bound else "; raise max_iterations"))
     per_length = " per contour length matched to a moving curve" if params.energy.endswith("ratio") else ""
     metric = f"{params.metric} product metric, " if params.energy in FIRST_ORDER_ENERGIES else ""
     return MatchResult("contour3d", map_xy=matched, map_yx=None, energy=bb.energy, timings=watch.times,
                        path=ContourPath(query.contour.points, path.vertices, path.curve_index, path.layers),
-                       search=SearchCertificate.of(bb), extras=extras,
+                       search=certificate, extras=extras,
                        energy_meaning=f"{params.energy} product-graph path energy{per_length} ({metric}{model} shape model, unit-area "
                                       f"mesh, contour area {params.area_ratio:g}, axis weight {params.axis_weight:g}"
                                       + (f", side view, symmetry-curve weight {params.symmetry_weight:g})"

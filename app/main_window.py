@@ -830,7 +830,11 @@ class MainWindow(QMainWindow):
             from corrlib.methods.kernel_matching import (  # loaded by the method that ran
                 reversal_note, start_note, turn_note)
 
-            for note in (reversal_note(result.extras), turn_note(result.extras), start_note(result.extras)):
+            from corrlib.evaluation import collapse_note
+
+            for note in (reversal_note(result.extras), turn_note(result.extras), start_note(result.extras),
+                         collapse_note(result.map_xy, self.target)
+                         if isinstance(self.source, TriMesh) and isinstance(self.target, TriMesh) else None):
                 if note:
                     self.job_panel.write(f"{result.method}: {note}")
         self.result_ready.emit(result)

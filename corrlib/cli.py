@@ -149,9 +149,15 @@ def cmd_eval(args) -> int:
 
 
 def _load_shape(path: str):
+    """A mesh, contour or silhouette from ``path``; what its validation warns of goes to stderr (the studio
+    shows the same in its shapes panel)."""
     from corrlib.io import load_shape
 
-    return load_shape(path)
+    shape = load_shape(path)
+    for finding in getattr(shape, "report", lambda: [])():
+        if finding.level == "warning":
+            print(f"warning: {shape.name}: {finding.message}", file=sys.stderr)
+    return shape
 
 
 def _parse_overrides(pairs: list[str]) -> dict:
@@ -295,7 +301,14 @@ def _initial_match(value: str, source, target, spec=None):
                 except CorrError as exc:
                     raise FileFormatError(f"{path}: {exc}") from None
             return initial
-    return InitialMatch(map_xy=load_map(path, n_target=target.n_vertices, n_source=source.n_vertices))
+    map_xy = load_map(path, n_target=target.n_vertices, n_source=source.n_vertices)
+    from corrlib.evaluation import collapse_note
+
+    note = collapse_note(map_xy, target, what=f"the initial map {path.name}",
+                         advice="it carries no correspondence to refine")
+    if note:  # refined all the same (a refinement may recover), but the user should know
+        print(f"warning: {note}", file=sys.stderr)
+    return InitialMatch(map_xy=map_xy)
 
 
 def _best_method(source, target):
@@ -337,6 +350,7 @@ def cmd_match(args) -> int:
     if result.search is not None:
         print(f"path search: {result.search.describe()}")
     _print_reversal_note(result)
+    _print_collapse_note(result, source, target)
     if result.energy_trace is not None:
         trace = result.energy_trace
         print(f"energy trace ({trace.size} assignments): " + ", ".join(f"{e:.5g}" for e in trace))
@@ -363,6 +377,7 @@ def cmd_refine(args) -> int:
         plotting.join()
     print(f"method {result.method}: {result.timings.get('total', 0):.2f} s")
     _print_reversal_note(result)
+    _print_collapse_note(result, source, target)
     kept = result.extras.get("kept_matches")
     if kept is not None and not args.quiet:
         given_back = result.extras.get("isometric_matches")
@@ -372,6 +387,17 @@ def cmd_refine(args) -> int:
               "the others were corrected")
     _write_match_outputs(result, source, target, Path(args.output), quiet=args.quiet, pictures=args.pictures)
     return 0
+
+
+def _print_collapse_note(result, source, target) -> None:
+    """Warn (on stderr) when a mesh-to-mesh map has collapsed onto a negligible part of the target."""
+    from corrlib.evaluation import collapse_note
+    from corrlib.shapes import TriMesh
+
+    if isinstance(source, TriMesh) and isinstance(target, TriMesh) and result.map_xy is not None:
+        note = collapse_note(result.map_xy, target)
+        if note:
+            print(f"warning: {note}", file=sys.stderr)
 
 
 def _print_reversal_note(result) -> None:

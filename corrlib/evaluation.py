@@ -167,3 +167,37 @@ def evaluate(result, target, gt_source, gt_target, **options) -> ErrorReport:
     if map_xy is None:
         raise InputError(f"the result of {getattr(result, 'method', '?')!r} has no point-to-point map to evaluate")
     return geodesic_errors(map_xy, target, gt_source, gt_target, **options)
+
+
+#: a map of one surface onto another whose image holds less than this fraction of the target's area has
+#: collapsed (every point sent to a few): no correspondence, whatever the method's energy says
+COLLAPSED_AREA = 0.01
+
+
+def collapse_note(map_xy, target, what: str = "the map",
+                  advice: str = "the inputs give the method nothing to tell points apart (try another method or "
+                                "descriptor)") -> str | None:
+    """A warning when a mesh-to-mesh map sends its vertices onto a negligible part of the target (the image's
+    vertices hold less than :data:`COLLAPSED_AREA` of its area, each vertex a third of its faces' areas), else
+    None. A method can return such a map without failing (descriptors that barely vary on a very regular
+    shape make a functional map of rank one); the user is told rather than handed it as a result.
+
+    Parameters
+    ----------
+    map_xy : (n_x,) int
+        Target vertex of every source vertex; -1 unmatched.
+    target : TriMesh
+    what, advice : str
+        How the map is named, and what the user is advised.
+    """
+    matched = np.asarray(map_xy)
+    matched = np.unique(matched[matched >= 0])
+    if matched.size == 0:
+        return f"{what} matches no vertex"
+    vertex_areas = np.bincount(target.faces.ravel(), np.repeat(target.face_areas / 3.0, 3),
+                               minlength=target.n_vertices)
+    share = float(vertex_areas[matched].sum() / vertex_areas.sum())
+    if share >= COLLAPSED_AREA:
+        return None
+    return (f"{what} has collapsed: its {np.count_nonzero(np.asarray(map_xy) >= 0)} matched vertices land on "
+            f"{matched.size} vertices of {target.name}, {100 * share:.2g} % of its area; {advice}")

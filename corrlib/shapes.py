@@ -18,7 +18,7 @@ from functools import cached_property
 
 import numpy as np
 import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
+from scipy.sparse.csgraph import breadth_first_order, connected_components
 
 from corrlib.errors import ContourError, MeshError
 
@@ -297,6 +297,71 @@ def _connectivity_findings(f: np.ndarray, n: int) -> list[Finding]:
     return findings
 
 
+def consistently_oriented(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarray, int]:
+    """The faces with their windings made to agree across every edge, and the number of faces turned.
+
+    Two faces that share an edge agree when they traverse it in opposite directions (then their normals point
+    to the same side). Breadth-first over the faces joined by edges of exactly two faces, a face that
+    traverses the shared edge in its parent's direction is turned. In every patch of faces so joined, the
+    winding most of the input's faces have is kept (a file with some wrong faces keeps its outside). Where
+    that cannot make every edge agree (a non-orientable surface such as a Möbius strip), the input is
+    returned unchanged with 0.
+
+    Parameters
+    ----------
+    faces : (f, 3) int
+    n_vertices : int
+
+    Returns
+    -------
+    faces : (f, 3) int
+    turned : int
+    """
+    f = np.asarray(faces, dtype=np.int64)
+    n_faces = f.shape[0]
+    half = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
+    owner = np.tile(np.arange(n_faces), 3)
+    und = np.sort(half, axis=1)
+    keys = und[:, 0] * np.int64(n_vertices) + und[:, 1]
+    order = np.argsort(keys, kind="stable")
+    sorted_keys = keys[order]
+    starts = np.flatnonzero(np.r_[True, sorted_keys[1:] != sorted_keys[:-1]])
+    sizes = np.diff(np.r_[starts, keys.size])
+    pairs = starts[sizes == 2]  # edges of exactly two faces
+    first, second = order[pairs], order[pairs + 1]
+    same_direction = np.all(half[first] == half[second], axis=1)  # disagree: one of the two must turn
+    a, b = owner[first], owner[second]
+    graph = sp.coo_matrix((np.ones(a.size), (a, b)), shape=(n_faces, n_faces)).tocsr()
+    graph = graph + graph.T
+    pair_keys = np.concatenate([a * np.int64(n_faces) + b, b * np.int64(n_faces) + a])
+    pair_same = np.concatenate([same_direction, same_direction])
+    key_order = np.argsort(pair_keys)
+    pair_keys, pair_same = pair_keys[key_order], pair_same[key_order]
+    turn = np.zeros(n_faces, dtype=bool)
+    seen = np.zeros(n_faces, dtype=bool)
+    for root in range(n_faces):
+        if seen[root]:
+            continue
+        patch, parent = breadth_first_order(graph, root, directed=False, return_predecessors=True)
+        seen[patch] = True
+        children = patch[1:]
+        tree_keys = parent[children] * np.int64(n_faces) + children
+        tree_same = pair_same[np.searchsorted(pair_keys, tree_keys)].tolist()
+        parents = parent[children].tolist()
+        turned = {int(root): False}
+        for child, up, same in zip(children.tolist(), parents, tree_same):
+            turned[child] = turned[up] ^ same
+        patch_turn = np.fromiter((turned[int(i)] for i in patch), dtype=bool, count=patch.size)
+        if 2 * np.count_nonzero(patch_turn) > patch.size:  # keep the winding most of the patch has
+            patch_turn = ~patch_turn
+        turn[patch] = patch_turn
+    if not turn.any() or np.any(same_direction ^ turn[a] ^ turn[b]):  # nothing to turn, or non-orientable
+        return f, 0
+    out = f.copy()
+    out[turn] = out[turn][:, ::-1]
+    return out, int(np.count_nonzero(turn))
+
+
 def _edge_warnings(edges: _Edges) -> list[Finding]:
     """Inconsistent orientation (only on a manifold mesh) and a boundary."""
     findings = []
@@ -376,7 +441,25 @@ class TriMesh:
         With ``largest_component=True`` vertices outside the largest component
         (and unreferenced vertices) are removed; the kept original indices are
         available as :attr:`original_indices`.
+
+        Faces whose windings disagree with their neighbours' (half of a file's faces turned by an exporter) are
+        turned to agree (:func:`consistently_oriented`; normals, descriptors that tell left from right and the
+        orientation terms all need one winding), and :meth:`report` says how many.
         """
+        mesh = cls._from_arrays(vertices, faces, name=name, largest_component=largest_component)
+        if not any(fd.code == "orientation" for fd in mesh.report()):
+            return mesh
+        faces, turned = consistently_oriented(mesh.faces, mesh.n_vertices)
+        if not turned:  # a non-orientable surface: the warning stays
+            return mesh
+        oriented = cls(mesh.vertices, faces, name=name)
+        oriented.original_indices = mesh.original_indices
+        oriented._findings.append(Finding("warning", "reoriented", f"{turned} faces were turned to agree with "
+                                          "their neighbours (the file's face orientation was inconsistent)"))
+        return oriented
+
+    @classmethod
+    def _from_arrays(cls, vertices, faces, *, name: str, largest_component: bool) -> "TriMesh":
         if largest_component:
             v, f, findings = _as_arrays(vertices, faces)
             if not findings and f.size and f.min() >= 0 and f.max() < v.shape[0]:

@@ -286,6 +286,25 @@ def test_a_flat_closed_mesh_has_no_relative_volume_change_and_no_section(tmp_pat
         cut_query(load_mesh(tmp_path / "flat.off"), "cross")
 
 
+def test_a_mesh_with_turned_faces_is_matched_as_the_mesh_it_should_be(tmp_path, capsys):
+    """Every third face of wolf0 turned (normals in and out): the faces are turned back on load, the user is
+    warned, and the map is the one of the clean file (it was a left/right-swapped map, silently)."""
+    from corrlib.io import load_mesh, save_mesh
+    from corrlib.methods.base import MatchResult
+
+    wolf = load_mesh(WOLF0)
+    faces = wolf.faces.copy()
+    faces[::3] = faces[::3, ::-1]
+    save_mesh(tmp_path / "turned.off", wolf.vertices, faces)
+    save_mesh(tmp_path / "clean.off", wolf.vertices, wolf.faces)  # the same digits
+    for name, source in (("clean", tmp_path / "clean.off"), ("turned", tmp_path / "turned.off")):
+        assert main(list(map(str, ["match", source, WOLF1, *FAST, "-o", tmp_path / name, "-q"]))) == 0
+    err = capsys.readouterr().err
+    assert f"warning: turned.off: {len(faces[::3])} faces were turned to agree with their neighbours" in err
+    np.testing.assert_array_equal(MatchResult.load(tmp_path / "turned").map_xy,
+                                  MatchResult.load(tmp_path / "clean").map_xy)
+
+
 def test_a_damaged_result_file_is_refused_by_name(tmp_path):
     """A result archive cut short (a full disk, a copy interrupted) raised zipfile's BadZipFile."""
     from corrlib.errors import FileFormatError

@@ -86,6 +86,63 @@ def test_orientation_warning():
     assert any(fd.code == "orientation" for fd in inspect_mesh(TETRA_V, f))
 
 
+def warnings_of(v, f):
+    return [fd.code for fd in inspect_mesh(v, f) if fd.level == "warning"]
+
+
+def _mobius_strip(n=20):
+    """A triangulated Möbius strip: one-sided, so no winding of its faces agrees across every edge."""
+    angles = np.linspace(0, 2 * np.pi, n, endpoint=False)
+    v = np.array([[(2 + 0.5 * w * np.cos(t / 2)) * np.cos(t), (2 + 0.5 * w * np.cos(t / 2)) * np.sin(t),
+                   0.5 * w * np.sin(t / 2)] for t in angles for w in (-1, 1)])
+    f = []
+    for i in range(n):
+        a, b = 2 * i, 2 * i + 1
+        c, d = (2 * i + 2, 2 * i + 3) if i < n - 1 else (1, 0)  # the last quad closes with the half twist
+        f += [[a, c, b], [b, c, d]]
+    return v, np.array(f)
+
+
+@pytest.mark.parametrize("every", [2, 3, 7])
+def test_inconsistent_windings_are_turned_to_agree(every):
+    """Every ``every``-th face of a sphere turned (an exporter's mistake): the faces are turned back to agree
+    with their neighbours, keeping the winding most faces had; a consistent mesh and a one-sided surface are
+    left as they are."""
+    from corrlib.shapes import consistently_oriented
+
+    sphere = trimesh.creation.icosphere(3)
+    v, f = np.asarray(sphere.vertices), np.asarray(sphere.faces)
+    mixed = f.copy()
+    mixed[::every] = mixed[::every, ::-1]
+    fixed, turned = consistently_oriented(mixed, len(v))
+    assert turned == min(len(f[::every]), len(f) - len(f[::every]))
+    assert "orientation" in warnings_of(v, mixed) and "orientation" not in warnings_of(v, fixed)
+    volume, outside = TriMesh(v, fixed).enclosed_volume(), TriMesh(v, f).enclosed_volume()
+    assert abs(volume) == pytest.approx(outside)  # one winding everywhere: all out or all in
+    if every > 2:  # the majority's winding, the outside: the file's faces exactly
+        assert np.array_equal(fixed, f)
+    same, zero = consistently_oriented(f, len(v))
+    assert zero == 0 and np.array_equal(same, f)
+    strip_v, strip_f = _mobius_strip()
+    assert "orientation" in warnings_of(strip_v, strip_f)
+    unchanged, none = consistently_oriented(strip_f, len(strip_v))
+    assert none == 0 and np.array_equal(unchanged, strip_f)
+
+
+def test_a_loaded_mesh_with_turned_faces_is_reoriented_and_says_so(tmp_path):
+    from corrlib.io import load_mesh, save_mesh
+
+    sphere = trimesh.creation.icosphere(3)
+    f = np.asarray(sphere.faces).copy()
+    f[::3] = f[::3, ::-1]
+    save_mesh(tmp_path / "mixed.off", sphere.vertices, f)
+    mesh = load_mesh(tmp_path / "mixed.off")
+    assert np.array_equal(mesh.faces, sphere.faces)
+    notes = [fd.message for fd in mesh.report() if fd.code == "reoriented"]
+    assert notes == [f"{len(f[::3])} faces were turned to agree with their neighbours (the file's face "
+                     "orientation was inconsistent)"]
+
+
 def square(n=40, side=2.0):
     t = np.linspace(0, 4, n, endpoint=False)
     pts = []

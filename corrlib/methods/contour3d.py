@@ -960,8 +960,7 @@ def _match_mesh(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams, to
               "near_half": int(near), "sided": sided is not None and model == "whole",
               "contour_points": len(query.points), "contour_points_asked": params.n_contour}
     certificate = SearchCertificate.of(bb, params.eps)
-    yield Progress("done", 1.0, f"energy {bb.energy:.6g} after {bb.iterations} iterations, {certificate.describe()}"
-                   + ("" if certificate.within_bound else "; raise max_iterations"))
+    yield Progress("done", 1.0, f"energy {bb.energy:.6g} after {bb.iterations} iterations, {certificate.describe()}")
     per_length = " per contour length matched to a moving curve" if params.energy.endswith("ratio") else ""
     metric = f"{params.metric} product metric, " if params.energy in FIRST_ORDER_ENERGIES else ""
     return MatchResult("contour3d", map_xy=matched, map_yx=None, energy=bb.energy, timings=watch.times,

@@ -436,14 +436,26 @@ def cmd_bench(args) -> int:
     print(f"{len(dataset.pairs)} pairs x {len(methods) + len(external)} methods: {len(todo)} jobs to run "
           f"({len(runner.jobs()) - len(todo)} already done)", file=sys.stderr)
 
+    failures = []
+
     def progress(done, total, label, record):
+        if record["status"] != "ok":
+            failures.append(f"{label} {record['source']} -> {record['target']}: {record['error']}")
         if not args.quiet:
             what = f"mean {record['mean']:.4f}" if record["status"] == "ok" else f"FAILED: {record['error']}"
             print(f"  [{done}/{total}] {label} {record['source']} -> {record['target']}: {what}", file=sys.stderr)
 
     summary = runner.run(jobs=args.jobs, scheduler=args.scheduler, callback=progress)
     print((Path(args.output) / "summary.md").read_text())
+    _say_failures(failures, Path(args.output) / "errors.csv")
     return 0 if all(entry["failed"] == 0 for entry in summary.values()) else 1
+
+
+def _say_failures(failures: list[str], where: Path) -> None:
+    """After a benchmark: how many runs failed, the first one's reason, and where the others are (stderr)."""
+    if failures:
+        print(f"error: {len(failures)} run{'s' if len(failures) > 1 else ''} failed, e.g. {failures[0]} "
+              f"(every reason is in {where})", file=sys.stderr)
 
 
 def cmd_bench_retrieval(args) -> int:
@@ -451,7 +463,11 @@ def cmd_bench_retrieval(args) -> int:
 
     params = _contour3d_params(args, retrieval=True)  # named errors before any work
 
+    failures = []
+
     def progress(done, total, row):
+        if row["error"]:
+            failures.append(f"{row['query']}: {row['error']}")
         if not args.quiet:
             what = f"AP {row['ap']:.3f}" if not row["error"] else f"FAILED: {row['error']}"
             print(f"  [{done}/{total}] {row['query']} ({row['class']}): {what}", file=sys.stderr)
@@ -459,6 +475,7 @@ def cmd_bench_retrieval(args) -> int:
     summary = retrieval_benchmark(args.queries, args.collection, args.output, params=params, jobs=args.jobs,
                                   scheduler=args.scheduler, callback=progress)
     print((Path(args.output) / "retrieval_summary.md").read_text())
+    _say_failures(failures, Path(args.output) / "retrieval.csv")
     return 0 if summary["failed"] == 0 and not summary["failed_meshes"] else 1
 
 
@@ -470,7 +487,11 @@ def cmd_bench_contour(args) -> int:
         params["n_contour"] = args.n_contour
     planes = [p.strip() for p in args.planes.split(",") if p.strip() and p.strip() != "none"]
 
+    failures = []
+
     def progress(done, total, row):
+        if row["status"] not in ("ok", "skipped"):
+            failures.append(f"{row['query']} -> {row['target']}: {row['error']}")
         if args.quiet or row["status"] == "skipped":
             return
         if row["status"] != "ok":
@@ -486,6 +507,7 @@ def cmd_bench_contour(args) -> int:
                                 scheduler=args.scheduler, pictures=not args.no_pictures, callback=progress,
                                 sketches=args.sketches or ())
     print((Path(args.output) / "contour_summary.md").read_text())
+    _say_failures(failures, Path(args.output) / "contour_bench.csv")
     failed = summary["all"]["failed"] + summary.get("sketches", {}).get("failed", 0)
     return 0 if failed == 0 else 1
 
@@ -580,6 +602,11 @@ def _query_contour(path: str, labels: str | None = None):
         values = load_labels(labels, what="--query-labels")
         if isinstance(sketch, TriMesh) and values.shape[0] == sketch.n_vertices:
             values = values[loop]  # per-vertex labels of the sketch mesh
+        if values.shape[0] != contour.n_points:
+            expected = f"{contour.n_points} (one per contour point)" + (
+                f" or {sketch.n_vertices} (one per sketch vertex)" if isinstance(sketch, TriMesh) else "")
+            raise FileFormatError(f"{labels}: the --query-labels file has {values.shape[0]} labels, expected "
+                                  f"{expected} for {contour.name}")
         contour = Contour2D(contour.points, name=contour.name, labels=values)
     return contour
 

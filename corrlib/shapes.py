@@ -292,7 +292,8 @@ def _connectivity_findings(f: np.ndarray, n: int) -> list[Finding]:
         findings.append(
             Finding("error", "components", f"the mesh has {n_comp_used} connected components "
                     f"(vertex counts {', '.join(map(str, sizes[:5]))}{', ...' if sizes.size > 5 else ''}); "
-                    "load it with largest_component=True to keep the largest")
+                    "delete the other parts in a mesh editor, or keep the largest with "
+                    "corrlib.io.load_mesh(path, largest_component=True)")
         )
     return findings
 
@@ -773,7 +774,8 @@ class Contour2D:
                 raise ContourError(
                     f"{name}: open contour: the gap between the last and the first point ({gap:.4g}) is more "
                     f"than {TOL.closing_gap:g} times the median point spacing ({np.median(steps):.4g}); "
-                    "close the curve or pass assume_closed=True")
+                    "repeat the first point at the end to close the curve, or load it with "
+                    "corrlib.io.load_contour(path, assume_closed=True)")
         return cls(p, name=name, min_points=min_points)
 
     @property

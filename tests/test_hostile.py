@@ -284,6 +284,12 @@ def test_a_flat_closed_mesh_has_no_relative_volume_change_and_no_section(tmp_pat
     assert "volume_change" not in result.get("extras", {})
     with pytest.raises(InputError, match="flat.off: the section of the cross plane encloses no area"):
         cut_query(load_mesh(tmp_path / "flat.off"), "cross")
+    (tmp_path / "dataset").mkdir()  # a benchmark of it fails, and says why even when quiet
+    save_mesh(tmp_path / "dataset" / "flat.off", flat, wolf.faces)
+    argv = ["bench-contour", tmp_path / "dataset", "--planes", "cross", "--no-pictures", "-q", "-o", tmp_path / "b"]
+    assert main(list(map(str, argv))) == 1
+    assert ("error: 1 run failed, e.g. flat-cross -> flat: flat.off: the section of the cross plane encloses no "
+            "area") in capsys.readouterr().err
 
 
 def test_a_mesh_with_turned_faces_is_matched_as_the_mesh_it_should_be(tmp_path, capsys):

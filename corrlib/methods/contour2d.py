@@ -68,8 +68,8 @@ def solve_contour2d(source, target, params: Contour2DParams, token):
     base = Contour3DParams(k=params.k, n_scales=params.n_scales, area_ratio=1.0, features="paper")
     yield Progress("features", 0.0)
     with watch("features"):
-        qa = prepare_query(source, replace(base, n_contour=params.n_source))
-        qb = prepare_query(target, replace(base, n_contour=params.n_target))
+        qa = prepare_query(source, replace(base, n_contour=params.n_source), finer="raise n_source")
+        qb = prepare_query(target, replace(base, n_contour=params.n_target), finer="raise n_target")
         cost = node_costs(qa.features, qb.features)
     token.raise_if_cancelled()
     # B unrolled twice with forward moves only: a path from (0, s) to (m, s + n) runs once around B in

@@ -518,11 +518,13 @@ class PreparedMesh:
     parts: np.ndarray | None = None
 
 
-def prepare_query(contour: Contour2D, params: Contour3DParams) -> PreparedQuery:
+def prepare_query(contour: Contour2D, params: Contour3DParams,
+                  finer: str = "raise n_contour or fill_density") -> PreparedQuery:
     """Resample, normalise and compute features of a query contour.
 
     Part labels of the contour (``contour.labels``), if any, follow the
-    resampling (label of the segment each new point falls on).
+    resampling (label of the segment each new point falls on). ``finer`` tells the user how to make the
+    filled outline finer, in the parameters of the method that asks (contour2d has its own).
     """
     if not isinstance(contour, Contour2D):
         raise InputError(f"the query must be a Contour2D, got {type(contour).__name__}")
@@ -533,7 +535,7 @@ def prepare_query(contour: Contour2D, params: Contour3DParams) -> PreparedQuery:
     stiffness, mass = mesh_laplacian(filled)
     if filled.n_vertices <= params.k:
         raise ContourError(f"{contour.name}: the filled silhouette has {filled.n_vertices} vertices, too few for "
-                           f"k={params.k} eigenpairs; raise n_contour or fill_density, or lower k")
+                           f"k={params.k} eigenpairs; {finer}, or lower k")
     evals, evecs = eigenpairs(stiffness, mass, params.k, name=contour.name)
     feats = spectral_features(evals, evecs, mass.diagonal(), params)
     m = canonical.n_points

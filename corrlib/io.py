@@ -354,6 +354,8 @@ def _colors_u8(colors, n: int, path) -> np.ndarray | None:
         if not np.all(np.isfinite(c)):
             raise InputError(f"{path}: colours contain NaN or infinite values")
         c = np.clip(np.round(c * 255.0), 0, 255)
+    elif c.size and (c.min() < 0 or c.max() > 255):  # uint8 would wrap 300 round to 44
+        raise InputError(f"{path}: integer colours must be 0 to 255, got {c.min()} to {c.max()}")
     return c[:, :3].astype(np.uint8)
 
 
@@ -374,8 +376,17 @@ def save_mesh(path, vertices, faces, colors=None) -> Path:
     Path
     """
     path = Path(path)
-    v = np.asarray(vertices, dtype=np.float64)
-    f = np.asarray(faces, dtype=np.int64)
+    try:
+        v = np.asarray(vertices, dtype=np.float64)
+        f = np.asarray(faces, dtype=np.int64)
+    except (TypeError, ValueError, OverflowError) as exc:
+        raise InputError(f"{path}: vertices must be numbers and faces integers ({exc})") from None
+    if v.ndim != 2 or v.shape[1] != 3 or not np.all(np.isfinite(v)):
+        raise InputError(f"{path}: vertices must be finite coordinates of shape (n, 3), got shape {v.shape}"
+                         + ("" if v.ndim != 2 or v.shape[1] != 3 else " with NaN or infinite values"))
+    if f.ndim != 2 or f.shape[1] != 3 or (f.size and (f.min() < 0 or f.max() >= v.shape[0])):
+        raise InputError(f"{path}: faces must be (f, 3) indices of the {v.shape[0]} vertices, got shape {f.shape}"
+                         + (f" with indices from {f.min()} to {f.max()}" if f.size and f.ndim == 2 else ""))
     c = _colors_u8(colors, v.shape[0], path)
     suffix = path.suffix.lower()
     if suffix not in MESH_WRITE_SUFFIXES:
@@ -964,6 +975,9 @@ def save_result(stem, arrays: dict[str, np.ndarray], meta: dict | None = None) -
     meta : dict
         JSON-serialisable parameters, timings, ...; the environment is added.
     """
+    if str(stem).endswith(("/", os.sep)) or Path(stem).is_dir() or not Path(stem).name:
+        raise InputError(f"{stem}: a result is written as STEM.npz and STEM.json; give a file stem (e.g. "
+                         f"{Path(stem) / 'result'}), not a folder")
     stem = Path(stem)
     if stem.suffix in {".npz", ".json"}:
         stem = stem.with_suffix("")
@@ -1001,8 +1015,10 @@ def load_result(stem) -> tuple[dict[str, np.ndarray], dict]:
     if js.exists():
         try:
             meta = json.loads(js.read_text())
-        except json.JSONDecodeError as exc:
-            raise FileFormatError(f"{js}: invalid JSON: {exc}") from exc
+        except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+            raise FileFormatError(f"{js}: invalid JSON: {exc}") from None
+        if not isinstance(meta, dict):
+            raise FileFormatError(f"{js}: a result's metadata is a JSON object, found a {type(meta).__name__}")
     return arrays, meta
 
 

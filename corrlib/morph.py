@@ -64,7 +64,14 @@ def sequence_positions(result, source, target, t_max: float = 1.5):
 
 
 def frame_positions(result, source, target, times) -> list[np.ndarray]:
-    """Exact positions at ``times`` (the flow integrated to each time, or linear interpolation)."""
+    """Exact positions at ``times`` (the flow integrated to each time, or linear interpolation); the times must
+    be finite numbers (a flow extrapolates beyond 1, a linear interpolation too)."""
+    try:
+        times = np.asarray(times, dtype=np.float64).reshape(-1)
+    except (TypeError, ValueError):
+        raise InputError(f"times must be numbers, got {times!r}") from None
+    if not np.all(np.isfinite(times)):
+        raise InputError(f"times must be finite, got {float(times[~np.isfinite(times)][0])!r}")
     if has_deformation(result):
         return [result.deformation.positions(source.vertices, float(t)) for t in times]
     positions = _linear(result, source, target)
@@ -125,7 +132,10 @@ def export_sequence(folder, frames, faces, times, *, fmt: str = "obj", animation
     if len(frames) != len(times) or len(frames) == 0:
         raise InputError(f"{len(frames)} frames for {len(times)} times")
     out = Path(folder)
-    out.mkdir(parents=True, exist_ok=True)
+    try:
+        out.mkdir(parents=True, exist_ok=True)
+    except OSError as exc:
+        raise InputError(f"{out}: cannot create the folder for the frames ({exc.strerror or exc})") from None
     digits = max(3, len(str(len(frames) - 1)))
     paths = [save_mesh(out / f"{name}_{i:0{digits}d}.{fmt}", f, faces) for i, f in enumerate(frames)]
     volumes = frame_volumes(frames, faces, closed)

@@ -134,13 +134,19 @@ def retrieve(query_contour, meshes: Iterable, params: Contour3DParams | None = N
         Sorted by increasing energy (failed meshes last, with their error).
     """
     params = params or retrieval_params()
+    if not isinstance(params, Contour3DParams):
+        raise ParameterError(f"params must be contour3d's parameters (Contour3DParams, e.g. retrieval_params()), "
+                             f"got {type(params).__name__}")
     token = token or CancelToken()
+    if isinstance(meshes, (str, os.PathLike)):  # one folder, not a sequence of one-letter paths
+        raise InputError(f"meshes must be a list of mesh files, got the single path {str(meshes)!r} (for a folder, "
+                         "pass its meshes, e.g. sorted(Path(folder).glob('*.off')))")
     paths = [str(p) for p in meshes]
     if not paths:
         raise InputError("no meshes to rank")
+    if jobs is not None and (isinstance(jobs, bool) or not isinstance(jobs, (int, np.integer)) or jobs < 1):
+        raise ParameterError(f"jobs must be a whole number of at least 1 (or None: all cores), got {jobs!r}")
     jobs = jobs or os.cpu_count() or 1
-    if jobs < 1:
-        raise ParameterError(f"jobs must be at least 1, got {jobs}")
     yield Progress("query features", 0.0)
     query = prepare_query(query_contour, params)
     hits: list[RetrievalHit] = []

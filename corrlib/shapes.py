@@ -112,9 +112,12 @@ def _face_components(n_vertices: int, faces: np.ndarray) -> tuple[int, np.ndarra
 def _as_arrays(vertices, faces) -> tuple[np.ndarray, np.ndarray, list[Finding]]:
     """Convert to float64 (n,3) / int64 (f,3); structural errors stop further checks."""
     findings: list[Finding] = []
+    if np.iscomplexobj(vertices):  # NumPy would drop the imaginary parts with only a warning
+        return None, None, [Finding("error", "vertices-type", "vertices are complex numbers; real coordinates "
+                                    "are needed")]
     try:
         v = np.asarray(vertices, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, OverflowError) as exc:
         return None, None, [Finding("error", "vertices-type", f"vertices are not numeric: {exc}")]
     try:
         f_raw = np.asarray(faces)
@@ -123,8 +126,8 @@ def _as_arrays(vertices, faces) -> tuple[np.ndarray, np.ndarray, list[Finding]]:
             if not np.all(np.isfinite(f_float)) or np.any(f_float != np.round(f_float)):
                 return v, None, [Finding("error", "faces-type", "face indices are not integers")]
         f = f_raw.astype(np.int64)
-    except (TypeError, ValueError) as exc:
-        return v, None, [Finding("error", "faces-type", f"faces are not integer indices: {exc}")]
+    except (TypeError, ValueError, OverflowError) as exc:
+        return v, None, [Finding("error", "faces-type", f"faces are not integer vertex indices: {exc}")]
     if v.ndim != 2 or v.shape[1] != 3:
         findings.append(Finding("error", "vertices-shape", f"vertices must have shape (n, 3), got {v.shape}"))
     elif v.shape[0] == 0:
@@ -171,22 +174,25 @@ def inspect_mesh(vertices, faces) -> list[Finding]:
     return findings
 
 
-#: coordinates are usable while squared lengths stay finite and non-zero in float64 (about 1e±308)
+#: coordinates are usable while squared lengths (a contour) stay finite and non-zero in float64 (about 1e±308)
 COORDINATE_LIMITS = (1e-150, 1e150)
+#: a mesh's squared triangle areas are fourth powers of its coordinates (the Laplacian's cotangents divide by them)
+MESH_COORDINATE_LIMITS = (1e-75, 1e75)
 
 
-def _coordinate_scale_problem(points: np.ndarray) -> str:
-    """A message if the coordinates are too large or their spread too small for squared lengths, else ''."""
+def _coordinate_scale_problem(points: np.ndarray, limits: tuple[float, float] = COORDINATE_LIMITS,
+                              what: str = "squared lengths") -> str:
+    """A message if the coordinates are too large or their spread too small for ``what`` (the highest power of
+    them that is formed), else ''."""
     if points.size == 0:
         return ""
     largest = float(np.abs(points).max())
-    if largest > COORDINATE_LIMITS[1]:
-        return (f"coordinates up to {largest:.3g} overflow squared lengths (at most {COORDINATE_LIMITS[1]:.0e}); "
-                f"rescale the input")
+    if largest > limits[1]:
+        return f"coordinates up to {largest:.3g} overflow {what} (at most {limits[1]:.0e}); rescale the input"
     spread = float(np.abs(points - points.mean(axis=0)).max())
-    if 0 < spread < COORDINATE_LIMITS[0]:
-        return (f"the coordinates span only {spread:.3g}, too small for squared lengths (at least "
-                f"{COORDINATE_LIMITS[0]:.0e}); rescale the input")
+    if 0 < spread < limits[0]:
+        return (f"the coordinates span only {spread:.3g}, too small for {what} (at least {limits[0]:.0e}); "
+                "rescale the input")
     return ""
 
 
@@ -197,7 +203,7 @@ def _value_findings(v: np.ndarray, f: np.ndarray) -> list[Finding]:
     if bad_rows.size:
         return [Finding("error", "non-finite", f"{bad_rows.size} vertices have NaN or infinite coordinates "
                         f"(e.g. vertex {_examples(bad_rows)})")]
-    scale = _coordinate_scale_problem(v)
+    scale = _coordinate_scale_problem(v, MESH_COORDINATE_LIMITS, "squared triangle areas")
     if scale:
         return [Finding("error", "coordinate-scale", scale)]
     out_of_range = np.flatnonzero(np.any((f < 0) | (f >= n), axis=1))
@@ -678,9 +684,11 @@ def inspect_contour(points, *, min_points: int = 10) -> list[Finding]:
     min_points : int
         Fewest distinct points accepted.
     """
+    if np.iscomplexobj(points):  # NumPy would drop the imaginary parts with only a warning
+        return [Finding("error", "points-type", "contour points are complex numbers; real (x, y) are needed")]
     try:
         p = np.asarray(points, dtype=np.float64)
-    except (TypeError, ValueError) as exc:
+    except (TypeError, ValueError, OverflowError) as exc:
         return [Finding("error", "points-type", f"contour points are not numeric: {exc}")]
     if p.ndim != 2 or p.shape[1] != 2:
         return [Finding("error", "points-shape", f"contour points must have shape (m, 2), got {p.shape}")]

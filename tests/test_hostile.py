@@ -2,6 +2,7 @@
 silently wrong answer or a half-written result set (issue 20)."""
 
 import os
+import re
 import resource
 import signal
 import struct
@@ -321,6 +322,16 @@ def test_a_damaged_result_file_is_refused_by_name(tmp_path):
     (tmp_path / "r.npz").write_bytes(whole[: len(whole) // 2])
     with pytest.raises(FileFormatError, match=r"r\.npz: cannot read result"):
         MatchResult.load(tmp_path / "r")
+    MatchResult("descriptor-nn", np.arange(10), np.arange(10), 1.0, {}).save(tmp_path / "r")
+    for sidecar, message in [("[1, 2]", "metadata is a JSON object, found a list"),
+                             ('{"timings": 5}', "not a result written by corrlib"),
+                             ('{"search": {"foo": 1}}', "not a result written by corrlib")]:
+        (tmp_path / "r.json").write_text(sidecar)
+        with pytest.raises(FileFormatError, match=message):
+            MatchResult.load(tmp_path / "r")
+    (tmp_path / "r.json").write_bytes(b"\xff\xfe{")
+    with pytest.raises(FileFormatError, match="invalid JSON"):
+        MatchResult.load(tmp_path / "r")
 
 
 def test_a_hugely_negative_slack_is_no_slack():
@@ -351,3 +362,35 @@ def test_interrupting_a_parallel_run_stops_its_workers():
     for worker in workers:
         worker.join(timeout=10)
         assert not worker.is_alive()
+
+
+def test_bad_arguments_of_the_python_api_are_named(tmp_path, wolf_pair):
+    """Library calls that wrote a wrong file or walked a string: integer colours above 255 (wrapped round),
+    NaN vertices and out-of-range faces (written as they were), a result saved to a folder (written beside
+    it), frame times that are not finite (NaN positions), a folder given to retrieve (one path per letter)."""
+    from corrlib.errors import CorrError
+    from corrlib.io import save_mesh
+    from corrlib.methods.base import MatchResult
+    from corrlib.morph import frame_positions
+    from corrlib.progress import run
+    from corrlib.retrieval import retrieve
+    from corrlib.shapes import Contour2D
+
+    wolf0, wolf1 = wolf_pair
+    v, f = wolf0.vertices, wolf0.faces
+    for args, message in [((v, f, np.full((len(v), 3), 300)), "integer colours must be 0 to 255, got 300 to 300"),
+                          ((v * np.nan, f), "with NaN or infinite values"),
+                          ((v, f + len(v)), f"indices of the {len(v)} vertices"),
+                          ((v[:, :2], f), "finite coordinates of shape (n, 3), got shape")]:
+        with pytest.raises(CorrError, match=re.escape(message)):
+            save_mesh(tmp_path / "m.off", *args)
+    assert files_in(tmp_path) == []
+    result = MatchResult("descriptor-nn", np.arange(wolf0.n_vertices), None, 1.0, {})
+    with pytest.raises(CorrError, match="give a file stem"):
+        result.save(tmp_path)
+    assert files_in(tmp_path.parent).count(tmp_path.name + ".npz") == 0
+    with pytest.raises(CorrError, match="times must be finite, got nan"):
+        frame_positions(result, wolf0, wolf1, [0.5, float("nan")])
+    circle = Contour2D(np.column_stack([np.cos(np.linspace(0, 6.2, 40)), np.sin(np.linspace(0, 6.2, 40))]))
+    with pytest.raises(CorrError, match="got the single path"):
+        run(retrieve(circle, str(tmp_path), jobs=1))

@@ -315,13 +315,55 @@ def test_bad_inputs(wolf_pair):
         solve("kernel-matching", *wolf_pair, times="0.1,abc")
     with pytest.raises(ParameterError, match="times must decrease"):
         solve("kernel-matching", *wolf_pair, times="0.001,0.1")
-    with pytest.raises(InputError, match="initial map has"):
+    with pytest.raises(InputError, match=r"one target vertex per source vertex, shape \(4344,\); got shape \(5,\)"):
         solve("kernel-matching", *wolf_pair, initial=InitialMatch(map_xy=np.zeros(5, int)))
     for refiner in ("kernel-matching", "product-manifold", "divergence-free"):  # a plain array is a dense map
-        with pytest.raises(InputError, match="initial map has 5 entries"):
+        with pytest.raises(InputError, match=r"shape \(4344,\); got shape \(5,\)"):
             solve(refiner, *wolf_pair, initial=np.zeros(5, int))
     with pytest.raises(InputError, match="does not take an initial map"):
         solve("descriptor-nn", *wolf_pair, initial=InitialMatch(map_xy=np.zeros(5, int)))
+
+
+def test_bad_initial_matches_and_parameters_through_the_python_api_are_named(wolf_pair):
+    """What the CLI checks, the Python API checks too, before any work: a float map (0.9 was cut to vertex 0),
+    a scalar, a map below -1, landmarks that send one vertex to two targets, a map and landmarks together,
+    params with keyword overrides (the overrides were dropped without a word), params of another method, a
+    number beyond every float, an array where a choice is expected."""
+    from corrlib.methods.base import make_params
+    from corrlib.methods.baselines import DescriptorNNParams, FmapZoomOutParams
+    from corrlib.methods.kernel_matching import KernelMatchingParams
+
+    n = wolf_pair[0].n_vertices
+    cases = [
+        (dict(initial=np.full(n, 0.9)), InputError, r"the initial map must hold integer vertex indices; entry 0 is 0.9"),
+        (dict(initial=5), InputError, r"shape \(4344,\); got shape \(\)"),
+        (dict(initial=np.full(n, -7)), InputError, r"sends source vertex 0 to -7, outside a 4344-vertex target"),
+        (dict(initial=InitialMatch(landmarks_x=[5, 5, 9], landmarks_y=[5, 300, 9])), InputError,
+         r"landmarks send source vertex 5 to several targets \(5, 300\)"),
+        (dict(initial=InitialMatch(landmarks_x=[0.7, 10], landmarks_y=[1, 2])), InputError,
+         r"landmarks_x must hold integer vertex indices; entry 0 is 0.7"),
+        (dict(params=make_params(DescriptorNNParams), n_eigs=3), ParameterError,
+         r"give params or keyword overrides, not both \(got params and n_eigs\)"),
+        (dict(params=make_params(FmapZoomOutParams)), ParameterError,
+         r"params of 'product-manifold' must be a ProductManifoldParams"),
+        (dict(params={"n_eigs": 50}), ParameterError, r"must be a ProductManifoldParams .* got dict"),
+    ]
+    for kwargs, error, message in cases:
+        method = "descriptor-nn" if "n_eigs" in kwargs else "product-manifold"
+        with pytest.raises(error, match=message):
+            solve(method, *wolf_pair, **kwargs)
+    with pytest.raises(InputError, match="a map or landmarks, not both"):
+        InitialMatch(map_xy=np.arange(n), landmarks_x=[0], landmarks_y=[0])
+    with pytest.raises(InputError, match="needs a map"):
+        InitialMatch()
+    with pytest.raises(ParameterError, match="n_eigs must be finite, got an integer of 401 digits"):
+        make_params(KernelMatchingParams, n_eigs=10 ** 400)
+    with pytest.raises(ParameterError, match="init = .* is not one of best, descriptors, fmap"):
+        make_params(KernelMatchingParams, init=np.array(["best", "fmap"]))
+    with pytest.raises(ParameterError, match="unknown method"):
+        solve(["kernel-matching"], *wolf_pair)
+    kept = InitialMatch(landmarks_x=[9, 5, 9], landmarks_y=[9, 5, 9]).pairs(n, n)  # a repeated pair counts once
+    assert [list(side) for side in kept] == [[9, 5], [9, 5]]
 
 
 @pytest.mark.parametrize("name, value", [("tau_min", -1e-3), ("tau_max", -0.5), ("tau_min", 0.0),

@@ -228,3 +228,27 @@ def test_open_contour_detection():
     t = np.linspace(0, 2 * np.pi, 50, endpoint=False)
     circle = np.column_stack([np.cos(t), np.sin(t)])
     assert Contour2D.from_open_points(circle).n_points == 50
+
+
+@pytest.mark.parametrize("scale, accepted", [(1e100, False), (1e70, True), (1e-70, True), (1e-100, False)])
+def test_mesh_coordinates_are_usable_only_where_squared_areas_are(scale, accepted):
+    """A mesh forms squared triangle areas (fourth powers of its coordinates): at 1e140 its area was already
+    infinite after validation passed, and a method then failed with a misleading message."""
+    v = TETRA_V * scale
+    if accepted:
+        mesh = TriMesh(v, TETRA_F)
+        assert np.isfinite(mesh.area) and mesh.area > 0
+    else:
+        with pytest.raises(MeshError, match="squared triangle areas"):
+            TriMesh(v, TETRA_F)
+
+
+def test_complex_coordinates_and_indices_beyond_int64_are_refused_by_name():
+    """NumPy drops imaginary parts with only a warning, and a face index of 2**70 raised OverflowError."""
+    faces = TETRA_F.tolist()
+    with pytest.raises(MeshError, match="complex numbers"):
+        TriMesh(TETRA_V + 1j, TETRA_F)
+    with pytest.raises(MeshError, match="faces are not integer vertex indices"):
+        TriMesh(TETRA_V, faces[:-1] + [[0, 1, 2 ** 70]])
+    with pytest.raises(ContourError, match="complex numbers"):
+        Contour2D(square() + 1j)

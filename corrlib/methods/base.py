@@ -67,7 +67,7 @@ def validate_params(params) -> None:
         value = getattr(params, f.name)
         meta = f.metadata
         if meta.get("choices") is not None:
-            if value not in meta["choices"]:
+            if not isinstance(value, (str, bool, int, float)) or value not in meta["choices"]:
                 raise ParameterError(f"{f.name} = {value!r} is not one of {', '.join(map(str, meta['choices']))}")
             continue
         if isinstance(f.default, bool):
@@ -79,7 +79,11 @@ def validate_params(params) -> None:
         if isinstance(f.default, (int, float)) and f.default is not None:
             if isinstance(value, bool) or not isinstance(value, (int, float, np.integer, np.floating)):
                 raise ParameterError(f"{f.name} must be a number, got {value!r}")
-            if not math.isfinite(float(value)):
+            try:
+                finite = math.isfinite(float(value))
+            except OverflowError:  # an integer beyond every float
+                raise ParameterError(f"{f.name} must be finite, got an integer of {len(str(value))} digits") from None
+            if not finite:
                 raise ParameterError(f"{f.name} must be finite, got {value!r}")
             if isinstance(f.default, int) and not isinstance(value, (int, np.integer)):
                 raise ParameterError(f"{f.name} must be an integer, got {value!r}")
@@ -141,28 +145,63 @@ class InitialMatch:
     landmarks_x: np.ndarray | None = None
     landmarks_y: np.ndarray | None = None
 
+    def __post_init__(self):
+        given = (self.map_xy is not None, self.landmarks_x is not None or self.landmarks_y is not None)
+        if given == (True, True):
+            raise InputError("an initial match is a map or landmarks, not both")
+        if given == (False, False):
+            raise InputError("an initial match needs a map (map_xy) or landmarks (landmarks_x and landmarks_y)")
+        if given[1] and (self.landmarks_x is None or self.landmarks_y is None):
+            raise InputError("landmarks need both landmarks_x (source vertices) and landmarks_y (target vertices)")
+
     def pairs(self, n_x: int, n_y: int) -> tuple[np.ndarray, np.ndarray]:
-        """The matched ``(source, target)`` vertex pairs, checked against the vertex counts."""
+        """The matched ``(source, target)`` vertex pairs, checked against the vertex counts: integer indices in
+        range (-1 in a map: no partner), one target per source vertex."""
         if self.map_xy is not None:
-            mp = np.asarray(self.map_xy, dtype=np.int64)
+            mp = vertex_indices(self.map_xy, "the initial map")
             if mp.shape != (n_x,):
-                raise InputError(f"the initial map has {mp.shape[0]} entries, the source {n_x} vertices")
-            if mp.max() >= n_y:
-                raise InputError(f"the initial map points to vertex {mp.max()} of a {n_y}-vertex target")
+                raise InputError(f"the initial map must hold one target vertex per source vertex, shape ({n_x},); "
+                                 f"got shape {mp.shape}")
+            bad = np.flatnonzero((mp < -1) | (mp >= n_y))
+            if bad.size:
+                raise InputError(f"the initial map sends source vertex {bad[0]} to {mp[bad[0]]}, outside a "
+                                 f"{n_y}-vertex target (0 to {n_y - 1}, or -1 for no partner)")
             keep = np.flatnonzero(mp >= 0)
             if keep.size == 0:
                 raise InputError("the initial map matches no vertex")
             return keep, mp[keep]
-        lx = np.asarray(self.landmarks_x, dtype=np.int64)
-        ly = np.asarray(self.landmarks_y, dtype=np.int64)
-        if lx.size == 0 or lx.shape != ly.shape:
-            raise InputError(f"landmarks need equally many source and target indices, got {lx.size} and {ly.size}")
+        lx, ly = vertex_indices(self.landmarks_x, "landmarks_x"), vertex_indices(self.landmarks_y, "landmarks_y")
+        if lx.ndim != 1 or lx.size == 0 or lx.shape != ly.shape:
+            raise InputError(f"landmarks need two equally long 1-D lists of source and target indices, got shapes "
+                             f"{lx.shape} and {ly.shape}")
         for side, indices, n in (("source", lx, n_x), ("target", ly, n_y)):
             bad = np.flatnonzero((indices < 0) | (indices >= n))
             if bad.size:
                 raise InputError(f"landmark {bad[0]}: {side} vertex {indices[bad[0]]} is out of range for a "
                                  f"{n}-vertex {side} (0 to {n - 1})")
-        return lx, ly
+        _, first = np.unique(np.column_stack([lx, ly]), axis=0, return_index=True)
+        pairs = np.column_stack([lx, ly])[np.sort(first)]  # a pair given twice counts once; the order is kept
+        sources, counts = np.unique(pairs[:, 0], return_counts=True)
+        if np.any(counts > 1):
+            twice = sources[np.argmax(counts > 1)]
+            raise InputError(f"landmarks send source vertex {twice} to several targets "
+                             f"({', '.join(map(str, pairs[pairs[:, 0] == twice, 1]))}); give one")
+        return pairs[:, 0], pairs[:, 1]
+
+
+def vertex_indices(values, what: str) -> np.ndarray:
+    """``values`` as int64 vertex indices; :class:`InputError` naming ``what`` unless every entry is a whole
+    number (a float map, e.g. 0.9, would otherwise be cut to 0 without a word)."""
+    array = np.asarray(values)
+    if array.dtype == bool or not (np.issubdtype(array.dtype, np.integer) or np.issubdtype(array.dtype, np.floating)):
+        raise InputError(f"{what} must hold vertex indices (integers), got {array.dtype} values")
+    if np.issubdtype(array.dtype, np.floating):
+        bad = ~np.isfinite(array) | (array != np.round(array)) | (np.abs(array) > 2 ** 53)
+        if np.any(bad):
+            where = np.unravel_index(int(np.argmax(bad)), array.shape)
+            raise InputError(f"{what} must hold integer vertex indices; entry {where[0] if len(where) == 1 else where} "
+                             f"is {float(array[where])!r}")
+    return array.astype(np.int64)
 
 
 @dataclass(frozen=True)
@@ -347,10 +386,19 @@ class MatchResult:
 
     @classmethod
     def load(cls, stem) -> "MatchResult":
-        """Read a result written by :meth:`save` (``stem``, ``stem.npz`` or ``stem.json``)."""
+        """Read a result written by :meth:`save` (``stem``, ``stem.npz`` or ``stem.json``);
+        :class:`~corrlib.errors.FileFormatError` for files that are not one."""
+        from corrlib.errors import FileFormatError
         from corrlib.io import load_result
 
         arrays, meta = load_result(stem)
+        try:
+            return cls._from_saved(arrays, meta)
+        except (TypeError, ValueError, KeyError, AttributeError) as exc:  # another program's files, or edited ones
+            raise FileFormatError(f"{stem}: not a result written by corrlib ({type(exc).__name__}: {exc})") from None
+
+    @classmethod
+    def _from_saved(cls, arrays: dict, meta: dict) -> "MatchResult":
         result = cls(str(meta.get("method", "")), arrays.get("map_xy"), arrays.get("map_yx"), meta.get("energy"),
                      dict(meta.get("timings", {})), dict(meta.get("params", {})),
                      str(meta.get("energy_sense", "min")), str(meta.get("energy_meaning", "")),

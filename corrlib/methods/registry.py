@@ -21,7 +21,6 @@ from collections.abc import Generator
 from dataclasses import asdict, dataclass
 from typing import Any, Protocol
 
-import numpy as np
 
 from corrlib.errors import InputError, ParameterError
 from corrlib.methods.base import InitialMatch, MatchResult, make_params, validate_params
@@ -102,7 +101,7 @@ def all_methods() -> list[MethodSpec]:
 
 def get_method(name: str) -> MethodSpec:
     """The method called ``name``; :class:`ParameterError` lists the known names otherwise."""
-    if name not in _REGISTRY:
+    if not isinstance(name, str) or name not in _REGISTRY:
         raise ParameterError(f"unknown method {name!r} (available: {', '.join(sorted(_REGISTRY))})")
     return _REGISTRY[name]
 
@@ -142,13 +141,20 @@ def solve_iter(method: str | MethodSpec, source, target, params=None, token: Can
     check_inputs(spec, source, target)
     if params is None:
         params = make_params(spec.params, **overrides)
+    elif not isinstance(params, spec.params):
+        raise ParameterError(f"params of {spec.name!r} must be a {spec.params.__name__} (make_params or keyword "
+                             f"overrides), got {type(params).__name__}")
+    elif overrides:  # they would be dropped without a word
+        raise ParameterError(f"give params or keyword overrides, not both (got params and {', '.join(overrides)})")
     else:
         validate_params(params)
     token = token or CancelToken()
     if initial is not None and not spec.refines:
         raise InputError(f"method {spec.name!r} does not take an initial map")
     if initial is not None and not isinstance(initial, InitialMatch):  # a dense map given as an array
-        initial = InitialMatch(map_xy=np.asarray(initial))
+        initial = InitialMatch(map_xy=initial)
+    if initial is not None and kind_of(source) == kind_of(target) == "mesh":
+        initial.pairs(source.n_vertices, target.n_vertices)  # checked before any work
     start = time.perf_counter()
     gen = spec.solve(source, target, params, token, initial=initial) if spec.refines else \
         spec.solve(source, target, params, token)

@@ -214,3 +214,17 @@ def test_a_zoomout_that_would_shrink_the_map_is_refused():
     with pytest.raises(ParameterError, match=r"k_init \(200\) must not exceed k_final \(2\)"):
         make_params(FmapZoomOutParams, k_init=200, k_final=2)
     assert make_params(FmapZoomOutParams, k_init=30, k_final=30).k_final == 30
+
+
+def test_a_zoomout_beyond_the_meshes_says_where_it_stopped():
+    """k_final above what the meshes give is capped (a default must run on small meshes), and said so: the
+    result had a smaller functional map than asked without a word."""
+    import trimesh
+
+    sphere = trimesh.creation.icosphere(2)
+    x = TriMesh(sphere.vertices, sphere.faces, name="ball")
+    y = TriMesh(sphere.vertices * [1.0, 1.3, 0.8], sphere.faces, name="egg")
+    reports = []
+    result = solve("fmap-zoomout", x, y, k_final=700, callback=reports.append)
+    assert result.extras["k_final"] == x.n_vertices - 1
+    assert any(f"ZoomOut up to {x.n_vertices - 1} eigenfunctions, not k_final = 700" in r.message for r in reports)

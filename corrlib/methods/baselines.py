@@ -164,6 +164,10 @@ def solve_fmap_zoomout(source, target, params: FmapZoomOutParams, token):
     k_final = min(available_eigenpairs(source, params.k_final, "functional maps"),
                   available_eigenpairs(target, params.k_final, "functional maps"))
     k_init = min(params.k_init, k_final)
+    if k_final < params.k_final:  # said, not silently: the result then has a smaller functional map
+        yield Progress("functional maps", 0.0, f"ZoomOut up to {k_final} eigenfunctions, not k_final = "
+                                               f"{params.k_final}: {source.name} and {target.name} have "
+                                               f"{source.n_vertices} and {target.n_vertices} vertices")
     yield Progress("eigenpairs and descriptors", 0.0)
     spec_x, spec_y, desc_x, desc_y = _spectra_and_descriptors(source, target, max(k_final, 100),
                                                               params.descriptor, 100, watch)
@@ -193,7 +197,7 @@ def solve_fmap_zoomout(source, target, params: FmapZoomOutParams, token):
     yield Progress("done", 1.0)
     return MatchResult("fmap-zoomout", map_xy, map_yx, energy, watch.times,
                        energy_meaning="orthogonality defect of C",
-                       extras={"c_yx": c_yx, "off_diagonal_norm": float(np.linalg.norm(off))})
+                       extras={"c_yx": c_yx, "off_diagonal_norm": float(np.linalg.norm(off)), "k_final": int(k)})
 
 
 register(MethodSpec(

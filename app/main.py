@@ -12,6 +12,7 @@
 from __future__ import annotations
 
 import argparse
+import math
 import os
 import sys
 
@@ -21,7 +22,6 @@ SCREENSHOT_SETTLE_MS = 500  # after the first result: let the views finish drawi
 NO_JOB_SCREENSHOT_DELAY_MS = 1500  # with nothing to run, grab the window this long after start
 SETTLE_EVENT_ROUNDS = 5  # event-loop passes that apply the requested tab/slider/function before the grab
 NO_DISPLAY_HINT = ('xvfb-run -a -s "-screen 0 1600x1000x24" corr-studio --demo --screenshot shot.png')
-TRUE_WORDS = {"1", "true", "yes", "on"}  # --param NAME=VALUE spellings of True for boolean parameters
 
 
 def build_parser() -> argparse.ArgumentParser:
@@ -88,6 +88,9 @@ def select_tab(window, name: str | None) -> None:
 
 def apply_param(window, item: str, method: str | None) -> str | None:
     """Set ``NAME=VALUE`` in the form of ``method`` (default: the selected one); an error message or None."""
+    from corrlib.errors import ParameterError
+    from corrlib.methods.base import make_params
+
     name, _, value = item.partition("=")
     method = method or window.method_box.currentData()
     form = window.form_of(method) if method is not None else None
@@ -96,12 +99,15 @@ def apply_param(window, item: str, method: str | None) -> str | None:
     current = form.values()
     if name not in current:
         return f"--param {item}: {method} has no parameter {name!r} (it has {', '.join(current)})"
-    try:
-        current[name] = (value.lower() in TRUE_WORDS if isinstance(current[name], bool)
-                         else type(current[name])(value))
-    except ValueError:
-        return f"--param {item}: cannot interpret {value!r}"
+    try:  # the method's own checks (range, choices, true/false words), not the widget's silent clamping
+        wanted = getattr(make_params(form.params_cls, **{name: value}), name)
+    except ParameterError as exc:
+        return f"--param {item}: {exc}"
+    current[name] = wanted
     form.set_values(current)
+    shown = form.values()[name]
+    if shown != wanted and not (isinstance(wanted, float) and math.isclose(shown, wanted, rel_tol=1e-9)):
+        return f"--param {item}: the form holds {shown!r}, not {wanted!r}"
     return None
 
 

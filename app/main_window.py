@@ -586,6 +586,7 @@ class MainWindow(QMainWindow):
             self.loading_finished.emit()
             return
         path, which, _then = self._loading
+        self._cancel_method_jobs()  # the pair is changing: a running method's result would not fit it
         self.job_panel.started(f"loading {which}: {Path(path).name}")
         self.runner.start(LOAD_KEY, load_job(path))
 
@@ -619,6 +620,7 @@ class MainWindow(QMainWindow):
             self.target_info.setText(text)
         self.gt = None
         self.last_result = None
+        self.sequence_view.clear()  # the last pair's motion: its frames would mix two shapes on export
         if isinstance(self.source, TriMesh) and isinstance(self.target, TriMesh):
             self.pair_view.set_shapes(self.source, self.target)
         self.refresh_methods()
@@ -964,12 +966,13 @@ class MainWindow(QMainWindow):
                 != QMessageBox.Yes:
             return []
         try:
-            written = export_sequence(folder, [v for _t, v in frames], self.source.faces, [t for t, _v in frames],
-                                      fmt=suffix.lstrip("."), closed=self.source.is_closed)
+            moving = self.sequence_view.source  # the mesh the sequence deforms
+            written = export_sequence(folder, [v for _t, v in frames], moving.faces, [t for t, _v in frames],
+                                      fmt=suffix.lstrip("."), closed=moving.is_closed)
         except (CorrError, OSError) as exc:
             self.show_error(str(exc))
             return []
-        change = largest_volume_change(written["volume"], self.source.area)
+        change = largest_volume_change(written["volume"], moving.area)
         note = (f"largest volume change {change:.2e}" if change is not None
                 else "volume does not apply (open mesh, or a closed one that encloses none)")
         self.job_panel.write(f"wrote {len(frames)} frames, animation.glb and volumes.csv to {folder} ({note})")
@@ -987,13 +990,19 @@ class MainWindow(QMainWindow):
         if path:
             self.tabs.setCurrentWidget(self.sequence_view)
             strip = self.sequence_view.picture_strip()
-            with atomic_write(path, "wb") as fh:
-                Image.fromarray(strip).save(fh, format="PNG")
+            try:
+                with atomic_write(path, "wb") as fh:
+                    Image.fromarray(strip).save(fh, format="PNG")
+            except (CorrError, OSError) as exc:
+                self.show_error(str(exc))
 
     def export_screenshot(self) -> None:
         path = self._save_path("Screenshot", dialog_filter("picture", save=True))
         if path:
-            self.save_screenshot(path)
+            try:
+                self.save_screenshot(path)
+            except (CorrError, OSError) as exc:
+                self.show_error(str(exc))
 
     def save_screenshot(self, path: str) -> None:
         """The window as the screen shows it (OpenGL views included), written atomically."""

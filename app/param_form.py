@@ -76,7 +76,9 @@ class ParamForm(QWidget):
             return w
         if isinstance(default, float):
             w = QDoubleSpinBox()
-            w.setDecimals(DECIMALS_SMALL if abs(default) < SMALL_FLOAT and default != 0 else DECIMALS)
+            low = meta.get("low")  # a small default or a small lower bound: enough decimals to type it
+            small = (default != 0 and abs(default) < SMALL_FLOAT) or (low is not None and 0 < low < SMALL_FLOAT)
+            w.setDecimals(DECIMALS_SMALL if small else DECIMALS)
             w.setRange(meta.get("low") if meta.get("low") is not None else -SPINBOX_FLOAT_MAX,
                        meta.get("high") if meta.get("high") is not None else SPINBOX_FLOAT_MAX)
             w.setSingleStep(10 ** math.floor(math.log10(abs(default))) if default else DEFAULT_FLOAT_STEP)

@@ -771,6 +771,8 @@ def shape_kind(path) -> str:
 
 def load_shape(path) -> TriMesh | Contour2D:
     """Load a mesh (:func:`load_mesh`) or a contour (:func:`load_contour`) according to the file's suffix."""
+    if Path(path).is_dir():  # before the suffix is asked: a folder has none
+        raise FileFormatError(f"{path}: a folder, not a shape file (choose a mesh or a contour in it)")
     return load_mesh(path) if shape_kind(path) == "mesh" else load_contour(path)
 
 

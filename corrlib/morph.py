@@ -138,16 +138,19 @@ def export_sequence(folder, frames, faces, times, *, fmt: str = "obj", animation
         raise InputError(f"{out}: cannot create the folder for the frames ({exc.strerror or exc})") from None
     digits = max(3, len(str(len(frames) - 1)))
     paths = [save_mesh(out / f"{name}_{i:0{digits}d}.{fmt}", f, faces) for i, f in enumerate(frames)]
+    from corrlib.shapes import relative_volume_change, triangle_areas
+
     volumes = frame_volumes(frames, faces, closed)
+    area = float(triangle_areas(np.asarray(frames[0]), np.asarray(faces)).sum()) if len(frames) else 0.0
     table = out / "volumes.csv"
     with atomic_write(table) as fh:
         fh.write("frame,t,volume,relative_change\n")
-        base = volumes[0]
         for i, (t, v) in enumerate(zip(times, volumes)):
             if v is None:
                 fh.write(f"{i},{t:.6g},not applicable (open mesh),\n")
-            else:
-                fh.write(f"{i},{t:.6g},{v:.9g},{v / base - 1.0:.3e}\n")
+                continue
+            change = relative_volume_change(v, volumes[0], area)
+            fh.write(f"{i},{t:.6g},{v:.9g},{'not applicable (no volume at t = 0)' if change is None else f'{change:.3e}'}\n")
     anim = save_glb_animation(out / "animation.glb", frames, faces, times) if animation else None
     return {"frames": paths, "animation": anim, "volumes": table, "volume": volumes}
 

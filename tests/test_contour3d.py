@@ -872,3 +872,21 @@ def test_a_side_view_is_read_as_the_half_model_only():
     front_whole = solve("contour3d", drawn_wolf, lion, n_contour=100, view="front", model="whole")
     # the front view's search includes the whole model's readings, in the same unit
     assert front.extras["view"] == "front" and front.energy <= front_whole.energy * (1 + 1e-12)
+
+
+def test_a_mesh_too_small_for_a_spectrum_is_refused_by_name(tmp_path):
+    """A tetrahedron was remeshed, matched, and the curve reported on its four vertices: every contour point
+    on one vertex, and the studio's product view then failed to draw a curve without length."""
+    from corrlib.methods.contour3d import match_prepared, prepare_query
+
+    tetrahedron = TriMesh(np.array([[0.0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]]),
+                          np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]]), name="tet.off")
+    t = np.linspace(0, 2 * np.pi, 60, endpoint=False)
+    blob = Contour2D(np.column_stack([np.cos(t) * (1 + 0.3 * np.cos(3 * t)), np.sin(t)]), name="blob")
+    with pytest.raises(InputError, match="tet.off: a mesh of 4 vertices is too small for 2D-to-3D matching"):
+        solve("contour3d", blob, tetrahedron)
+    from corrlib.methods.contour3d import Contour3DParams
+
+    params = Contour3DParams()
+    with pytest.raises(InputError, match="too small for 2D-to-3D matching"):
+        run(match_prepared(prepare_query(blob, params), tetrahedron, params, CancelToken()))

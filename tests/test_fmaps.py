@@ -211,8 +211,10 @@ def test_a_zoomout_that_would_shrink_the_map_is_refused():
     from corrlib.methods.base import make_params
     from corrlib.methods.baselines import FmapZoomOutParams
 
-    with pytest.raises(ParameterError, match=r"k_init \(200\) must not exceed k_final \(2\)"):
-        make_params(FmapZoomOutParams, k_init=200, k_final=2)
+    with pytest.raises(ParameterError, match=r"k_init \(60\) must not exceed k_final \(2\)"):
+        make_params(FmapZoomOutParams, k_init=60, k_final=2)
+    with pytest.raises(ParameterError, match="k_init = 200 is above its maximum 80"):  # 12 GB of normal matrices
+        make_params(FmapZoomOutParams, k_init=200, k_final=300)
     assert make_params(FmapZoomOutParams, k_init=30, k_final=30).k_final == 30
 
 

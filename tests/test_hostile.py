@@ -240,6 +240,7 @@ def test_bad_files_give_named_errors(tmp_path, capsys):
             "nowhere.txt: file not found",
         ("refine", WOLF0, WOLF1, "--init", t / "random.bin", *out): "random.bin",
         ("refine", WOLF0, WOLF1, "--init", t / "folder", *out): "folder: not a file",
+        ("match", t / "folder", WOLF1, *FAST, *out): "folder: a folder, not a shape file",
         ("refine", WOLF0, WOLF1, "--init", t / "landmarks.txt", *out):
             "landmarks.txt: landmark 2: source vertex 99999 is out of range for a 4344-vertex source",
         ("refine", WOLF0, WOLF1, "--init", t / "fraction.txt", *out):
@@ -283,6 +284,8 @@ def test_a_flat_closed_mesh_has_no_relative_volume_change_and_no_section(tmp_pat
     assert "flat.off encloses none (a flat closed mesh)" in output.out and "Traceback" not in output.err
     result = load_result(tmp_path / "m" / "result")[1]
     assert "volume_change" not in result.get("extras", {})
+    rows = (tmp_path / "m" / "volumes.csv").read_text().splitlines()[1:]
+    assert rows and all(row.endswith("not applicable (no volume at t = 0)") for row in rows), rows
     with pytest.raises(InputError, match="flat.off: the section of the cross plane encloses no area"):
         cut_query(load_mesh(tmp_path / "flat.off"), "cross")
     (tmp_path / "dataset").mkdir()  # a benchmark of it fails, and says why even when quiet

@@ -352,6 +352,25 @@ def test_bad_file_shows_a_dialog(qtbot, tmp_path, monkeypatch):
     win.close()
 
 
+def test_a_parameter_the_form_cannot_hold_is_said_not_clamped(qtbot, window):
+    """--param values outside a parameter's range, unknown choices and non-boolean words were clamped or
+    dropped by the widgets without a word; a small value inside the range (σ² = 1e-6) was rounded to 0 by a
+    4-decimal spin box and then refused as a value the user never typed."""
+    from app.main import apply_param
+
+    load_demo(qtbot, window)
+    for item, message in [("n_eigs=99999", "above its maximum"), ("descriptor=bogus", "is not one of"),
+                          ("reorient=maybe", "cannot interpret 'maybe'")]:
+        error = apply_param(window, item, "kernel-matching")
+        assert error is not None and message in error, (item, error)
+    assert apply_param(window, "sigma2=1e-6", "divergence-free") is None
+    assert window.form_of("divergence-free").values()["sigma2"] == pytest.approx(1e-6)
+    assert "tau_min (0.000518) must not exceed tau_max (0.0001)" in apply_param(window, "tau_max=0.0001",
+                                                                              "kernel-matching")
+    window.form_of("divergence-free").reset()
+    window.form_of("kernel-matching").reset()
+
+
 def test_invalid_parameters_are_flagged(qtbot, window):
     load_demo(qtbot, window)
     form = window.form_of("kernel-matching")
@@ -507,3 +526,38 @@ def test_divergence_free_sequence_uses_the_flow(qtbot, window, tmp_path):
     _faces, frames, _times = load_glb_frames(tmp_path / "animation.glb")
     assert len(frames) == 11
     assert "volume change" in window.job_panel.log.toPlainText()
+
+
+def test_a_new_shape_forgets_the_last_motion_and_a_bad_export_path_is_said(qtbot, window, tmp_path):
+    """After a match, loading another source kept the last pair's motion: exporting frames then wrote the old
+    vertices with the new faces. And a picture strip or screenshot to a path under a file raised instead of
+    saying so."""
+    load_demo(qtbot, window)
+    run_and_wait(qtbot, window, "descriptor-nn")
+    assert window.sequence_view.positions is not None
+    messages = []
+    window.error_shown.connect(messages.append)
+    blocker = tmp_path / "afile"
+    blocker.write_text("x")
+    window._save_path = lambda *_args: str(blocker / "strip.png")
+    window.export_strip()
+    window.export_screenshot()
+    assert len(messages) == 2 and all("afile" in m for m in messages), messages
+    assert load_file(qtbot, window, TOSCA / "cat0.off", "source")
+    assert window.sequence_view.positions is None
+    assert window.export_frames(".obj", folder=str(tmp_path / "frames")) == []
+    assert "no sequence to export" in messages[-1] and not (tmp_path / "frames").exists()
+
+
+def test_loading_a_shape_while_a_method_runs_stops_the_method(qtbot, window, tmp_path):
+    """Loading a file while a method ran took over the job panel (Cancel disabled, "failed" for a bad file)
+    while the method went on: the pair is changing, so the method is stopped when the load starts."""
+    load_demo(qtbot, window)
+    window.run_method(method="kernel-matching")
+    qtbot.waitUntil(lambda: window.runner.is_running("pair"), timeout=10_000)
+    garbage = tmp_path / "garbage.off"
+    garbage.write_text("not a mesh\n")
+    window.load_file(str(garbage), "target")
+    wait_loaded(qtbot, window)
+    qtbot.waitUntil(lambda: not window.runner.is_running("pair"), timeout=30_000)
+    assert window.target is not None and window.target.name == "wolf1.off"  # the bad file changed nothing

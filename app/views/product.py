@@ -74,7 +74,11 @@ class ProductView(QWidget, FramedView):
         self.curve = polyline(self.mesh_points[path_vertices], closed=False)
         self.curve["colors"] = hue_colors(path_contour_index / m)  # carried onto the tube's points
         tube = self.curve.tube(radius=CURVE_TUBE_RADIUS)  # the display frame has unit diagonal
-        p.add_mesh(tube, scalars="colors", rgb=True)
+        if tube.n_points:
+            p.add_mesh(tube, scalars="colors", rgb=True)
+        else:  # a curve without length (every step on one vertex): its vertices, as points
+            p.add_points(self.mesh_points[np.unique(path_vertices)], color="red", point_size=12,
+                         render_points_as_spheres=True)
         p.add_text(f"{mesh.name}: matched curve (energy {energy:.4g})", font_size=LABEL_FONT_SIZE)
         self.fit_preset()
         p.subplot(0, 0)

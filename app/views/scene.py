@@ -107,6 +107,11 @@ class LazyPlotter:
             self._layout.addWidget(self._plotter.interactor, 1)
         return self._plotter
 
+    @property
+    def created(self) -> bool:
+        """Whether the plotter exists (asked before clearing one that was never shown)."""
+        return self._plotter is not None
+
     def close(self) -> None:
         if self._plotter is not None:
             close_plotter(self._plotter)

@@ -92,6 +92,14 @@ class SequenceView(QWidget, FramedView):
     def plotter(self):
         return self._plotter.get()
 
+    def clear(self) -> None:
+        """Forget the sequence (a new shape was loaded: the last pair's motion no longer fits it)."""
+        self.source = self.positions = self.mesh = self.display = None
+        self.ends, self.description = [], ""
+        self.kind.setText("")
+        if self._plotter.created:
+            self.plotter.clear_actors()
+
     def set_sequence(self, source, positions: Callable[[float], np.ndarray], description: str) -> None:
         """Show ``source`` deforming along ``positions(t)`` (see :func:`corrlib.morph.sequence_positions`)."""
         self.source = source

@@ -187,7 +187,7 @@ from corrlib.geometry.elastic_paths import ElasticProductGraph
 from corrlib.geometry.intrinsic_axis import IntrinsicAxis, axis_mismatch, spectral_axes
 from corrlib.geometry.laplacian import mesh_laplacian
 from corrlib.geometry.segmentation import assign_parts, protrusion_parts
-from corrlib.geometry.spectrum import doubled_spectrum, eigenpairs, mesh_spectrum
+from corrlib.geometry.spectrum import available_eigenpairs, doubled_spectrum, eigenpairs, mesh_spectrum
 from corrlib.geometry.symmetric_paths import sided_cost, symmetry_curve_vertices
 from corrlib.geometry.triangulate import fill_contour
 from corrlib.methods.base import ContourPath, MatchResult, SearchCertificate, param
@@ -870,8 +870,10 @@ def match_prepared(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams,
     (:func:`~corrlib.geometry.remeshing.remeshed`), and the map and the curve are reported on the input
     vertices nearest to the remeshed ones (``extras["matched_vertices"]`` says how many were matched). Where
     the remeshing cannot give a valid mesh, the mesh is matched as given and ``extras["remeshing_failed"]``
-    says why.
+    says why. A mesh too small for a spectrum of its own (a tetrahedron) is refused: the curve is reported on
+    its vertices, and on four vertices every contour point lands on one.
     """
+    available_eigenpairs(mesh, params.k, "2D-to-3D matching")
     if not params.mesh_vertices:
         return (yield from _match_mesh(query, mesh, params, token))
     try:

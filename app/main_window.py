@@ -185,6 +185,7 @@ class MainWindow(QMainWindow):
         self.runner.failed.connect(self._on_failed)
         self.runner.cancelled.connect(self._on_cancelled)
         self._compare_queue: list[str] = []
+        self._compare_current = ""  # the compared method running (named in its failure)
         # files waiting to be loaded (one load job at a time, in request order): (path, which, then)
         self._load_queue: list[tuple[str, str, Callable[[], None] | None]] = []
         self._loading: tuple[str, str, Callable[[], None] | None] | None = None
@@ -776,6 +777,10 @@ class MainWindow(QMainWindow):
 
     def _on_failed(self, key: str, message: str) -> None:
         self.job_panel.stopped("failed")
+        if key == COMPARE_KEY:  # one method failing leaves the others of the comparison to run
+            self.show_error(f"{self._compare_current}: {message}")
+            self._next_compare()
+            return
         if key != LOAD_KEY:
             self._compare_queue.clear()
         self.show_error(message)
@@ -886,10 +891,11 @@ class MainWindow(QMainWindow):
         self._next_compare()
 
     def _next_compare(self) -> None:
-        if not self._compare_queue:
-            return
-        if not self._start_method(COMPARE_KEY, self._compare_queue.pop(0)):
-            self._compare_queue.clear()
+        """Start the next method of the comparison; one whose parameters are invalid is skipped (it said why)."""
+        while self._compare_queue:
+            self._compare_current = self._compare_queue.pop(0)
+            if self._start_method(COMPARE_KEY, self._compare_current):
+                return
 
     # ------------------------------------------------------------------ exports (atomic, ask before overwrite)
 

@@ -561,3 +561,22 @@ def test_loading_a_shape_while_a_method_runs_stops_the_method(qtbot, window, tmp
     wait_loaded(qtbot, window)
     qtbot.waitUntil(lambda: not window.runner.is_running("pair"), timeout=30_000)
     assert window.target is not None and window.target.name == "wolf1.off"  # the bad file changed nothing
+
+
+def test_a_method_that_cannot_run_leaves_the_rest_of_the_comparison(qtbot, window):
+    """One method of a comparison with invalid parameters (or failing) stopped the whole queue, and its
+    message did not say which method it was."""
+    load_demo(qtbot, window)
+    view = window.compare_view
+    chosen = ("kernel-matching", "descriptor-nn")
+    for i in range(view.methods.count()):
+        item = view.methods.item(i)
+        item.setCheckState(item.checkState().Checked if item.data(0x0100) in chosen else item.checkState().Unchecked)
+    window.form_of("kernel-matching").widgets["times"].setText("0.1, abc")
+    messages = []
+    window.error_shown.connect(messages.append)
+    window.run_compare()
+    qtbot.waitUntil(lambda: not window.runner.is_running("compare"), timeout=120_000)
+    assert any(m.startswith("kernel-matching: invalid parameters") for m in messages), messages
+    assert [r[0] for r in view.table_rows()] == ["descriptor-nn"]
+    window.form_of("kernel-matching").reset()

@@ -868,6 +868,7 @@ class MainWindow(QMainWindow):
         if view.query is None or view.folder is None:
             self.show_error("retrieval needs a query (sketch or silhouette) and a folder of meshes")
             return
+        view.clear_results()
         self.job_panel.started(f"ranking {view.folder}")
         self.runner.start(RETRIEVAL_KEY, retrieval_job(view.query, view.folder))
 

@@ -122,6 +122,15 @@ def test_retrieval_gallery_order(qtbot, window, tmp_path):
     names = window.retrieval_view.ranked_names()
     assert len(names) == 3 and set(names[:2]) == {"wolf0.off", "wolf1.off"}
     assert window.retrieval_view.gallery.item(0).icon().isNull() is False
+    # a ranking that fails (an empty folder) leaves no gallery of the last folder standing for it
+    empty = tmp_path / "empty"
+    empty.mkdir()
+    window.retrieval_view.set_folder(str(empty))
+    messages = []
+    window.error_shown.connect(messages.append)
+    window.run_retrieval()
+    qtbot.waitUntil(lambda: not window.runner.is_running("retrieval"), timeout=30_000)
+    assert messages and window.retrieval_view.ranked_names() == []
 
 
 @pytest.mark.slow

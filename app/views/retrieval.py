@@ -146,6 +146,11 @@ class RetrievalView(QWidget):
         if folder:
             self.set_folder(folder)
 
+    def clear_results(self) -> None:
+        """An empty gallery (a new ranking starts: the last folder's must not stand for it if it fails)."""
+        self.hits = []
+        self.gallery.clear()
+
     def show_results(self, hits, meshes) -> None:
         """The ranked gallery: ``hits`` (best first) and their meshes (None where loading failed)."""
         self.hits = hits

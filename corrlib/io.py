@@ -35,7 +35,7 @@ from pathlib import Path
 
 import numpy as np
 
-from corrlib.errors import ContourError, CorrError, FileFormatError, InputError
+from corrlib.errors import ContourError, CorrError, FileFormatError, InputError, ParameterError
 from corrlib.formats import (  # noqa: F401  (the table of formats, re-exported)
     CONTOUR_SUFFIXES,
     FORMATS,
@@ -658,6 +658,9 @@ def silhouette_mask(image: np.ndarray, threshold: float | None = None, *, name: 
         from skimage.filters import threshold_otsu
 
         threshold = float(threshold_otsu(img))
+    elif isinstance(threshold, bool) or not isinstance(threshold, (int, float, np.integer, np.floating)) or \
+            not np.isfinite(threshold):
+        raise ParameterError(f"{name}: threshold must be a grey level (a finite number), got {threshold!r}")
     bright = img > threshold
     return ~bright if _border(bright).mean() > 0.5 else bright
 

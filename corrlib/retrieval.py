@@ -214,6 +214,8 @@ def map_interval(aps, level: float = 0.95, resamples: int = BOOTSTRAP_RESAMPLES,
                          f"that are not finite")
     if not 0.0 < level < 1.0:
         raise ParameterError(f"level must lie in (0, 1), got {level}")
+    if isinstance(resamples, bool) or not isinstance(resamples, (int, np.integer)) or resamples < 1:
+        raise ParameterError(f"resamples must be a whole number of at least 1, got {resamples!r}")
     rng = np.random.default_rng(seed)
     means = aps[rng.integers(0, aps.size, size=(resamples, aps.size))].mean(axis=1)
     low, high = np.quantile(means, [(1.0 - level) / 2.0, (1.0 + level) / 2.0])

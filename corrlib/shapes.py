@@ -721,6 +721,10 @@ def inspect_contour(points, *, min_points: int = 10) -> list[Finding]:
     return []
 
 
+#: the most points a contour is resampled to (a 2D outline has no use for more; more would only fill memory)
+MAX_CONTOUR_POINTS = 1_000_000
+
+
 class Contour2D:
     """An immutable closed 2D polygon (counter-clockwise or clockwise as given).
 
@@ -835,9 +839,11 @@ class Contour2D:
         ContourError
             If ``n_points`` < 3.
         """
+        if isinstance(n_points, bool) or not isinstance(n_points, (int, np.integer)) or \
+                not 3 <= n_points <= MAX_CONTOUR_POINTS:
+            raise ContourError(f"{self.name}: cannot resample to {n_points!r} points (a whole number from 3 to "
+                               f"{MAX_CONTOUR_POINTS:,})")
         n_points = int(n_points)
-        if n_points < 3:
-            raise ContourError(f"{self.name}: cannot resample to {n_points} points (need at least 3)")
         closed = np.concatenate([self.points, self.points[:1]])
         s = np.concatenate([self.arclength, [self.length]])
         t = np.linspace(0.0, self.length, n_points, endpoint=False)

@@ -397,3 +397,30 @@ def test_bad_arguments_of_the_python_api_are_named(tmp_path, wolf_pair):
     circle = Contour2D(np.column_stack([np.cos(np.linspace(0, 6.2, 40)), np.sin(np.linspace(0, 6.2, 40))]))
     with pytest.raises(CorrError, match="got the single path"):
         run(retrieve(circle, str(tmp_path), jobs=1))
+
+
+def test_counts_and_levels_of_contour_helpers_are_named(tmp_path):
+    """A resampling to "x", None, NaN or 10^12 points (a MemoryError), an image threshold of "x" (a NumPy
+    UFuncTypeError) and a bootstrap of 0 resamples (an IndexError) are refused by name."""
+    from corrlib.errors import CorrError
+    from corrlib.io import load_contour
+    from corrlib.retrieval import map_interval
+    from corrlib.shapes import Contour2D
+
+    circle = Contour2D(np.column_stack([np.cos(np.linspace(0, 6.2, 40)), np.sin(np.linspace(0, 6.2, 40))]),
+                       name="circle")
+    for count in ("x", None, float("nan"), 10 ** 12, 2):
+        with pytest.raises(CorrError, match="circle: cannot resample to"):
+            circle.resample(count)
+    assert circle.resample(np.int64(50)).n_points == 50
+    image = np.zeros((40, 40), dtype=np.uint8)
+    image[10:30, 12:28] = 255
+    from PIL import Image
+
+    Image.fromarray(image).save(tmp_path / "blob.png")
+    with pytest.raises(CorrError, match="blob.png: threshold must be a grey level"):
+        load_contour(tmp_path / "blob.png", threshold="x")
+    assert load_contour(tmp_path / "blob.png", threshold=128).n_points >= 10
+    for resamples in (0, -1, 2.5):
+        with pytest.raises(CorrError, match="resamples must be a whole number"):
+            map_interval([0.5, 1.0], resamples=resamples)

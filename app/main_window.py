@@ -840,8 +840,7 @@ class MainWindow(QMainWindow):
             from corrlib.evaluation import collapse_note
 
             for note in (reversal_note(result.extras), turn_note(result.extras), start_note(result.extras),
-                         collapse_note(result.map_xy, self.target)
-                         if isinstance(self.source, TriMesh) and isinstance(self.target, TriMesh) else None):
+                         collapse_note(result.map_xy, self.source, self.target)):
                 if note:
                     self.job_panel.write(f"{result.method}: {note}")
         self.result_ready.emit(result)

@@ -149,11 +149,15 @@ def cmd_eval(args) -> int:
 
 
 def _load_shape(path: str):
-    """A mesh, contour or silhouette from ``path``; what its validation warns of goes to stderr (the studio
-    shows the same in its shapes panel)."""
+    """A mesh, contour or silhouette from ``path``, its warnings said (:func:`_warned`)."""
     from corrlib.io import load_shape
 
-    shape = load_shape(path)
+    return _warned(load_shape(path))
+
+
+def _warned(shape):
+    """``shape``, after what its validation warns of went to stderr (the studio shows the same in its shapes
+    panel)."""
     for finding in getattr(shape, "report", lambda: [])():
         if finding.level == "warning":
             print(f"warning: {shape.name}: {finding.message}", file=sys.stderr)
@@ -304,7 +308,7 @@ def _initial_match(value: str, source, target, spec=None):
     map_xy = load_map(path, n_target=target.n_vertices, n_source=source.n_vertices)
     from corrlib.evaluation import collapse_note
 
-    note = collapse_note(map_xy, target, what=f"the initial map {path.name}",
+    note = collapse_note(map_xy, source, target, what=f"the initial map {path.name}",
                          advice="it carries no correspondence to refine")
     if note:  # refined all the same (a refinement may recover), but the user should know
         print(f"warning: {note}", file=sys.stderr)
@@ -392,12 +396,10 @@ def cmd_refine(args) -> int:
 def _print_collapse_note(result, source, target) -> None:
     """Warn (on stderr) when a mesh-to-mesh map has collapsed onto a negligible part of the target."""
     from corrlib.evaluation import collapse_note
-    from corrlib.shapes import TriMesh
 
-    if isinstance(source, TriMesh) and isinstance(target, TriMesh) and result.map_xy is not None:
-        note = collapse_note(result.map_xy, target)
-        if note:
-            print(f"warning: {note}", file=sys.stderr)
+    note = collapse_note(result.map_xy, source, target)
+    if note:
+        print(f"warning: {note}", file=sys.stderr)
 
 
 def _print_reversal_note(result) -> None:
@@ -635,7 +637,7 @@ def cmd_match_contour(args) -> int:
 
     out = _check_output_stem(args)
     contour = _query_contour(args.query, args.query_labels)
-    mesh = load_mesh(args.mesh)
+    mesh = _warned(load_mesh(args.mesh))
     if args.mesh_labels:
         from corrlib.io import load_labels
 

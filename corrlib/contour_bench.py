@@ -198,8 +198,6 @@ def cut_query(mesh: TriMesh, plane: str = "main") -> CutQuery:
         raise InputError(f"{mesh.name}: the {plane} plane does not cut a closed section loop of 10 or more points")
     loop = loops[0]
     contour = Contour2D(loop.points_2d, name=f"{mesh.name}-{plane}", validate=False)
-    if not contour.ccw().area > 0:
-        raise InputError(f"{mesh.name}: the section of the {plane} plane encloses no area (a flat mesh cut across)")
     # the contour drops (near-)duplicate points: keep the loop points it kept, in order
     position = {tuple(p): i for i, p in enumerate(loop.points_2d)}
     kept = np.array([position[tuple(p)] for p in contour.points])

@@ -174,22 +174,27 @@ def evaluate(result, target, gt_source, gt_target, **options) -> ErrorReport:
 COLLAPSED_AREA = 0.01
 
 
-def collapse_note(map_xy, target, what: str = "the map",
+def collapse_note(map_xy, source, target, what: str = "the map",
                   advice: str = "the inputs give the method nothing to tell points apart (try another method or "
                                 "descriptor)") -> str | None:
     """A warning when a mesh-to-mesh map sends its vertices onto a negligible part of the target (the image's
     vertices hold less than :data:`COLLAPSED_AREA` of its area, each vertex a third of its faces' areas), else
     None. A method can return such a map without failing (descriptors that barely vary on a very regular
-    shape make a functional map of rank one); the user is told rather than handed it as a result.
+    shape make a functional map of rank one); the user is told rather than handed it as a result. Only a map
+    from a mesh is judged: a contour's points lie along a curve, which covers no area.
 
     Parameters
     ----------
-    map_xy : (n_x,) int
+    map_xy : (n_x,) int or None
         Target vertex of every source vertex; -1 unmatched.
-    target : TriMesh
+    source, target : TriMesh or Contour2D
     what, advice : str
         How the map is named, and what the user is advised.
     """
+    from corrlib.shapes import TriMesh
+
+    if map_xy is None or not (isinstance(source, TriMesh) and isinstance(target, TriMesh)):
+        return None
     matched = np.asarray(map_xy)
     matched = np.unique(matched[matched >= 0])
     if matched.size == 0:

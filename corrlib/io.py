@@ -795,6 +795,14 @@ def read_text(path, what: str = "input") -> str:
 _LARGEST_INDEX = 2 ** 53
 
 
+def non_integer_entry(values: np.ndarray) -> tuple | None:
+    """The index of the first entry of a float array that is not an integer of at most 2^53 in magnitude (NaN,
+    0.5, 1e300: casting would cut or wrap it without a word), or None if there is none."""
+    values = np.asarray(values, dtype=np.float64)
+    bad = ~np.isfinite(values) | (values != np.round(values)) | (np.abs(values) > _LARGEST_INDEX)
+    return np.unravel_index(int(np.argmax(bad)), values.shape) if np.any(bad) else None
+
+
 def _integers(values: np.ndarray, path: Path, what: str, entry: str = "vertex indices") -> np.ndarray:
     """``values`` as int64 if every one is a finite integer of at most 2^53 in magnitude."""
     values = np.asarray(values)
@@ -802,10 +810,8 @@ def _integers(values: np.ndarray, path: Path, what: str, entry: str = "vertex in
         return values.astype(np.int64)
     if not np.issubdtype(values.dtype, np.floating) and not np.issubdtype(values.dtype, np.bool_):
         raise FileFormatError(f"{path}: the {what} must hold {entry}, found {values.dtype} values")
-    values = values.astype(np.float64)
-    bad = ~np.isfinite(values) | (values != np.round(values)) | (np.abs(values) > _LARGEST_INDEX)
-    if np.any(bad):  # named by its position in the file: row and column where the values form a table
-        first = np.unravel_index(int(np.argmax(bad)), values.shape)
+    first = non_integer_entry(values)
+    if first is not None:  # named by its position in the file: row and column where the values form a table
         where = f"data line {first[0] + 1}, column {first[1] + 1}" if values.ndim == 2 else f"entry {first[0]}"
         raise FileFormatError(f"{path}: the {what} must hold integer {entry}; {where} is "
                               f"{float(values[first])!r}")

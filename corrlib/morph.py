@@ -141,7 +141,7 @@ def export_sequence(folder, frames, faces, times, *, fmt: str = "obj", animation
     from corrlib.shapes import relative_volume_change, triangle_areas
 
     volumes = frame_volumes(frames, faces, closed)
-    area = float(triangle_areas(np.asarray(frames[0]), np.asarray(faces)).sum()) if len(frames) else 0.0
+    area = float(triangle_areas(np.asarray(frames[0]), np.asarray(faces)).sum())  # frames: at least one
     table = out / "volumes.csv"
     with atomic_write(table) as fh:
         fh.write("frame,t,volume,relative_change\n")
@@ -150,7 +150,8 @@ def export_sequence(folder, frames, faces, times, *, fmt: str = "obj", animation
                 fh.write(f"{i},{t:.6g},not applicable (open mesh),\n")
                 continue
             change = relative_volume_change(v, volumes[0], area)
-            fh.write(f"{i},{t:.6g},{v:.9g},{'not applicable (no volume at t = 0)' if change is None else f'{change:.3e}'}\n")
+            said = "not applicable (no volume at t = 0)" if change is None else f"{change:.3e}"
+            fh.write(f"{i},{t:.6g},{v:.9g},{said}\n")
     anim = save_glb_animation(out / "animation.glb", frames, faces, times) if animation else None
     return {"frames": paths, "animation": anim, "volumes": table, "volume": volumes}
 

@@ -9,6 +9,7 @@ multi-threaded BLAS per core collapse.
 from __future__ import annotations
 
 import multiprocessing
+import numbers
 import os
 from concurrent.futures import ProcessPoolExecutor
 
@@ -39,6 +40,13 @@ def process_pool(jobs: int | None = None) -> ProcessPoolExecutor:
                                mp_context=multiprocessing.get_context("forkserver"))
 
 
+def check_jobs(jobs) -> None:
+    """:class:`ParameterError` unless ``jobs`` is a whole number of worker processes (0 or None: all cores)."""
+    if jobs is not None and (isinstance(jobs, bool) or not isinstance(jobs, numbers.Integral) or jobs < 0):
+        raise ParameterError(f"jobs must be a whole number of worker processes (0 or none: all cores), "
+                             f"got {jobs!r}")
+
+
 class job_executor:
     """Context manager: a local process pool, or Dask's ``concurrent.futures`` executor on a cluster.
 
@@ -49,9 +57,7 @@ class job_executor:
     """
 
     def __init__(self, jobs: int | None, scheduler: str | None):
-        if jobs is not None and (isinstance(jobs, bool) or not isinstance(jobs, int) or jobs < 0):
-            raise ParameterError(f"jobs must be a whole number of worker processes (0 or none: all cores), "
-                                 f"got {jobs!r}")
+        check_jobs(jobs)
         if scheduler is not None:
             check_scheduler_address(scheduler)
         self.jobs, self.scheduler = jobs, scheduler

@@ -24,7 +24,7 @@ import numpy as np
 
 from corrlib.errors import CorrError, InputError, ParameterError
 from corrlib.io import MESH_SUFFIXES, load_mesh
-from corrlib.parallel import job_executor
+from corrlib.parallel import check_jobs, job_executor
 from corrlib.methods.contour3d import Contour3DParams, PreparedQuery, match_prepared, prepare_query
 from corrlib.progress import CancelToken, Progress, run
 
@@ -144,8 +144,7 @@ def retrieve(query_contour, meshes: Iterable, params: Contour3DParams | None = N
     paths = [str(p) for p in meshes]
     if not paths:
         raise InputError("no meshes to rank")
-    if jobs is not None and (isinstance(jobs, bool) or not isinstance(jobs, (int, np.integer)) or jobs < 1):
-        raise ParameterError(f"jobs must be a whole number of at least 1 (or None: all cores), got {jobs!r}")
+    check_jobs(jobs)
     jobs = jobs or os.cpu_count() or 1
     yield Progress("query features", 0.0)
     query = prepare_query(query_contour, params)

@@ -326,17 +326,13 @@ def consistently_oriented(faces: np.ndarray, n_vertices: int) -> tuple[np.ndarra
     """
     f = np.asarray(faces, dtype=np.int64)
     n_faces = f.shape[0]
-    half = np.concatenate([f[:, [0, 1]], f[:, [1, 2]], f[:, [2, 0]]])
-    owner = np.tile(np.arange(n_faces), 3)
-    und = np.sort(half, axis=1)
-    keys = und[:, 0] * np.int64(n_vertices) + und[:, 1]
-    order = np.argsort(keys, kind="stable")
-    sorted_keys = keys[order]
-    starts = np.flatnonzero(np.r_[True, sorted_keys[1:] != sorted_keys[:-1]])
-    sizes = np.diff(np.r_[starts, keys.size])
-    pairs = starts[sizes == 2]  # edges of exactly two faces
+    edges = _Edges.of(f, n_vertices)
+    owner = np.tile(np.arange(n_faces), 3)  # the face of every half-edge
+    order = np.argsort(edges.inverse, kind="stable")  # half-edges grouped by edge
+    starts = np.concatenate([[0], np.cumsum(edges.counts)[:-1]])
+    pairs = starts[edges.counts == 2]  # edges of exactly two faces
     first, second = order[pairs], order[pairs + 1]
-    same_direction = np.all(half[first] == half[second], axis=1)  # disagree: one of the two must turn
+    same_direction = np.all(edges.half[first] == edges.half[second], axis=1)  # disagree: one must turn
     a, b = owner[first], owner[second]
     graph = sp.coo_matrix((np.ones(a.size), (a, b)), shape=(n_faces, n_faces)).tocsr()
     graph = graph + graph.T

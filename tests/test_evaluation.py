@@ -74,13 +74,17 @@ def test_evaluation_errors(wolf_pair):
 
 def test_a_collapsed_map_is_named_and_a_map_onto_a_part_is_not(wolf_pair):
     """Every vertex sent to one target vertex (a functional map of rank one, as from a sphere's nearly
-    constant descriptors) is warned of; the identity, and a map onto a fifth of the target, are not."""
+    constant descriptors) is warned of; the identity, a map onto a fifth of the target, and a contour's map
+    (its points lie along a curve) are not."""
     from corrlib.evaluation import collapse_note
+    from corrlib.shapes import Contour2D
 
     wolf0, wolf1 = wolf_pair
-    note = collapse_note(np.zeros(wolf0.n_vertices, dtype=int), wolf1)
+    note = collapse_note(np.zeros(wolf0.n_vertices, dtype=int), wolf0, wolf1)
     assert note is not None and "land on 1 vertices of wolf1.off" in note
-    assert collapse_note(np.arange(wolf0.n_vertices), wolf1) is None
+    assert collapse_note(np.arange(wolf0.n_vertices), wolf0, wolf1) is None
     upper = np.flatnonzero(wolf1.vertices[:, 1] > np.quantile(wolf1.vertices[:, 1], 0.8))  # the top fifth
-    assert collapse_note(upper[np.arange(wolf0.n_vertices) % upper.size], wolf1) is None
-    assert collapse_note(np.full(wolf0.n_vertices, -1), wolf1) == "the map matches no vertex"
+    assert collapse_note(upper[np.arange(wolf0.n_vertices) % upper.size], wolf0, wolf1) is None
+    assert collapse_note(np.full(wolf0.n_vertices, -1), wolf0, wolf1) == "the map matches no vertex"
+    circle = Contour2D(np.column_stack([np.cos(np.linspace(0, 6.2, 40)), np.sin(np.linspace(0, 6.2, 40))]))
+    assert collapse_note(np.zeros(40, dtype=int), circle, wolf1) is None

@@ -589,3 +589,16 @@ def test_a_method_that_cannot_run_leaves_the_rest_of_the_comparison(qtbot, windo
     assert any(m.startswith("kernel-matching: invalid parameters") for m in messages), messages
     assert [r[0] for r in view.table_rows()] == ["descriptor-nn"]
     window.form_of("kernel-matching").reset()
+
+
+def test_a_matched_curve_without_length_is_drawn_as_points(qtbot, window):
+    """A curve whose every step is on one vertex has no tube to draw (pyvista refused the empty mesh and the
+    studio's result never showed); its vertices are drawn instead."""
+    from corrlib.io import load_mesh
+
+    wolf = load_mesh(TOSCA / "wolf0.off")
+    t = np.linspace(0, 2 * np.pi, 30, endpoint=False)
+    contour = np.column_stack([np.cos(t), np.sin(t)])
+    view = window.product_view
+    view.show_contour_match(contour, wolf, np.zeros(30, dtype=int), np.arange(30), 1.0)
+    assert "30 contour points matched" in view.info.text()

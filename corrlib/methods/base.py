@@ -192,15 +192,15 @@ class InitialMatch:
 def vertex_indices(values, what: str) -> np.ndarray:
     """``values`` as int64 vertex indices; :class:`InputError` naming ``what`` unless every entry is a whole
     number (a float map, e.g. 0.9, would otherwise be cut to 0 without a word)."""
+    from corrlib.io import non_integer_entry
+
     array = np.asarray(values)
     if array.dtype == bool or not (np.issubdtype(array.dtype, np.integer) or np.issubdtype(array.dtype, np.floating)):
         raise InputError(f"{what} must hold vertex indices (integers), got {array.dtype} values")
-    if np.issubdtype(array.dtype, np.floating):
-        bad = ~np.isfinite(array) | (array != np.round(array)) | (np.abs(array) > 2 ** 53)
-        if np.any(bad):
-            where = np.unravel_index(int(np.argmax(bad)), array.shape)
-            raise InputError(f"{what} must hold integer vertex indices; entry {where[0] if len(where) == 1 else where} "
-                             f"is {float(array[where])!r}")
+    where = non_integer_entry(array) if np.issubdtype(array.dtype, np.floating) else None
+    if where is not None:
+        raise InputError(f"{what} must hold integer vertex indices; entry {where[0] if len(where) == 1 else where} "
+                         f"is {float(array[where])!r}")
     return array.astype(np.int64)
 
 

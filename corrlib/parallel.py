@@ -14,7 +14,7 @@ import os
 from concurrent.futures import ProcessPoolExecutor
 
 from corrlib.cores import set_core_share
-from corrlib.errors import CorrError, ParameterError
+from corrlib.errors import Cancelled, CorrError, ParameterError
 
 
 def _limit_threads(share: int):
@@ -79,9 +79,11 @@ class job_executor:
         return self.pool
 
     def __exit__(self, exc_type, exc, tb):
-        interrupted = exc_type is not None and not issubclass(exc_type, Exception)  # Ctrl-C, SIGTERM, exit
+        # Ctrl-C, SIGTERM, exit, a closed generator, or the user's cancel: nobody waits for the running jobs
+        interrupted = exc_type is not None and (not issubclass(exc_type, Exception) or issubclass(exc_type, Cancelled))
         if interrupted and self.client is None:
-            # stop the local workers now instead of waiting for their jobs (else they outlive the command)
+            # stop the local workers now instead of waiting for their jobs (else they outlive the command, and a
+            # cancelled retrieval in the studio waits for the meshes in progress)
             workers = list((getattr(self.pool, "_processes", None) or {}).values())
             self.pool.shutdown(wait=False, cancel_futures=True)
             for worker in workers:

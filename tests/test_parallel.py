@@ -75,3 +75,34 @@ def test_a_worker_with_one_core_decomposes_both_shapes_itself(monkeypatch):
     assert not spectrum._second_process_allowed()
     monkeypatch.setattr(cores, "_core_share", 2)
     assert spectrum._second_process_allowed()  # the test process is no pool's child
+
+
+def test_a_cancelled_run_stops_its_workers_instead_of_waiting_for_their_jobs():
+    """A user's cancel (``Cancelled``) ends the pool at once: its running jobs are not waited for (before, a
+    cancelled retrieval in the studio waited for every mesh in progress)."""
+    import time
+
+    from corrlib.errors import Cancelled
+
+    started = time.perf_counter()
+    with pytest.raises(Cancelled):
+        with parallel.job_executor(2, None) as pool:
+            running = [pool.submit(time.sleep, 60) for _ in range(2)]
+            workers = list(pool._processes.values())
+            raise Cancelled("cancelled")
+    assert time.perf_counter() - started < 30  # 60 s if the sleeping jobs were waited for
+    for worker in workers:
+        worker.join(timeout=10)
+        assert not worker.is_alive()
+    assert all(job.done() for job in running)
+
+
+def test_an_error_of_the_caller_still_waits_for_the_running_jobs():
+    """Any other error leaves the pool to finish its running jobs (their results may be written), as before."""
+    import time
+
+    with pytest.raises(RuntimeError):
+        with parallel.job_executor(1, None) as pool:
+            job = pool.submit(time.sleep, 0.5)
+            raise RuntimeError("the caller's own error")
+    assert job.done() and job.exception() is None

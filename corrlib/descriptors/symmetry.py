@@ -64,7 +64,7 @@ from corrlib.descriptors.orientation import orientation_descriptors
 from corrlib.descriptors.spectral import biharmonic_embedding, hks, wks
 from corrlib.errors import InputError, ParameterError
 from corrlib.geometry.distortion import GEODESIC_SAMPLES, geodesic_distortions as pair_distortions
-from corrlib.geometry.fmaps import functional_map, pointwise_to_functional, resolvent_mask, zoomout
+from corrlib.geometry.fmaps import ZoomOutSamples, functional_map, pointwise_to_functional, resolvent_mask, zoomout
 
 #: scales of the even probes (HKS and WKS each) and of the HKS whose pairs give the odd probes
 EVEN_SCALES = 16
@@ -124,21 +124,22 @@ def reflection_map(mesh, spectrum, *, k_init: int = K_INIT, k_final: int = K_FIN
     c = functional_map(phi.T @ (mass[:, None] * probes), phi.T @ (mass[:, None] * mirrored),
                        resolvent_mask(evals, evals), weights=(1.0, COMMUTATIVITY))
     embedding = biharmonic_embedding(spectrum.evals, spectrum.evecs)
-    mirror = _zoomout(spectrum, c, k_final)
+    samples = ZoomOutSamples.of(mesh, mass)  # a finer mesh iterates on samples
+    mirror = _zoomout(spectrum, c, k_final, samples)
     # refined only if it starts better than the first start ends (ZoomOut then lowers it further)
     searched = _sign_search(spectrum, probes[:, even.shape[1]:], embedding,
                             below=reflection_distortion(mirror, embedding))
     if searched is not None:
-        second = _zoomout(spectrum, pointwise_to_functional(searched, phi, phi, mass), k_final)
+        second = _zoomout(spectrum, pointwise_to_functional(searched, phi, phi, mass), k_final, samples)
         distortion_second, distortion_first = geodesic_distortions(mesh, (second, mirror))
         if distortion_second < distortion_first:
             return second
     return mirror
 
 
-def _zoomout(spectrum, c: np.ndarray, k_final: int) -> np.ndarray:
-    """The pointwise self-map ZoomOut refines a functional map into."""
-    steps = zoomout(spectrum.evecs, spectrum.evecs, spectrum.mass, c, k_final, ZOOMOUT_STEP)
+def _zoomout(spectrum, c: np.ndarray, k_final: int, samples=None) -> np.ndarray:
+    """The pointwise self-map ZoomOut refines a functional map into (through ``samples``, if given)."""
+    steps = zoomout(spectrum.evecs, spectrum.evecs, spectrum.mass, c, k_final, ZOOMOUT_STEP, None, samples, samples)
     while True:
         try:
             next(steps)

@@ -6,7 +6,9 @@ orientation) exactly; :func:`zoomout` refines a map by spectral upsampling;
 :func:`pointwise_from_basis` and :func:`repeated_pointwise_from_basis` are
 the final ZoomOut steps of a map and its reverse at one basis size (kernel
 matching's and divergence-free's last stage), the basis chosen by
-:func:`resolved_eigenpairs`.
+:func:`resolved_eigenpairs`. On meshes finer than the basis needs,
+ZoomOut iterates on samples (:class:`ZoomOutSamples`) and only the last
+pointwise map is formed for every vertex (:func:`nearest_rows_through_samples`).
 
 Convention (pyFM's): ``C_yx`` of shape (k_Y, k_X) carries the spectral
 coefficients of a function on X to those of its pull-back on Y,
@@ -17,10 +19,96 @@ coefficients of a function on X to those of its pull-back on Y,
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 import scipy.sparse as sp
+from scipy.spatial import cKDTree
 
+from corrlib.geometry.sampling import farthest_point_sampling, voronoi_cells
 from corrlib.neighbours import descended_nearest_rows, nearest_rows
+
+#: ZoomOut's iterations run on this many farthest-point samples of a finer mesh (Melzi et al. 2019 run it on
+#: subsamples too): about ten vertices per basis function at the largest sizes ZoomOut is given here (100-500),
+#: and the size of the meshes the methods are measured on, which therefore keep their exact ZoomOut
+ZOOMOUT_SAMPLES = 5000
+
+
+@dataclass(frozen=True)
+class ZoomOutSamples:
+    """Vertices that stand for a mesh in ZoomOut's iterations, with what the last step needs.
+
+    Attributes
+    ----------
+    index : (s,) int
+        The sampled vertices.
+    owner : (n,) int
+        For every vertex, the position in ``index`` of the sample whose geodesic Voronoi cell holds it.
+    weight : (s,) float
+        The lumped mass of every sample's cell (the samples' stand-in for the mass matrix).
+    indptr, indices : int arrays
+        The mesh's vertex adjacency (CSR), over which the last step searches from the samples' partners.
+    """
+
+    index: np.ndarray
+    owner: np.ndarray
+    weight: np.ndarray
+    indptr: np.ndarray
+    indices: np.ndarray
+
+    @classmethod
+    def of(cls, mesh, mass_diag: np.ndarray, count: int = ZOOMOUT_SAMPLES) -> "ZoomOutSamples | None":
+        """Farthest-point samples of ``mesh`` and their geodesic Voronoi cells; ``None`` where the mesh has
+        no more than ``count`` vertices (ZoomOut then runs on every vertex)."""
+        if mesh.n_vertices <= count:
+            return None
+        index = farthest_point_sampling(mesh.vertices, count)
+        owner, _ = voronoi_cells(mesh, index)
+        stray = owner < 0  # a component no sample reached: the Euclidean nearest sample stands for it
+        if stray.any():
+            owner[stray] = cKDTree(mesh.vertices[index]).query(mesh.vertices[stray])[1]
+        weight = np.bincount(owner, weights=np.asarray(mass_diag, dtype=float), minlength=count)
+        graph = mesh.adjacency
+        return cls(index, owner, weight, graph.indptr, graph.indices)
+
+
+def nearest_rows_through_samples(query: np.ndarray, data: np.ndarray, query_samples: ZoomOutSamples | None,
+                                 data_samples: ZoomOutSamples | None, sampled_partners: np.ndarray | None = None,
+                                 current: np.ndarray | None = None) -> np.ndarray:
+    """(q,) int: the nearest row of ``data`` for every row of ``query``, searched through samples.
+
+    The query's samples take their nearest rows among the data's samples (or ``sampled_partners``, rows of
+    ``data`` already found for them); every query row then starts from the partner of its own sample and
+    descends over the data mesh's edges to the nearest row there
+    (:func:`~corrlib.neighbours.descended_nearest_rows`); with ``current`` partners it descends from those
+    too and keeps the nearer of the two rows. A smooth embedding (a few eigenfunctions) has few minima
+    within a sample's cell, so this is close to the brute-force search, at the cost of ``s²`` distances and
+    a walk or two per row instead of ``q × d`` distances. Without samples on either side it is
+    :func:`nearest_rows` itself.
+
+    Parameters
+    ----------
+    query : (q, k) float
+    data : (d, k) float
+    query_samples, data_samples : ZoomOutSamples or None
+        Samples of the shapes whose vertices the rows are.
+    sampled_partners : (s_q,) int, optional
+        Rows of ``data`` for the query's samples, if known.
+    current : (q,) int, optional
+        Rows of ``data`` to descend from as well (a map being refined); -1 for none.
+    """
+    if query_samples is None or data_samples is None:
+        return nearest_rows(query, data)
+    if sampled_partners is None:
+        sampled_partners = data_samples.index[nearest_rows(query[query_samples.index], data[data_samples.index])]
+    graph = data_samples.indptr, data_samples.indices
+    found = descended_nearest_rows(query, data, sampled_partners[query_samples.owner], *graph)
+    if current is None:
+        return found
+    other = descended_nearest_rows(query, data, np.where(current >= 0, current, found), *graph)
+    nearer = np.einsum("ij,ij->i", query - data[other], query - data[other]) < np.einsum(
+        "ij,ij->i", query - data[found], query - data[found])
+    return np.where(nearer, other, found)
 
 
 def pointwise_to_functional(map_yx: np.ndarray, evecs_x: np.ndarray, evecs_y: np.ndarray, mass_y) -> np.ndarray:
@@ -51,8 +139,15 @@ def pointwise_to_functional(map_yx: np.ndarray, evecs_x: np.ndarray, evecs_y: np
 
 
 def zoomout(evecs_x: np.ndarray, evecs_y: np.ndarray, mass_y, c_yx: np.ndarray, k_final: int, step: int,
-            token=None):
+            token=None, samples_x: ZoomOutSamples | None = None, samples_y: ZoomOutSamples | None = None):
     """ZoomOut refinement (Melzi et al. 2019).
+
+    Alternates the pointwise map of the current functional map with the functional map of that pointwise map,
+    adding ``step`` basis functions each time. With samples of both shapes the iterations run on them (the
+    paper's subsampled ZoomOut): the map of Y's samples to X's samples, and the functional map as the
+    least-squares fit ``C = argmin Σ_s w_s |Ψ(s) C − Φ(m(s))|²`` over Y's samples weighted by their cells'
+    masses, which for every vertex and the mass matrix is ``Ψᵀ M_Y Π Φ`` itself (``Ψᵀ M_Y Ψ = I``). The last
+    pointwise map is formed for every vertex of Y (:func:`nearest_rows_through_samples`).
 
     Parameters
     ----------
@@ -63,6 +158,9 @@ def zoomout(evecs_x: np.ndarray, evecs_y: np.ndarray, mass_y, c_yx: np.ndarray, 
         Initial functional map.
     k_final : int
     step : int
+    token : CancelToken, optional
+    samples_x, samples_y : ZoomOutSamples, optional
+        Both, or ZoomOut runs on every vertex.
 
     Yields
     ------
@@ -74,15 +172,30 @@ def zoomout(evecs_x: np.ndarray, evecs_y: np.ndarray, mass_y, c_yx: np.ndarray, 
     map_yx : (n_y,) int
     c_yx : (k_final, k_final) float
     """
+    sampled = samples_x is not None and samples_y is not None
+    if sampled:
+        rows_x, rows_y = evecs_x[samples_x.index], evecs_y[samples_y.index]
+        weight_y = samples_y.weight
+    else:
+        rows_x, rows_y = evecs_x, evecs_y
     k = c_yx.shape[1]
     while True:
         if token is not None:
             token.raise_if_cancelled()
-        map_yx = nearest_rows(evecs_y[:, :c_yx.shape[0]], evecs_x[:, :k] @ c_yx.T)
+        partners = nearest_rows(rows_y[:, :c_yx.shape[0]], rows_x[:, :k] @ c_yx.T)  # rows of rows_x
         if k >= k_final:
+            if not sampled:
+                return partners, c_yx
+            map_yx = nearest_rows_through_samples(evecs_y[:, :c_yx.shape[0]], evecs_x[:, :k] @ c_yx.T, samples_y,
+                                                  samples_x, samples_x.index[partners])
             return map_yx, c_yx
         k = min(k + step, k_final)
-        c_yx = pointwise_to_functional(map_yx, evecs_x[:, :k], evecs_y[:, :k], mass_y)
+        if sampled:
+            psi = rows_y[:, :k]
+            gram = psi.T @ (weight_y[:, None] * psi)
+            c_yx = np.linalg.solve(gram, psi.T @ (weight_y[:, None] * rows_x[partners, :k]))
+        else:
+            c_yx = pointwise_to_functional(partners, evecs_x[:, :k], evecs_y[:, :k], mass_y)
         yield k
 
 
@@ -187,7 +300,8 @@ def _unit_area_bases(spec_x, spec_y, k: int):
             spec_y.truncated(k).at_unit_area(float(spec_y.mass.diagonal().sum())))
 
 
-def pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k, both_directions: bool = True):
+def pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k, both_directions: bool = True,
+                         samples_x: ZoomOutSamples | None = None, samples_y: ZoomOutSamples | None = None):
     """One ZoomOut step (Melzi et al. 2019, the pointwise maps from a functional map) with one functional map
     estimated from both directions of the map.
 
@@ -216,30 +330,38 @@ def pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k, both_directions: boo
         With at least ``k`` eigenpairs.
     k : int
     both_directions : bool
+    samples_x, samples_y : ZoomOutSamples, optional
+        Samples of finer meshes: the partners are searched through them
+        (:func:`nearest_rows_through_samples`) instead of over all pairs of vertices.
 
     Returns
     -------
     new_xy : (n_x,) int
     new_yx : (n_y,) int
     """
-    return _global_step(map_xy, map_yx, *_unit_area_bases(spec_x, spec_y, k), both_directions)
+    return _global_step(map_xy, map_yx, *_unit_area_bases(spec_x, spec_y, k), both_directions, samples_x, samples_y)
 
 
-def _global_step(map_xy, map_yx, unit_x, unit_y, both_directions: bool = True):
+def _global_step(map_xy, map_yx, unit_x, unit_y, both_directions: bool = True, samples_x=None, samples_y=None):
     """:func:`pointwise_from_basis` on bases already at unit area (:func:`_unit_area_bases`)."""
     phi, psi = unit_x.evecs, unit_y.evecs
     c_xy = pointwise_to_functional(map_xy, psi, phi, unit_x.mass.diagonal())  # pulls Y's functions back to X
     c_yx = pointwise_to_functional(map_yx, phi, psi, unit_y.mass.diagonal())
     if not both_directions:
-        return (np.where(map_xy >= 0, nearest_rows(phi @ c_xy, psi), -1),
-                np.where(map_yx >= 0, nearest_rows(psi @ c_yx, phi), -1))
+        return (np.where(map_xy >= 0, nearest_rows_through_samples(phi @ c_xy, psi, samples_x, samples_y,
+                                                                   current=map_xy), -1),
+                np.where(map_yx >= 0, nearest_rows_through_samples(psi @ c_yx, phi, samples_y, samples_x,
+                                                                   current=map_yx), -1))
     both = 0.5 * (c_xy + c_yx.T)
-    new_xy = np.where(map_xy >= 0, nearest_rows(phi, psi @ both.T), -1)
-    new_yx = np.where(map_yx >= 0, nearest_rows(psi, phi @ both), -1)
+    new_xy = np.where(map_xy >= 0, nearest_rows_through_samples(phi, psi @ both.T, samples_x, samples_y,
+                                                                current=map_xy), -1)
+    new_yx = np.where(map_yx >= 0, nearest_rows_through_samples(psi, phi @ both, samples_y, samples_x,
+                                                                current=map_yx), -1)
     return new_xy, new_yx
 
 
-def repeated_pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k, graph_x, graph_y, token=None):
+def repeated_pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k, graph_x, graph_y, token=None,
+                                  samples_x: ZoomOutSamples | None = None, samples_y: ZoomOutSamples | None = None):
     """The step of :func:`pointwise_from_basis`, then the same step repeated from its own maps while the
     number of partners a step changes decreases (and is not zero), each partner searched by descent from the
     current one.
@@ -265,6 +387,8 @@ def repeated_pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k, graph_x, gr
         The shapes' vertex adjacencies.
     token : CancelToken, optional
         Checked before every step.
+    samples_x, samples_y : ZoomOutSamples, optional
+        Samples of finer meshes, through which the first (global) step searches.
 
     Returns
     -------
@@ -272,7 +396,7 @@ def repeated_pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k, graph_x, gr
     map_yx : (n_y,) int
     """
     spec_x, spec_y = _unit_area_bases(spec_x, spec_y, k)
-    map_xy, map_yx = _global_step(map_xy, map_yx, spec_x, spec_y)  # the first step searches globally
+    map_xy, map_yx = _global_step(map_xy, map_yx, spec_x, spec_y, True, samples_x, samples_y)  # a global search
     phi, psi = np.ascontiguousarray(spec_x.evecs), np.ascontiguousarray(spec_y.evecs)
     mass_x, mass_y = spec_x.mass.diagonal(), spec_y.mass.diagonal()
     c_xy = pointwise_to_functional(map_xy, psi, phi, mass_x)

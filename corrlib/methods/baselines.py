@@ -21,7 +21,8 @@ import numpy as np
 from corrlib.descriptors import DESCRIPTOR_KINDS, mesh_descriptors
 from corrlib.descriptors.orientation import orientation_operators
 from corrlib.errors import InputError, ParameterError
-from corrlib.geometry.fmaps import functional_map, multiplication_operators, resolvent_mask, zoomout
+from corrlib.geometry.fmaps import (ZoomOutSamples, functional_map, multiplication_operators,
+                                    nearest_rows_through_samples, resolvent_mask, zoomout)
 from corrlib.geometry.spectrum import available_eigenpairs, mesh_spectra
 from corrlib.methods.base import MatchResult, param
 from corrlib.methods.registry import MethodSpec, register
@@ -182,7 +183,9 @@ def solve_fmap_zoomout(source, target, params: FmapZoomOutParams, token):
         c_yx = descriptor_functional_map(source, target, spec_x, spec_y, desc_x, desc_y, k_init, params)
     with watch("zoomout"):
         phi, psi = spec_x.evecs, spec_y.evecs
-        gen = zoomout(phi, psi, spec_y.mass, c_yx, k_final, params.step, token)
+        samples_x = ZoomOutSamples.of(source, spec_x.mass.diagonal())
+        samples_y = ZoomOutSamples.of(target, spec_y.mass.diagonal())
+        gen = zoomout(phi, psi, spec_y.mass, c_yx, k_final, params.step, token, samples_x, samples_y)
         while True:
             try:
                 k = next(gen)
@@ -191,7 +194,7 @@ def solve_fmap_zoomout(source, target, params: FmapZoomOutParams, token):
                 break
             yield Progress("ZoomOut", 0.4 + 0.6 * (k - k_init) / max(k_final - k_init, 1), f"k = {k}")
         # the other direction with the adjoint (C_yx is near-orthogonal for near-isometries)
-        map_xy = nearest_rows(phi[:, :k_final], psi[:, :k_final] @ c_yx)
+        map_xy = nearest_rows_through_samples(phi[:, :k_final], psi[:, :k_final] @ c_yx, samples_x, samples_y)
     k = c_yx.shape[0]
     off = c_yx - np.diag(np.diag(c_yx))
     energy = float(np.linalg.norm(c_yx.T @ c_yx - np.eye(k)) / k)

@@ -86,7 +86,7 @@ from corrlib.deformation.flow import check_points, flow, flow_with_jacobian
 from corrlib.deformation.mixture import mixture_moments
 from corrlib.deformation.model import Deformation, Frames, StoredSteps
 from corrlib.errors import InputError
-from corrlib.geometry.fmaps import repeated_pointwise_from_basis, resolved_eigenpairs
+from corrlib.geometry.fmaps import ZoomOutSamples, repeated_pointwise_from_basis, resolved_eigenpairs
 from corrlib.geometry.sampling import farthest_point_sampling
 from corrlib.methods.base import MatchResult, param
 from corrlib.methods.kernel_matching import DEFAULT_EIGENPAIRS, DEFAULT_TAU_MIN
@@ -617,7 +617,9 @@ def final_zoomout_steps(source, target, map_xy, map_yx, smooth_k: int, token, wa
                 resolved_eigenpairs(spec_y.evals, target.area, FINAL_STEP_TAU), k)
     with watch("zoomout"):
         return repeated_pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k, source.adjacency,
-                                             target.adjacency, token)
+                                             target.adjacency, token,
+                                             ZoomOutSamples.of(source, spec_x.mass.diagonal()),
+                                             ZoomOutSamples.of(target, spec_y.mass.diagonal()))
 
 
 def solve_divergence_free(source, target, params: DivergenceFreeParams, token, *, initial=None):

@@ -131,7 +131,8 @@ from corrlib.assignment import area_capacities, linear_assignment
 from corrlib.cores import InlineExecutor, side_threads
 from corrlib.descriptors import DESCRIPTOR_KINDS, mesh_descriptors
 from corrlib.errors import Cancelled, CorrError, ParameterError
-from corrlib.geometry.fmaps import pointwise_from_basis, repeated_pointwise_from_basis, resolved_eigenpairs
+from corrlib.geometry.fmaps import (ZoomOutSamples, pointwise_from_basis, repeated_pointwise_from_basis,
+                                    resolved_eigenpairs)
 from corrlib.geometry.sampling import (
     SurfaceSample,
     farthest_point_sampling,
@@ -1266,13 +1267,15 @@ def kernel_result(state: KernelState, full_map_xy: np.ndarray, full_map_yx: np.n
     if smooth_k > 0:
         yield Progress("final ZoomOut step", PROGRESS_SMOOTHING, f"nearest partners in {smooth_k} eigenfunctions")
         with watch("zoomout"):
+            samples_x = ZoomOutSamples.of(state.source, state.spec_x.mass.diagonal())
+            samples_y = ZoomOutSamples.of(state.target, state.spec_y.mass.diagonal())
             if state.outside_map:  # a map refined from outside keeps its partners, which the reverse map lacks
                 full_map_xy, full_map_yx = pointwise_from_basis(full_map_xy, full_map_yx, state.spec_x,
-                                                                state.spec_y, smooth_k, both_directions=False)
+                                                                state.spec_y, smooth_k, False, samples_x, samples_y)
             else:
                 full_map_xy, full_map_yx = repeated_pointwise_from_basis(
                     full_map_xy, full_map_yx, state.spec_x, state.spec_y, smooth_k, state.source.adjacency,
-                    state.target.adjacency, state.token)
+                    state.target.adjacency, state.token, samples_x, samples_y)
     # the map's own energy: landmarks are rows of the dense map already (their anchor term is the solver's)
     c = _alignment(psi[full_map_xy[full_map_xy >= 0]], phi[full_map_xy >= 0])
     energy = kernel_energy(c, decay_y, decay_x)

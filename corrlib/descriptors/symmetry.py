@@ -143,7 +143,8 @@ def reflection_map(mesh, spectrum, *, k_init: int = K_INIT, k_final: int = K_FIN
 
 def _zoomout(spectrum, c: np.ndarray, k_final: int, samples=None) -> np.ndarray:
     """The pointwise self-map ZoomOut refines a functional map into (through ``samples``, if given)."""
-    steps = zoomout(spectrum.evecs, spectrum.evecs, spectrum.mass, c, k_final, ZOOMOUT_STEP, None, samples, samples)
+    steps = zoomout(spectrum.evecs, spectrum.evecs, spectrum.mass, c, k_final, ZOOMOUT_STEP,
+                    samples_x=samples, samples_y=samples)
     while True:
         try:
             next(steps)

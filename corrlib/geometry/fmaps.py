@@ -19,6 +19,7 @@ coefficients of a function on X to those of its pull-back on Y,
 
 from __future__ import annotations
 
+import threading
 from dataclasses import dataclass
 
 import numpy as np
@@ -60,17 +61,50 @@ class ZoomOutSamples:
     def of(cls, mesh, mass_diag: np.ndarray, count: int = ZOOMOUT_SAMPLES) -> "ZoomOutSamples | None":
         """Farthest-point samples of ``mesh`` and their geodesic Voronoi cells; ``None`` where the mesh has
         at most twice ``count`` vertices (ZoomOut then runs on every vertex: fewer than two vertices per
-        cell would save less than three quarters of the search, and change its answers)."""
+        cell would save less than three quarters of the search, and change its answers). The samples and
+        cells of the last few meshes are kept in memory (both starts of kernel matching, its functional-map
+        start and the final steps ask for the same ones)."""
         if mesh.n_vertices <= 2 * count:
             return None
+        index, owner = _sampled_cells(mesh, count)
+        weight = np.bincount(owner, weights=np.asarray(mass_diag, dtype=float), minlength=count)
+        graph = mesh.adjacency
+        return cls(index, owner, weight, graph.indptr, graph.indices)
+
+    @classmethod
+    def of_pair(cls, source, target, mass_x: np.ndarray, mass_y: np.ndarray, count: int = ZOOMOUT_SAMPLES):
+        """``(samples_x, samples_y)`` where both meshes are finer than twice ``count``, else ``(None, None)``:
+        a search goes through samples only where both sides have them (:func:`nearest_rows_through_samples`)."""
+        if min(source.n_vertices, target.n_vertices) <= 2 * count:
+            return None, None
+        return cls.of(source, mass_x, count), cls.of(target, mass_y, count)
+
+
+#: meshes whose samples and cells :meth:`ZoomOutSamples.of` keeps, by content and count (most recent last)
+_CELLS: dict[tuple[str, int], tuple[np.ndarray, np.ndarray]] = {}
+_CELLS_KEPT = 4
+_CELLS_LOCK = threading.Lock()
+
+
+def _sampled_cells(mesh, count: int) -> tuple[np.ndarray, np.ndarray]:
+    """(index, owner) of :class:`ZoomOutSamples`: farthest-point samples and the sample whose geodesic
+    Voronoi cell holds each vertex; computed once per mesh content among the last few asked for."""
+    key = (mesh.content_hash, count)
+    with _CELLS_LOCK:
+        if key in _CELLS:
+            _CELLS[key] = _CELLS.pop(key)  # most recent last
+            return _CELLS[key]
         index = farthest_point_sampling(mesh.vertices, count)
         owner, _ = voronoi_cells(mesh, index)
         stray = owner < 0  # a component no sample reached: the Euclidean nearest sample stands for it
         if stray.any():
             owner[stray] = cKDTree(mesh.vertices[index]).query(mesh.vertices[stray])[1]
-        weight = np.bincount(owner, weights=np.asarray(mass_diag, dtype=float), minlength=count)
-        graph = mesh.adjacency
-        return cls(index, owner, weight, graph.indptr, graph.indices)
+        for array in (index, owner):
+            array.flags.writeable = False
+        _CELLS[key] = (index, owner)
+        while len(_CELLS) > _CELLS_KEPT:
+            _CELLS.pop(next(iter(_CELLS)))
+        return index, owner
 
 
 def nearest_rows_through_samples(query: np.ndarray, data: np.ndarray, query_samples: ZoomOutSamples | None,

@@ -183,8 +183,7 @@ def solve_fmap_zoomout(source, target, params: FmapZoomOutParams, token):
         c_yx = descriptor_functional_map(source, target, spec_x, spec_y, desc_x, desc_y, k_init, params)
     with watch("zoomout"):
         phi, psi = spec_x.evecs, spec_y.evecs
-        samples_x = ZoomOutSamples.of(source, spec_x.mass.diagonal())
-        samples_y = ZoomOutSamples.of(target, spec_y.mass.diagonal())
+        samples_x, samples_y = ZoomOutSamples.of_pair(source, target, spec_x.mass.diagonal(), spec_y.mass.diagonal())
         gen = zoomout(phi, psi, spec_y.mass, c_yx, k_final, params.step, token, samples_x, samples_y)
         while True:
             try:

@@ -618,8 +618,8 @@ def final_zoomout_steps(source, target, map_xy, map_yx, smooth_k: int, token, wa
     with watch("zoomout"):
         return repeated_pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k, source.adjacency,
                                              target.adjacency, token,
-                                             ZoomOutSamples.of(source, spec_x.mass.diagonal()),
-                                             ZoomOutSamples.of(target, spec_y.mass.diagonal()))
+                                             *ZoomOutSamples.of_pair(source, target, spec_x.mass.diagonal(),
+                                                                     spec_y.mass.diagonal()))
 
 
 def solve_divergence_free(source, target, params: DivergenceFreeParams, token, *, initial=None):

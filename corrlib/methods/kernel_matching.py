@@ -1267,11 +1267,12 @@ def kernel_result(state: KernelState, full_map_xy: np.ndarray, full_map_yx: np.n
     if smooth_k > 0:
         yield Progress("final ZoomOut step", PROGRESS_SMOOTHING, f"nearest partners in {smooth_k} eigenfunctions")
         with watch("zoomout"):
-            samples_x = ZoomOutSamples.of(state.source, state.spec_x.mass.diagonal())
-            samples_y = ZoomOutSamples.of(state.target, state.spec_y.mass.diagonal())
+            samples_x, samples_y = ZoomOutSamples.of_pair(state.source, state.target, state.spec_x.mass.diagonal(),
+                                                          state.spec_y.mass.diagonal())
             if state.outside_map:  # a map refined from outside keeps its partners, which the reverse map lacks
-                full_map_xy, full_map_yx = pointwise_from_basis(full_map_xy, full_map_yx, state.spec_x,
-                                                                state.spec_y, smooth_k, False, samples_x, samples_y)
+                full_map_xy, full_map_yx = pointwise_from_basis(
+                    full_map_xy, full_map_yx, state.spec_x, state.spec_y, smooth_k, both_directions=False,
+                    samples_x=samples_x, samples_y=samples_y)
             else:
                 full_map_xy, full_map_yx = repeated_pointwise_from_basis(
                     full_map_xy, full_map_yx, state.spec_x, state.spec_y, smooth_k, state.source.adjacency,

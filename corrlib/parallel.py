@@ -81,14 +81,16 @@ class job_executor:
     def __exit__(self, exc_type, exc, tb):
         # Ctrl-C, SIGTERM, exit, a closed generator, or the user's cancel: nobody waits for the running jobs
         interrupted = exc_type is not None and (not issubclass(exc_type, Exception) or issubclass(exc_type, Cancelled))
-        if interrupted and self.client is None:
+        if interrupted and self.client is not None:
+            self.pool.shutdown(wait=False)  # Dask's executor cancels the cluster's futures instead of waiting
+        elif interrupted:
             # stop the local workers now instead of waiting for their jobs (else they outlive the command, and a
             # cancelled retrieval in the studio waits for the meshes in progress)
             workers = list((getattr(self.pool, "_processes", None) or {}).values())
             self.pool.shutdown(wait=False, cancel_futures=True)
             for worker in workers:
                 worker.terminate()
-        self.pool.shutdown(wait=True)
+        self.pool.shutdown(wait=True)  # a no-op after the above
         if self.client is not None:
             self.client.close()
         return False

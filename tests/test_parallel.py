@@ -107,3 +107,24 @@ def test_an_error_of_the_caller_still_waits_for_the_running_jobs():
             job = pool.submit(time.sleep, 0.5)
             raise RuntimeError("the caller's own error")
     assert job.done() and job.exception() is None
+
+
+@pytest.mark.slow
+def test_a_cancelled_run_on_a_dask_cluster_cancels_its_futures():
+    """On a Dask cluster the user's cancel cancels the submitted futures (Dask's executor with ``wait=False``)
+    instead of waiting for them, as the local pool stops its workers."""
+    import time
+
+    import distributed  # the dist extra is part of the test setup (scripts/test.sh)
+
+    from corrlib.errors import Cancelled
+
+    with distributed.LocalCluster(n_workers=1, threads_per_worker=1, processes=True,
+                                  dashboard_address=None) as cluster:
+        started = time.perf_counter()
+        with pytest.raises(Cancelled):
+            with parallel.job_executor(None, cluster.scheduler_address) as pool:
+                jobs = [pool.submit(time.sleep, 30) for _ in range(3)]
+                raise Cancelled("cancelled")
+        assert time.perf_counter() - started < 20  # 90 s if the three sleeps were waited for
+        assert all(job.cancelled() for job in jobs)

@@ -26,8 +26,9 @@ def _limit_threads(share: int):
     numba.set_num_threads(min(share, numba.config.NUMBA_NUM_THREADS))  # share >= 1
 
 
-def process_pool(jobs: int | None = None) -> ProcessPoolExecutor:
-    """A process pool with ``jobs`` workers (default: all cores).
+def process_pool(jobs: int | None = None, share: int | None = None) -> ProcessPoolExecutor:
+    """A process pool with ``jobs`` workers (default: all cores), each limited to ``share`` cores (default: its
+    share of the machine; ``corr perf bench`` runs one worker on one core as the serial baseline).
 
     Workers start from a fork server: forking the caller directly is unsafe
     once numba's OpenMP threads or the studio's threads run in it. As with
@@ -36,7 +37,7 @@ def process_pool(jobs: int | None = None) -> ProcessPoolExecutor:
     """
     jobs = jobs or os.cpu_count() or 1
     return ProcessPoolExecutor(max_workers=jobs, initializer=_limit_threads,
-                               initargs=((os.cpu_count() or 1) // jobs,),
+                               initargs=(share or (os.cpu_count() or 1) // jobs,),
                                mp_context=multiprocessing.get_context("forkserver"))
 
 

@@ -47,6 +47,16 @@ def test_pool_workers_know_their_share_of_the_cores(jobs):
     assert share == max(1, (os.cpu_count() or 1) // jobs)  # never 0, even with more workers than cores
 
 
+def test_a_pool_worker_can_be_limited_to_one_core():
+    """``corr perf bench``'s serial baseline: one worker with one core's share, whatever the machine."""
+    import numba
+
+    with parallel.process_pool(1, share=1) as pool:
+        assert pool.submit(cores.core_share).result() == 1
+        assert pool.submit(numba.get_num_threads).result() == 1
+        assert isinstance(pool.submit(cores.side_threads, 2).result(), cores.InlineExecutor)
+
+
 def test_kernel_matching_in_a_one_core_worker_gives_the_same_map(wolf_pair, monkeypatch):
     """With one core's share the side work (samples, the aligned second start, the cells, and the functional
     map's start of init="best") runs in the calling thread instead of beside it: the same computations in

@@ -176,9 +176,63 @@ def write_retrieval_people(folder) -> Path:
     return folder
 
 
+def mirror_image(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The mirror image x -> -x (faces rewound, so the normals still point out). Vertex i of the image is the
+    mirror image of vertex i, so as a person it is the mirror partner of vertex i (its left hand is the
+    image of the right hand)."""
+    return vertices * [-1.0, 1.0, 1.0], faces[:, ::-1]
+
+
+def write_kernel_battery(folder, noise: float = 0.0, seed: int = 0, subdivide: int = 0) -> Path:
+    """The people pairs that kernel matching's left/right decisions are judged on, as two ``corr bench``
+    datasets: ``capsule`` (the bundled people of ``resources/people``: no front but the feet) and ``face``
+    (``front=True``: a nose, a chest and buttocks). Each holds the four poses ``human0..3``, their mirror
+    images ``mirror0..3`` and ``pairs.txt``: every ordered pair of two poses, and every pose against the
+    other poses' mirror images (24 pairs). Ground truth: ``.vts`` rows (vertex i is the same body point in
+    every pose, the mirror partner's row in a mirror image) and ``.sym.vts`` (the mirrored rows), so that
+    ``corr bench`` reports the error with and without the left/right mirror accepted.
+
+    ``noise``: every vertex moved by Gaussian noise of that fraction of the bounding-box diagonal (each mesh
+    its own draw from ``seed``); ``subdivide``: edge-midpoint subdivisions of every mesh (the rows of the
+    original vertices are kept, the new vertices have no ground truth row)."""
+    import trimesh
+
+    rng = np.random.default_rng(seed)
+    out = Path(folder)
+    for kind, front in (("capsule", False), ("face", True)):
+        shapes, mirror = humanoids(front=front)
+        if not front:  # the capsule body's fourth pose, as bundled
+            shapes["human3"] = (posed(shapes["human0"][0], RETRIEVAL_POSE), shapes["human0"][1])
+        target = out / kind
+        (target / "corres").mkdir(parents=True, exist_ok=True)
+        rows = {"human": np.arange(len(mirror)), "mirror": mirror}
+        for pose, (vertices, faces) in sorted(shapes.items()):
+            number = pose[len("human"):]
+            for prefix, (v, f) in (("human", (vertices, faces)), ("mirror", mirror_image(vertices, faces))):
+                for _ in range(subdivide):
+                    v, f = trimesh.remesh.subdivide(v, f)
+                if noise > 0:
+                    v = v + rng.normal(scale=noise * np.linalg.norm(np.ptp(v, axis=0)), size=v.shape)
+                name = f"{prefix}{number}"
+                trimesh.Trimesh(v, f, process=False).export(target / f"{name}.off")
+                # identity rows on the original vertices: a subdivision appends its new vertices after them
+                np.savetxt(target / "corres" / f"{name}.vts", rows[prefix] + 1, fmt="%d")
+                other = "mirror" if prefix == "human" else "human"
+                np.savetxt(target / "corres" / f"{name}.sym.vts", rows[other] + 1, fmt="%d")
+        poses = [pose[len("human"):] for pose in sorted(shapes)]
+        pairs = [f"human{a} {prefix}{b}\n" for a in poses for b in poses if a != b for prefix in ("human", "mirror")]
+        (target / "pairs.txt").write_text("".join(pairs))
+    return out
+
+
 if __name__ == "__main__":
-    # python tests/_humanoid.py OUT: the ground-truth dataset; --people OUT: the bundled retrieval people
+    # python tests/_humanoid.py OUT: the ground-truth dataset; --people OUT: the bundled retrieval people;
+    # --kernel-battery OUT [NOISE [SUBDIVISIONS]]: kernel matching's people pairs (write_kernel_battery)
     if len(sys.argv) > 2 and sys.argv[1] == "--people":
         print(write_retrieval_people(sys.argv[2]))
+    elif len(sys.argv) > 2 and sys.argv[1] == "--kernel-battery":
+        extra = sys.argv[3:]
+        print(write_kernel_battery(sys.argv[2], noise=float(extra[0]) if extra else 0.0,
+                                   subdivide=int(extra[1]) if len(extra) > 1 else 0))
     else:
         print(write_dataset(sys.argv[1] if len(sys.argv) > 1 else "humanoid"))

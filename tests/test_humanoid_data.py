@@ -1,0 +1,31 @@
+"""The synthetic people's datasets (tests/_humanoid.py): their ground truth must say what it claims."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from _humanoid import write_kernel_battery
+from corrlib.bench import load_dataset
+from corrlib.io import load_mesh, load_vts
+from corrlib.resources import resource
+
+
+def test_kernel_battery_rows_name_the_same_body_point_in_poses_and_mirror_images(tmp_path):
+    """Every pose and mirror image is a ``corr bench`` dataset whose ``.vts`` rows are one body point across
+    shapes and whose ``.sym.vts`` rows are its mirror partner: on the rest pose (exactly symmetric) the row's
+    point of a mirror image lies where the same row's point of the pose lies, and the mirrored rows land on
+    the other side. The capsule poses are the bundled people."""
+    write_kernel_battery(tmp_path)
+    for kind in ("capsule", "face"):
+        dataset = load_dataset(tmp_path / kind)
+        assert len(dataset.pairs) == 24 and len(dataset.shapes) == 8
+        assert ("human1", "mirror2") in dataset.pairs and ("human1", "human1") not in dataset.pairs
+        meshes = {name: load_mesh(tmp_path / kind / f"{name}.off") for name in ("human0", "mirror0")}
+        size = np.linalg.norm(np.ptp(meshes["human0"].vertices, axis=0))
+        points = {name: mesh.vertices[load_vts(dataset.gt[name], mesh.n_vertices)] for name, mesh in meshes.items()}
+        mirrored = meshes["mirror0"].vertices[load_vts(dataset.gt_sym["mirror0"], meshes["mirror0"].n_vertices)]
+        assert np.abs(points["mirror0"] - points["human0"]).max() < 0.02 * size  # marching cubes' symmetry
+        lateral = np.abs(points["human0"][:, 0]) > 0.05 * size
+        assert np.all(np.sign(mirrored[lateral, 0]) == -np.sign(points["human0"][lateral, 0]))
+    bundled = load_mesh(resource("people/human3.off"))
+    np.testing.assert_allclose(load_mesh(tmp_path / "capsule" / "human3.off").vertices, bundled.vertices, atol=1e-5)

@@ -162,15 +162,22 @@ def write_dataset(folder) -> Path:
     return folder
 
 
+def capsule_people():
+    """:func:`humanoids` without a front, with :data:`RETRIEVAL_POSE` as a fourth pose ``human3``: the
+    people of ``resources/people``."""
+    shapes, mirror = humanoids()
+    rest_vertices, faces = shapes["human0"]
+    shapes["human3"] = (posed(rest_vertices, RETRIEVAL_POSE), faces)
+    return shapes, mirror
+
+
 def write_retrieval_people(folder) -> Path:
     """``human0.off`` … ``human3.off`` (the three poses and :data:`RETRIEVAL_POSE`): ``resources/people``."""
     import trimesh
 
     folder = Path(folder)
     folder.mkdir(parents=True, exist_ok=True)
-    shapes, _ = humanoids()
-    rest_vertices, faces = shapes["human0"]
-    shapes["human3"] = (posed(rest_vertices, RETRIEVAL_POSE), faces)
+    shapes, _ = capsule_people()
     for name, (vertices, pose_faces) in shapes.items():
         trimesh.Trimesh(vertices, pose_faces, process=False).export(folder / f"{name}.off")
     return folder
@@ -200,9 +207,7 @@ def write_kernel_battery(folder, noise: float = 0.0, seed: int = 0, subdivide: i
     rng = np.random.default_rng(seed)
     out = Path(folder)
     for kind, front in (("capsule", False), ("face", True)):
-        shapes, mirror = humanoids(front=front)
-        if not front:  # the capsule body's fourth pose, as bundled
-            shapes["human3"] = (posed(shapes["human0"][0], RETRIEVAL_POSE), shapes["human0"][1])
+        shapes, mirror = humanoids(front=True) if front else capsule_people()
         target = out / kind
         (target / "corres").mkdir(parents=True, exist_ok=True)
         rows = {"human": np.arange(len(mirror)), "mirror": mirror}

@@ -378,8 +378,8 @@ def suite_product(repeat: int, quick: bool = False) -> None:
 
 
 def suite_bench(repeat: int, quick: bool = False) -> None:
-    """Issue 8 targets: the runner's overhead per pair, and a kernel-matching benchmark on 5k pairs with
-    ``--jobs 1`` vs ``--jobs 2`` (20 pairs; ``quick``: 4)."""
+    """Issue 8 targets: the runner's overhead per pair, and a kernel-matching benchmark on 5k pairs (20; ``quick``:
+    4) in one worker limited to one core (the serial baseline), with ``--jobs 1`` and with ``--jobs 2``."""
     import shutil
 
     from corrlib.bench import Runner, load_dataset, parse_method, run_job

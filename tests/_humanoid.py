@@ -230,14 +230,44 @@ def write_kernel_battery(folder, noise: float = 0.0, seed: int = 0, subdivide: i
     return out
 
 
+def _kernel_battery_main(argv: list[str]) -> None:
+    """``--kernel-battery OUT [NOISE [SUBDIVISIONS]]``: named errors and exit status 2 for a bad argument or an
+    output folder that is a file, not writable or not empty, before anything is written."""
+    import argparse
+
+    from corrlib.errors import CorrError
+    from corrlib.io import ensure_output_folder
+
+    parser = argparse.ArgumentParser(prog="python tests/_humanoid.py --kernel-battery",
+                                     description="kernel matching's people pairs as two corr bench datasets")
+    parser.add_argument("out", type=Path, help="output folder (new or empty): OUT/capsule and OUT/face")
+    parser.add_argument("noise", type=float, nargs="?", default=0.0,
+                        help="vertex noise, a fraction of the bounding-box diagonal (default 0)")
+    parser.add_argument("subdivisions", type=int, nargs="?", default=0,
+                        help="edge-midpoint subdivisions of every mesh (default 0)")
+    args = parser.parse_args(argv)
+    if not (np.isfinite(args.noise) and args.noise >= 0):
+        parser.error(f"noise must be a finite fraction >= 0 of the diagonal, got {args.noise}")
+    if not 0 <= args.subdivisions <= 3:
+        parser.error(f"subdivisions must be 0 to 3 (each multiplies the vertices by four), got {args.subdivisions}")
+    folders = [args.out / kind for kind in ("capsule", "face")]
+    for folder in folders:
+        if folder.is_dir() and any(folder.iterdir()):
+            parser.error(f"{folder} is not empty; choose a new output folder")
+    for folder in folders:
+        try:
+            ensure_output_folder(folder)
+        except CorrError as exc:
+            parser.error(str(exc))
+    print(write_kernel_battery(args.out, noise=args.noise, subdivide=args.subdivisions))
+
+
 if __name__ == "__main__":
     # python tests/_humanoid.py OUT: the ground-truth dataset; --people OUT: the bundled retrieval people;
     # --kernel-battery OUT [NOISE [SUBDIVISIONS]]: kernel matching's people pairs (write_kernel_battery)
     if len(sys.argv) > 2 and sys.argv[1] == "--people":
         print(write_retrieval_people(sys.argv[2]))
-    elif len(sys.argv) > 2 and sys.argv[1] == "--kernel-battery":
-        extra = sys.argv[3:]
-        print(write_kernel_battery(sys.argv[2], noise=float(extra[0]) if extra else 0.0,
-                                   subdivide=int(extra[1]) if len(extra) > 1 else 0))
+    elif len(sys.argv) > 1 and sys.argv[1] == "--kernel-battery":
+        _kernel_battery_main(sys.argv[2:])
     else:
         print(write_dataset(sys.argv[1] if len(sys.argv) > 1 else "humanoid"))

@@ -2,7 +2,12 @@
 
 from __future__ import annotations
 
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
+import pytest
 
 from _humanoid import write_kernel_battery
 from corrlib.bench import load_dataset
@@ -29,3 +34,24 @@ def test_kernel_battery_rows_name_the_same_body_point_in_poses_and_mirror_images
         assert np.all(np.sign(mirrored[lateral, 0]) == -np.sign(points["human0"][lateral, 0]))
     bundled = load_mesh(resource("people/human3.off"))
     np.testing.assert_allclose(load_mesh(tmp_path / "capsule" / "human3.off").vertices, bundled.vertices, atol=1e-5)
+
+
+@pytest.mark.parametrize("args, message", [
+    (["OUT", "lots"], "invalid float value: 'lots'"),
+    (["OUT", "-0.1"], "noise must be a finite fraction >= 0"),
+    (["OUT", "0", "5"], "subdivisions must be 0 to 3"),
+    (["FILE/out"], "is a file, not a folder"),
+    (["FULL"], "is not empty; choose a new output folder"),
+])
+def test_kernel_battery_command_names_bad_arguments_and_writes_nothing(tmp_path, args, message):
+    """``python tests/_humanoid.py --kernel-battery``: a bad argument or output folder is a named error with exit
+    status 2, found before any mesh is written."""
+    (tmp_path / "FILE").write_text("not a folder")
+    (tmp_path / "FULL" / "face").mkdir(parents=True)
+    (tmp_path / "FULL" / "face" / "human0.off").write_text("an earlier run")
+    paths = [str(tmp_path / arg) if arg.isupper() or "/" in arg else arg for arg in args]
+    script = Path(__file__).with_name("_humanoid.py")
+    done = subprocess.run([sys.executable, str(script), "--kernel-battery", *paths], capture_output=True, text=True)
+    assert done.returncode == 2 and message in done.stderr and "Traceback" not in done.stderr, done.stderr
+    assert not (tmp_path / "OUT").exists() and not (tmp_path / "FULL" / "capsule").exists()
+    assert (tmp_path / "FULL" / "face" / "human0.off").read_text() == "an earlier run"

@@ -107,7 +107,6 @@ def test_reflection_of_posed_people_searches_the_signs():
     assert max(errors.values()) < 0.1, errors
 
 
-
 @pytest.mark.slow
 def test_reflection_of_posed_people_on_finer_meshes():
     """The same people subdivided to four times the vertices (the vertices kept first, so the mirrored truth
@@ -127,6 +126,7 @@ def test_reflection_of_posed_people_on_finer_meshes():
         reflection = reflection_map(mesh, mesh_spectrum(mesh, 60))
         errors[name] = geodesic_errors(reflection, mesh, np.arange(mirror.size), mirror).summary()["mean"]
     assert errors["human1"] < 0.09 and errors["human3"] < 0.01, errors
+
 
 def test_the_posed_capsule_person_is_reflected_left_to_right():
     """The fourth bundled person (resources/people/human3.off, the capsule body of tests/_humanoid.py in the

@@ -43,7 +43,7 @@ import numpy as np
 from corrlib.errors import Cancelled, InputError, ParameterError
 
 #: length of every row's list of best columns in the auction
-N_CANDIDATES = 16
+N_CANDIDATES = 8
 #: bids the auction may spend, per row and per √(columns), before the exact Jonker–Volgenant solver takes
 #: over. The auction is pseudo-polynomial: on near-tied columns (e.g. the copies of a column with a
 #: capacity, on an exactly symmetric shape) rows outbid each other by ε for a very long time.

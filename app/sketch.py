@@ -8,7 +8,8 @@ from PySide6.QtGui import QColor, QPainter, QPainterPath, QPen
 from PySide6.QtWidgets import QGridLayout, QHBoxLayout, QLabel, QPushButton, QSpinBox, QVBoxLayout, QWidget
 
 from corrlib.errors import CorrError
-from corrlib.shapes import Contour2D
+from corrlib.io import enclosed_outline
+from corrlib.shapes import Contour2D, inspect_contour
 
 MIN_CANVAS_SIZE = (240, 200)
 MIN_STEP_PX = 2.0  # a drawn point is kept when the mouse moved at least this far from the last one
@@ -145,13 +146,27 @@ class SketchPanel(QWidget):
         contour = Contour2D(p, name="sketch").ccw()
         return contour.resample(self.n_points.value())
 
+    def outline_crossed_stroke(self) -> bool:
+        """Replace a stroke that crosses itself by the outline of the region it encloses
+        (:func:`~corrlib.io.enclosed_outline`): a hand-drawn stroke overshoots its start when it is closed, or
+        loops where the hand shook, and a polygon that crosses itself has no inside to match. The canvas shows
+        the outline (Undo brings the stroke back). Returns whether the stroke was replaced."""
+        pts = self.area.points()
+        if pts is None or not any(f.code == "self-intersection" for f in inspect_contour(pts)):
+            return False
+        self.area.set_points(enclosed_outline(pts, name="sketch"))  # y down in and out: the raster is y-blind
+        return True
+
     def emit_contour(self) -> None:
         try:
+            replaced = self.outline_crossed_stroke()
             contour = self.contour()
         except CorrError as exc:
             self.status.setText(f"<span style='color:#b00020'>{exc}</span>")
             return
-        self.status.setText(f"sketch: {contour.n_points} points, ready as a query")
+        note = (" The stroke crossed itself, so the outline of the region it encloses is used (Undo brings the "
+                "stroke back).") if replaced else ""
+        self.status.setText(f"sketch: {contour.n_points} points, ready as a query.{note}")
         self.contour_ready.emit(contour)
 
     def _describe(self) -> None:

@@ -626,6 +626,89 @@ def contour_from_mask(mask: np.ndarray, *, name: str = "image") -> np.ndarray:
     return pts
 
 
+#: cells of the raster across the longer side of a drawing in :func:`enclosed_outline` (a stroke is resampled to
+#: a few hundred points afterwards, so a cell of a thousandth of its size loses nothing)
+OUTLINE_RESOLUTION = 1024
+
+
+def winding_mask(points: np.ndarray, width: int, height: int) -> np.ndarray:
+    """(height, width) bool: the cells whose centres ``(column + ½, row + ½)`` a closed polygon winds around.
+
+    The nonzero winding rule, by scanlines: along the line through a row's centres, the polygon's edges
+    cross upwards (+1) or downwards (−1), and the cumulative sum of these signs in the order of the crossings
+    is the winding number between two crossings. A point enclosed twice (where a stroke overlaps itself) is
+    inside, as it is for a pen that fills what it draws round.
+
+    Parameters
+    ----------
+    points : (m, 2) float
+        Polygon vertices in raster units, x along the columns, y along the rows; closed implicitly.
+    width, height : int
+    """
+    start = np.asarray(points, dtype=np.float64)
+    end = np.roll(start, -1, axis=0)
+    mask = np.zeros((height, width), dtype=bool)
+    for row in range(height):
+        y = row + 0.5
+        up = (start[:, 1] <= y) & (end[:, 1] > y)
+        down = (end[:, 1] <= y) & (start[:, 1] > y)
+        crossing = up | down
+        if not crossing.any():
+            continue
+        a, b = start[crossing], end[crossing]
+        x = a[:, 0] + (y - a[:, 1]) / (b[:, 1] - a[:, 1]) * (b[:, 0] - a[:, 0])
+        order = np.argsort(x, kind="stable")
+        x, winding = x[order], np.cumsum(np.where(up[crossing], 1, -1)[order])
+        for k in np.flatnonzero(winding[:-1] != 0):  # between crossings k and k + 1
+            first, last = int(np.ceil(x[k] - 0.5)), int(np.floor(x[k + 1] - 0.5))
+            mask[row, max(first, 0):min(last, width - 1) + 1] = True
+    return mask
+
+
+def enclosed_outline(points, *, resolution: int = OUTLINE_RESOLUTION, name: str = "drawing") -> np.ndarray:
+    """The outline of the region a closed drawing encloses, for a drawing that crosses itself.
+
+    A stroke drawn by hand crosses itself where the user did not mean it to: an end that overshoots the
+    start when the stroke is closed, a small loop of a shaky hand. A polygon that crosses itself has no
+    inside, so it cannot be filled or matched; the region it draws round can. That region (the nonzero
+    winding rule, :func:`winding_mask`) is rasterised with ``resolution`` cells across the drawing's longer
+    side, and the outer boundary of its largest connected part is returned (:func:`contour_from_mask`).
+
+    Parameters
+    ----------
+    points : (m, 2) array_like of float
+        The drawing's points in order, closed implicitly.
+    resolution : int
+    name : str
+        Used in error messages.
+
+    Returns
+    -------
+    (k, 2) float
+        The outline in the drawing's units (a simple polygon, not resampled).
+
+    Raises
+    ------
+    ContourError
+        The drawing encloses no area.
+    """
+    p = np.asarray(points, dtype=np.float64)
+    if p.ndim != 2 or p.shape[1] != 2 or p.shape[0] < 3 or not np.all(np.isfinite(p)):
+        raise ContourError(f"{name}: a drawing needs at least 3 finite (x, y) points, got shape {p.shape}")
+    lo, span = p.min(axis=0), np.ptp(p, axis=0)
+    if not span.max() > 0:
+        raise ContourError(f"{name}: the drawing encloses no area (all its points coincide)")
+    margin = 2  # empty cells round the drawing, so that its boundary is closed
+    scale = (resolution - 2 * margin) / span.max()
+    width, height = (np.ceil(span * scale).astype(int) + 2 * margin + 1)
+    mask = winding_mask((p - lo) * scale + margin, int(width), int(height))
+    if not mask.any():
+        raise ContourError(f"{name}: the drawing encloses no area")
+    boundary = contour_from_mask(mask, name=name)  # (column, −row) of the mask's cell centres
+    cells = np.column_stack([boundary[:, 0], -boundary[:, 1]]) + 0.5
+    return lo + (cells - margin) / scale
+
+
 def silhouette_mask(image: np.ndarray, threshold: float | None = None, *, name: str = "image") -> np.ndarray:
     """Binary silhouette of a grey or colour image.
 

@@ -11,6 +11,7 @@ from _data import SILHOUETTES, SKETCH2D, TOSCA
 from corrlib.errors import ContourError, FileFormatError, InputError, MeshError
 from corrlib.io import (
     atomic_write,
+    enclosed_outline,
     load_contour,
     load_map,
     load_mesh,
@@ -20,7 +21,9 @@ from corrlib.io import (
     save_map,
     save_mesh,
     save_result,
+    winding_mask,
 )
+from corrlib.shapes import Contour2D, inspect_contour
 
 
 def test_load_keeps_vertex_order():
@@ -258,3 +261,68 @@ def test_atomic_write_uses_normal_permissions(tmp_path):
     finally:
         os.umask(old)
     assert stat.S_IMODE((tmp_path / "m.txt").stat().st_mode) == 0o644
+
+
+def _winding_numbers(polygon: np.ndarray, points: np.ndarray) -> np.ndarray:
+    """Winding number of a closed polygon round every point, as the sum of the signed angles its edges
+    subtend (an independent definition of what the scanlines of ``winding_mask`` count)."""
+    a = polygon[None, :, :] - points[:, None, :]
+    b = np.roll(polygon, -1, axis=0)[None, :, :] - points[:, None, :]
+    angles = np.arctan2(a[..., 0] * b[..., 1] - a[..., 1] * b[..., 0], np.sum(a * b, axis=-1))
+    return np.rint(angles.sum(axis=1) / (2 * np.pi)).astype(int)
+
+
+def test_winding_mask_is_the_winding_number_rule():
+    angles = 4 * np.pi * np.arange(5) / 5  # a pentagram winds twice round its centre
+    pentagram = 15 + 11 * np.column_stack([np.cos(angles), np.sin(angles)])
+    rng = np.random.default_rng(3)
+    rows, cols = np.mgrid[0:30, 0:30]
+    centres = np.column_stack([cols.ravel() + 0.5, rows.ravel() + 0.5])
+    for polygon in [pentagram] + [rng.uniform(1.0, 29.0, size=(12, 2)) for _ in range(3)]:
+        winding = _winding_numbers(polygon, centres).reshape(30, 30)
+        np.testing.assert_array_equal(winding_mask(polygon, 30, 30), winding != 0)
+    assert _winding_numbers(pentagram, np.array([[15.0, 15.0]]))[0] == 2  # inside, though wound round twice
+
+
+def _traced(corners: np.ndarray, n: int) -> np.ndarray:
+    closed = np.vstack([corners, corners[:1]])
+    length = np.r_[0.0, np.cumsum(np.linalg.norm(np.diff(closed, axis=0), axis=1))]
+    s = np.linspace(0.0, length[-1], n, endpoint=False)
+    return np.column_stack([np.interp(s, length, closed[:, 0]), np.interp(s, length, closed[:, 1])])
+
+
+def test_enclosed_outline_of_a_stroke_that_overshoots_its_start():
+    square = _traced(np.array([[0.0, 0.0], [10.0, 0.0], [10.0, 10.0], [0.0, 10.0]]), 200)
+    stroke = np.vstack([square, [[0.0, -0.3], [0.5, -0.3], [1.5, 0.2]]])  # past the start, across the first edge
+    assert [f.code for f in inspect_contour(stroke)] == ["self-intersection"]
+    outline = enclosed_outline(stroke)
+    assert not inspect_contour(outline)  # a simple polygon
+    cell = 10.3 / 1020
+    assert Contour2D(outline).area == pytest.approx(100.0 + 0.5 * 1.5 * 0.3, abs=40 * cell)
+    # every outline point lies on the square's sides or on the overshoot, within a cell
+    off_square = np.minimum.reduce([np.abs(outline[:, 0]), np.abs(outline[:, 0] - 10), np.abs(outline[:, 1]),
+                                    np.abs(outline[:, 1] - 10)])
+    assert np.all((off_square <= cell) | (outline[:, 1] < 0.2 + cell))
+    # an outline of a simple polygon is the polygon, scaled and moved with it
+    far = enclosed_outline(square * 1e3 + 5e4)
+    assert Contour2D(far).area == pytest.approx(1e8, rel=1e-2)
+    assert np.allclose(far.min(axis=0), 5e4, atol=12.0) and np.allclose(far.max(axis=0), 6e4, atol=12.0)
+
+
+def test_enclosed_outline_of_a_figure_eight_holds_both_loops():
+    t = np.linspace(0.0, 2 * np.pi, 200, endpoint=False)
+    big = np.column_stack([3 + 3 * np.cos(t + np.pi), 3 * np.sin(t + np.pi)])  # through the origin, anticlockwise
+    small = np.column_stack([-1 + np.cos(t), -np.sin(t)])  # through the origin the other way round
+    outline = enclosed_outline(np.vstack([big, small]))
+    assert not inspect_contour(outline)
+    assert Contour2D(outline).area == pytest.approx(10 * np.pi, rel=1e-2)  # each loop is wound round once
+
+
+def test_enclosed_outline_of_a_drawing_without_area():
+    line = np.column_stack([np.r_[np.linspace(0, 5, 20), np.linspace(5, 0, 20)], np.zeros(40)])
+    with pytest.raises(ContourError, match="sketch: the drawing encloses no area"):
+        enclosed_outline(line, name="sketch")
+    with pytest.raises(ContourError, match="sketch: the drawing encloses no area"):
+        enclosed_outline(np.ones((5, 2)), name="sketch")
+    with pytest.raises(ContourError, match="at least 3 finite"):
+        enclosed_outline(np.array([[0.0, 0.0], [1.0, np.nan], [2.0, 0.0]]), name="sketch")

@@ -104,6 +104,25 @@ def test_sketch_becomes_a_query(qtbot, window):
     assert window.source is contour and window.retrieval_view.query is contour
 
 
+def test_a_stroke_that_crosses_itself_is_read_as_the_region_it_encloses(qtbot, window):
+    from corrlib.shapes import inspect_contour
+
+    t = np.linspace(0, 2 * np.pi, 80, endpoint=False)
+    on = np.linspace(0.05, 0.3, 6)  # the hand goes on past the start, then in across the stroke
+    stroke = np.vstack([np.column_stack([120 + 80 * np.cos(t), 100 + 60 * np.sin(t)]),
+                        np.column_stack([120 + 82 * np.cos(on), 100 + 62 * np.sin(on)]),
+                        [[120 + 72 * np.cos(0.3), 100 + 54 * np.sin(0.3)]]])
+    assert [f.code for f in inspect_contour(stroke)] == ["self-intersection"]
+    window.sketch.area.set_points(stroke)
+    with qtbot.waitSignal(window.sketch.contour_ready, timeout=5000) as blocker:
+        window.sketch.emit_contour()
+    assert blocker.args[0].area == pytest.approx(np.pi * 80 * 60, rel=0.02)
+    assert "crossed itself" in window.sketch.status.text()
+    assert not inspect_contour(window.sketch.area.points())  # the canvas shows the outline used
+    window.sketch.area.undo()
+    np.testing.assert_array_equal(window.sketch.area.points(), stroke)
+
+
 @pytest.mark.slow
 def test_retrieval_gallery_order(qtbot, window, tmp_path):
     from corrlib.geometry.sections import render_silhouette

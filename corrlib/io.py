@@ -50,7 +50,7 @@ from corrlib.formats import (  # noqa: F401  (the table of formats, re-exported)
     dialog_filter,
     suffixes,
 )
-from corrlib.shapes import Contour2D, TriMesh
+from corrlib.shapes import Contour2D, TriMesh, inspect_contour
 
 
 # ----------------------------------------------------------------------------- atomic writes
@@ -690,20 +690,28 @@ def enclosed_outline(points, *, resolution: int = OUTLINE_RESOLUTION, name: str 
     Raises
     ------
     ContourError
-        The drawing encloses no area.
+        What makes any polygon unusable except crossing itself (:func:`~corrlib.shapes.inspect_contour`:
+        complex, non-finite or overflowing coordinates, fewer than 3 distinct points, no area), or no region
+        wider than a cell.
+    ParameterError
+        ``resolution`` is not a whole number of at least 16 cells.
     """
+    if isinstance(resolution, bool) or not isinstance(resolution, (int, np.integer)) or resolution < 16:
+        raise ParameterError(f"resolution must be a whole number of at least 16 raster cells, got {resolution!r}")
+    # what makes a polygon unusable, other than crossing itself (complex, non-finite or overflowing coordinates,
+    # fewer than 3 points, no area at all): the contour's own checks
+    problems = [f for f in inspect_contour(points, min_points=3)
+                if f.level == "error" and f.code != "self-intersection"]
+    if problems:
+        raise ContourError(f"{name}: {problems[0].message}")
     p = np.asarray(points, dtype=np.float64)
-    if p.ndim != 2 or p.shape[1] != 2 or p.shape[0] < 3 or not np.all(np.isfinite(p)):
-        raise ContourError(f"{name}: a drawing needs at least 3 finite (x, y) points, got shape {p.shape}")
     lo, span = p.min(axis=0), np.ptp(p, axis=0)
-    if not span.max() > 0:
-        raise ContourError(f"{name}: the drawing encloses no area (all its points coincide)")
     margin = 2  # empty cells round the drawing, so that its boundary is closed
     scale = (resolution - 2 * margin) / span.max()
     width, height = (np.ceil(span * scale).astype(int) + 2 * margin + 1)
     mask = winding_mask((p - lo) * scale + margin, int(width), int(height))
     if not mask.any():
-        raise ContourError(f"{name}: the drawing encloses no area")
+        raise ContourError(f"{name}: the drawing encloses no area (none wider than 1/{resolution} of its size)")
     boundary = contour_from_mask(mask, name=name)  # (column, −row) of the mask's cell centres
     cells = np.column_stack([boundary[:, 0], -boundary[:, 1]]) + 0.5
     return lo + (cells - margin) / scale

@@ -8,7 +8,7 @@ import trimesh
 from PIL import Image
 
 from _data import SILHOUETTES, SKETCH2D, TOSCA
-from corrlib.errors import ContourError, FileFormatError, InputError, MeshError
+from corrlib.errors import ContourError, FileFormatError, InputError, MeshError, ParameterError
 from corrlib.io import (
     atomic_write,
     enclosed_outline,
@@ -320,9 +320,17 @@ def test_enclosed_outline_of_a_figure_eight_holds_both_loops():
 
 def test_enclosed_outline_of_a_drawing_without_area():
     line = np.column_stack([np.r_[np.linspace(0, 5, 20), np.linspace(5, 0, 20)], np.zeros(40)])
-    with pytest.raises(ContourError, match="sketch: the drawing encloses no area"):
+    with pytest.raises(ContourError, match="sketch: the contour encloses no area"):
         enclosed_outline(line, name="sketch")
-    with pytest.raises(ContourError, match="sketch: the drawing encloses no area"):
+    with pytest.raises(ContourError, match="sketch: the contour has 1 distinct points"):
         enclosed_outline(np.ones((5, 2)), name="sketch")
-    with pytest.raises(ContourError, match="at least 3 finite"):
+    with pytest.raises(ContourError, match="sketch: 1 contour points are NaN"):
         enclosed_outline(np.array([[0.0, 0.0], [1.0, np.nan], [2.0, 0.0]]), name="sketch")
+    with pytest.raises(ContourError, match="sketch: the drawing encloses no area"):  # a sliver below a cell
+        enclosed_outline(np.array([[0.0, 0.0], [1000.0, 0.0], [1000.0, 1e-4], [0.0, 1e-4]]), name="sketch")
+    with pytest.raises(ContourError, match="sketch: coordinates up to .* overflow"):
+        enclosed_outline(np.array([[0.0, 0.0], [1e308, 0.0], [1e308, 1e308], [5e307, -1e308]]), name="sketch")
+    with pytest.raises(ParameterError, match="resolution must be a whole number of at least 16"):
+        enclosed_outline(line, resolution=8)
+    with pytest.raises(ContourError, match="sketch: contour points are complex"):
+        enclosed_outline(np.array([[0, 0], [1, 0], [1j, 1]]), name="sketch")

@@ -102,6 +102,7 @@ def test_sketch_becomes_a_query(qtbot, window):
     contour = blocker.args[0]
     assert contour.n_points == window.sketch.n_points.value() and contour.is_ccw
     assert window.source is contour and window.retrieval_view.query is contour
+    assert "crossed itself" not in window.sketch.status.text() and len(window.sketch.area.strokes) == 1
 
 
 def test_a_stroke_that_crosses_itself_is_read_as_the_region_it_encloses(qtbot, window):

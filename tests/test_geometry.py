@@ -57,6 +57,39 @@ def test_unit_square_neumann_spectrum():
     assert np.allclose(evals[1:], exact[1:], rtol=0.01)
 
 
+def test_cotan_weights_of_a_sliver_triangle_match_their_analytic_values():
+    """A triangle (0, 0), (1, 0), (1/2, h) has cotangents 1/(2h) at its base and (h² − 1/4)/h at its apex
+    (|a × b| = h for both corners' edge vectors). At h = 1e-9 the squares of Lagrange's identity lose h²
+    below the rounding of 1/16, which made the apex weight −1e299; in 3D and embedded in 4D alike."""
+    h = 1e-9
+    for dim in (3, 4):
+        x = np.zeros((3, dim))
+        x[1, 0], x[2, 0], x[2, 1] = 1.0, 0.5, h
+        s = cotan_stiffness(x, np.array([[0, 1, 2]])).toarray()
+        # S_ij = −(cot of the angle opposite edge ij) / 2
+        assert -s[0, 1] == pytest.approx(0.5 * (h * h - 0.25) / h, rel=1e-6)
+        assert -s[1, 2] == pytest.approx(0.5 * 0.5 / h, rel=1e-6)
+        assert -s[0, 2] == pytest.approx(0.5 * 0.5 / h, rel=1e-6)
+
+
+def test_a_mesh_with_a_cap_keeps_its_spectrum():
+    """A grid vertex moved to within 1e-10 of the opposite edge of one of its triangles (a *cap*, as an edge
+    collapse leaves): the linear FEM is still a discretisation of the same square, so its Neumann eigenvalues
+    stay near those of the grid as it was, with one zero eigenvalue (the shape is connected)."""
+    uv, faces = grid_mesh(20, 20)
+    x = np.column_stack([uv, np.zeros(len(uv))])
+    regular, _ = eigenpairs(cotan_stiffness(x, faces), mass_matrix(x, faces), 6)
+    centre = int(np.argmin(np.linalg.norm(uv - 0.5, axis=1)))
+    face = faces[np.flatnonzero((faces == centre).any(axis=1))[0]]
+    a, b = (v for v in face if v != centre)
+    midpoint = 0.5 * (x[a] + x[b])
+    inward = x[centre] - midpoint
+    x[centre] = midpoint + 1e-10 * inward / np.linalg.norm(inward)
+    evals, _ = eigenpairs(cotan_stiffness(x, faces), mass_matrix(x, faces), 6)
+    assert evals[0] == 0.0 and evals[1] > 1.0
+    assert np.allclose(evals[1:], regular[1:], rtol=0.05)
+
+
 @pytest.mark.parametrize("mass", ["consistent", "lumped"])
 def test_circle_spectrum_converges(mass):
     exact = np.array([0, 1, 1, 4, 4, 9, 9, 16, 16])

@@ -373,7 +373,7 @@ def available_eigenpairs(mesh, k: int, what: str = "spectral descriptors") -> in
 
 
 def _spectrum_key(mesh, mass: str) -> str:
-    return cache.make_key("spectrum-v2", mesh.content_hash, mass)
+    return cache.make_key("spectrum-v3", mesh.content_hash, mass)
 
 
 def _cached_spectrum(mesh, k: int, key: str, stiffness, mass_mat) -> Spectrum | None:

@@ -25,18 +25,20 @@ from corrlib.errors import InputError
 class Frames:
     """The similarity transforms placing both shapes in the unit cube.
 
-    ``u = scale · (x @ rotation.T - centre_x) + 0.5`` for the source,
-    ``u = scale · (y - centre_y) + 0.5`` for the target.
+    ``u = scale · (x @ linear.T - centre_x) + 0.5`` for the source,
+    ``u = scale · (y - centre_y) + 0.5`` for the target. ``linear`` is the
+    source's rotation times its size relative to the target's (a flow that
+    preserves volume cannot change the size, so the pre-alignment does).
     """
 
-    rotation: np.ndarray  # (3, 3)
+    linear: np.ndarray  # (3, 3): rotation × the source's scale factor
     scale: float
     centre_x: np.ndarray  # (3,)
     centre_y: np.ndarray  # (3,)
 
     def source_to_cube(self, points: np.ndarray) -> np.ndarray:
         """(n, 3) float: source points in cube coordinates."""
-        return self.scale * (np.asarray(points, dtype=np.float64) @ self.rotation.T - self.centre_x) + 0.5
+        return self.scale * (np.asarray(points, dtype=np.float64) @ self.linear.T - self.centre_x) + 0.5
 
     def target_to_cube(self, points: np.ndarray) -> np.ndarray:
         """(n, 3) float: target points in cube coordinates."""
@@ -47,8 +49,8 @@ class Frames:
         return (np.asarray(points, dtype=np.float64) - 0.5) / self.scale + self.centre_y
 
     def as_array(self) -> np.ndarray:
-        """(16,) float: rotation (row-major), scale, centre_x, centre_y (how results store it)."""
-        return np.concatenate([self.rotation.ravel(), [self.scale], self.centre_x, self.centre_y])
+        """(16,) float: linear part (row-major), scale, centre_x, centre_y (how results store it)."""
+        return np.concatenate([self.linear.ravel(), [self.scale], self.centre_x, self.centre_y])
 
     @classmethod
     def from_array(cls, arr) -> "Frames":
@@ -124,8 +126,9 @@ class Deformation:
     def positions(self, points, t: float = 1.0) -> np.ndarray:
         """(n, 3) float: source points (original coordinates) flowed to time ``t``, in target coordinates.
 
-        t = 0 is the source after the rigid pre-alignment (placed on the
-        target), t = 1 the deformed source, t > 1 extrapolates.
+        t = 0 is the source after the pre-alignment (rotated, brought to the
+        target's size and placed on it), t = 1 the deformed source, t > 1
+        extrapolates.
         """
         u = self.frames.source_to_cube(points)
         return self.frames.cube_to_target(trajectory(self.basis, u, self.coeffs, t, self.n_steps, keep=False))

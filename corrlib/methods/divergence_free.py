@@ -6,7 +6,10 @@ of :mod:`corrlib.deformation.basis` (volume preserving, no flux through the
 unit cube), integrated by RK2 (:mod:`corrlib.deformation.flow`). The
 correspondence and the coefficients are estimated jointly by EM:
 
-* Pre-processing: both shapes are mapped into Ω = [0, 1]³ by one common
+* Pre-processing: the source is scaled to the target's surface area
+  (:func:`size_ratio`; a volume-preserving flow cannot change the size, so
+  shapes in different units would otherwise be matched part to whole), then
+  both are mapped into Ω = [0, 1]³ by one common
   scale (the larger shape fills ``1 - 2 margin``), each centred; the source
   is rotated by the rigid PCA alignment whose proper axis orientation (or
   no rotation at all) has the lowest Eq. 10.17 energy (mean over source
@@ -85,7 +88,7 @@ from corrlib.deformation.basis import DivFreeBasis
 from corrlib.deformation.flow import check_points, flow, flow_with_jacobian
 from corrlib.deformation.mixture import mixture_moments
 from corrlib.deformation.model import Deformation, Frames, StoredSteps
-from corrlib.errors import InputError
+from corrlib.errors import InputError, ParameterError
 from corrlib.geometry.fmaps import ZoomOutSamples, repeated_pointwise_from_basis, resolved_eigenpairs
 from corrlib.geometry.sampling import farthest_point_sampling
 from corrlib.methods.base import MatchResult, param
@@ -158,12 +161,24 @@ def _bbox_centre(p: np.ndarray) -> np.ndarray:
     return 0.5 * (p.min(axis=0) + p.max(axis=0))
 
 
-def _frames_for(points_x: np.ndarray, points_y: np.ndarray, rotation: np.ndarray, margin: float) -> Frames:
-    rx = points_x @ rotation.T
+def _frames_for(points_x: np.ndarray, points_y: np.ndarray, rotation: np.ndarray, margin: float,
+                source_scale: float = 1.0) -> Frames:
+    linear = source_scale * rotation
+    rx = points_x @ linear.T
     extent = max(np.ptp(rx, axis=0).max(), np.ptp(points_y, axis=0).max())
     if extent <= 0:
         raise InputError("the shapes have zero extent")
-    return Frames(rotation, (1.0 - 2.0 * margin) / extent, _bbox_centre(rx), _bbox_centre(points_y))
+    return Frames(linear, (1.0 - 2.0 * margin) / extent, _bbox_centre(rx), _bbox_centre(points_y))
+
+
+def size_ratio(source, target) -> float:
+    """The target's size relative to the source's, ``√(A_Y / A_X)`` for surface areas ``A``: the scale factor that
+    gives the source the target's area. An isometry keeps the area, so for two poses of one shape in different
+    units this is exactly the change of units."""
+    if not (source.area > 0 and target.area > 0):
+        raise InputError(f"{source.name} and {target.name} must have positive surface areas "
+                         f"(got {source.area:g} and {target.area:g})")
+    return math.sqrt(target.area / source.area)
 
 
 def _principal_axes(p: np.ndarray) -> np.ndarray:
@@ -436,7 +451,7 @@ class FitResult:
     converged: bool
 
 
-def prepare_fit(points_x, points_y, feats_x, feats_y, params, watch, extra_rotations=()):
+def prepare_fit(points_x, points_y, feats_x, feats_y, params, watch, extra_rotations=(), source_scale: float = 1.0):
     """Frames (pre-alignment), samples and the fixed feature distances."""
     rng_start = params.seed % len(points_x)
     with watch("sampling"):
@@ -452,7 +467,7 @@ def prepare_fit(points_x, points_y, feats_x, feats_y, params, watch, extra_rotat
     w = 0.0
     with watch("alignment"):
         for rot in rotations:
-            frames = _frames_for(points_x, points_y, rot, params.margin)
+            frames = _frames_for(points_x, points_y, rot, params.margin, source_scale)
             ux, uy = frames.source_to_cube(points_x[sx]), frames.target_to_cube(points_y[sy])
             dist = _sq_distances(ux, uy)
             if feat_dist is not None:
@@ -466,7 +481,7 @@ def prepare_fit(points_x, points_y, feats_x, feats_y, params, watch, extra_rotat
 
 
 def fit(points_x, points_y, params: DivergenceFreeParams | None = None, token=None, *,
-        feats_x=None, feats_y=None, watch: Stopwatch | None = None, extra_rotations=()):
+        feats_x=None, feats_y=None, watch: Stopwatch | None = None, extra_rotations=(), source_scale: float = 1.0):
     """EM fit of the divergence-free deformation of ``points_x`` onto ``points_y`` (generator).
 
     Parameters
@@ -483,6 +498,9 @@ def fit(points_x, points_y, params: DivergenceFreeParams | None = None, token=No
     watch : Stopwatch, optional
     extra_rotations : sequence of (3, 3) float
         Pre-alignment candidates besides the PCA ones (e.g. the rigid fit of a given map).
+    source_scale : float
+        Factor the source is scaled by before the flow (:func:`size_ratio` for two surfaces), so that shapes of
+        different sizes or units meet at one size: the flow preserves volume and cannot change it.
 
     Yields
     ------
@@ -504,7 +522,10 @@ def fit(points_x, points_y, params: DivergenceFreeParams | None = None, token=No
             raise InputError(f"feature arrays {feats_x.shape} and {feats_y.shape} do not fit the point counts "
                              f"{len(px)} and {len(py)}")
     yield Progress("preparing", 0.02, "samples and pre-alignment")
-    sx, sy, feat_dist, frames, w = prepare_fit(px, py, feats_x, feats_y, params, watch, extra_rotations)
+    if not (np.isfinite(source_scale) and source_scale > 0):
+        raise ParameterError(f"source_scale must be a positive number, got {source_scale!r}")
+    sx, sy, feat_dist, frames, w = prepare_fit(px, py, feats_x, feats_y, params, watch, extra_rotations,
+                                               source_scale)
     basis = DivFreeBasis(params.n_fields)
     start = frames.source_to_cube(px[sx])
     targets_y = frames.target_to_cube(py[sy])
@@ -645,8 +666,9 @@ def solve_divergence_free(source, target, params: DivergenceFreeParams, token, *
     feats_x = feats_y = None
     if blocks_x:
         feats_x, feats_y = _unit_blocks(blocks_x, blocks_y) if len(blocks_x) > 1 else (blocks_x[0], blocks_y[0])
+    source_scale = size_ratio(source, target)
     fitted = yield from fit(source.vertices, target.vertices, params, token, feats_x=feats_x, feats_y=feats_y,
-                            watch=watch, extra_rotations=extra_rotations)
+                            watch=watch, extra_rotations=extra_rotations, source_scale=source_scale)
     deformation = Deformation(fitted.basis, fitted.coeffs, fitted.frames, params.n_steps)
     yield Progress("dense map", 0.95, f"flowing {source.n_vertices} vertices")
     with watch("trajectory"):  # every RK2 step up to SEQUENCE_T_MAX; step T is t = 1 (same step size)
@@ -665,8 +687,12 @@ def solve_divergence_free(source, target, params: DivergenceFreeParams, token, *
         "iterations": fitted.iterations,
         "converged": bool(fitted.converged),
         "feature_factor": fitted.feature_factor,
+        "source_scale": source_scale,
     }
-    change = relative_volume_change(signed_volume(morphed, source.faces), source.enclosed_volume(), source.area)
+    volume = source.enclosed_volume()  # the flow preserves the volume of the source brought to the target's size
+    change = relative_volume_change(signed_volume(morphed, source.faces),
+                                    None if volume is None else volume * source_scale ** 3,
+                                    source.area * source_scale ** 2)
     if change is not None:
         extras["volume_change"] = change
     yield Progress("done", 1.0, f"{fitted.iterations} EM iterations, energy {fitted.energy_trace[-1]:.6g}")

@@ -169,7 +169,7 @@ def inspect_mesh(vertices, faces) -> list[Finding]:
     edges = _Edges.of(f, n)
     findings += _manifold_findings(edges)
     findings += _duplicate_face_findings(f, n)
-    findings += _connectivity_findings(f, n)
+    findings += _connectivity_findings(v, f)
     findings += _edge_warnings(edges)
     return findings
 
@@ -279,9 +279,11 @@ def _duplicate_face_findings(f: np.ndarray, n: int) -> list[Finding]:
     return []
 
 
-def _connectivity_findings(f: np.ndarray, n: int) -> list[Finding]:
-    """Vertices in no face, and more than one connected component."""
+def _connectivity_findings(v: np.ndarray, f: np.ndarray) -> list[Finding]:
+    """Vertices in no face, and more than one connected component (with the advice to weld where the
+    components touch at repeated vertex positions: a triangle soup, as STL stores a mesh)."""
     findings = []
+    n = v.shape[0]
     used = np.zeros(n, dtype=bool)
     used[f.ravel()] = True
     unused = np.flatnonzero(~used)
@@ -295,11 +297,21 @@ def _connectivity_findings(f: np.ndarray, n: int) -> list[Finding]:
     if n_comp_used > 1:
         sizes = np.bincount(labels[used])
         sizes = np.sort(sizes[sizes > 0])[::-1]
+        counts = f"{', '.join(map(str, sizes[:5]))}{', ...' if sizes.size > 5 else ''}"
+        _, position = np.unique(v, axis=0, return_inverse=True)
+        position = position.ravel()
+        n_welded = np.unique(_face_components(n, position[f])[1][position[used]]).size
+        if n_welded < n_comp_used:  # the parts share positions but not vertices
+            advice = (f"{n - np.unique(position).size} vertices repeat the position of another, so faces that "
+                      f"meet there are not joined (welded, {n_welded} component{'s' if n_welded > 1 else ''} would "
+                      "remain); weld coincident vertices in a mesh editor (merge by distance), or save the mesh "
+                      "as .stl, which is welded when it is loaded")
+        else:
+            advice = ("delete the other parts in a mesh editor, or keep the largest with "
+                      "corrlib.io.load_mesh(path, largest_component=True)")
         findings.append(
-            Finding("error", "components", f"the mesh has {n_comp_used} connected components "
-                    f"(vertex counts {', '.join(map(str, sizes[:5]))}{', ...' if sizes.size > 5 else ''}); "
-                    "delete the other parts in a mesh editor, or keep the largest with "
-                    "corrlib.io.load_mesh(path, largest_component=True)")
+            Finding("error", "components", f"the mesh has {n_comp_used} connected components (vertex counts "
+                    f"{counts}); {advice}")
         )
     return findings
 

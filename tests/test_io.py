@@ -95,9 +95,27 @@ def test_largest_component_option(tmp_path):
     b.apply_translation([5, 0, 0])
     both = trimesh.util.concatenate([a, b])
     save_mesh(tmp_path / "two.off", both.vertices, both.faces)
-    with pytest.raises(MeshError, match="connected components"):
+    with pytest.raises(MeshError, match="connected components.*keep the largest"):
         load_mesh(tmp_path / "two.off")
     assert load_mesh(tmp_path / "two.off", largest_component=True).n_vertices == len(a.vertices)
+
+
+@pytest.mark.parametrize("suffix", [".obj", ".ply"])
+def test_a_triangle_soup_is_told_to_weld_its_vertices(tmp_path, suffix):
+    """Faces that do not share their corners (every triangle its own three vertices, as STL stores a mesh and
+    some exporters write OBJ and PLY) make one component per face; keeping the largest would keep one
+    triangle, so the error says to weld instead. An STL file is welded on loading."""
+    sphere = trimesh.creation.icosphere(subdivisions=2)
+    corners = sphere.vertices[sphere.faces].reshape(-1, 3)
+    soup = trimesh.Trimesh(corners, np.arange(len(corners)).reshape(-1, 3), process=False)
+    soup.export(tmp_path / f"soup{suffix}")
+    repeated = len(corners) - len(sphere.vertices)  # 960 corners at 162 positions
+    with pytest.raises(MeshError, match=rf"soup\S*: the mesh has 320 connected components .* {repeated} vertices "
+                                        r"repeat the position of another.*1 component would remain.*weld") as caught:
+        load_mesh(tmp_path / f"soup{suffix}")
+    assert "keep the largest" not in str(caught.value)
+    soup.export(tmp_path / "soup.stl")
+    assert load_mesh(tmp_path / "soup.stl").n_vertices == len(sphere.vertices)
 
 
 def test_contour_text_files(tmp_path):

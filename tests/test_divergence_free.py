@@ -331,7 +331,8 @@ def test_kabsch_rotation_recovers_a_rotation_from_matches(wolf_pair):
 
 def test_a_given_map_enters_as_a_feature_and_a_prealignment(wolf_pair):
     """The initial map (here the identity with 20 % random partners) is a refinement input: with it the
-    small fit lands on the identity far better than without it (same budget)."""
+    small fit lands on the identity far better than without it (same budget). Compared on the flow's own maps:
+    the final ZoomOut brings both to the identity on this pair."""
     from corrlib.methods.base import InitialMatch
 
     wolf0, wolf1 = wolf_pair
@@ -344,8 +345,8 @@ def test_a_given_map_enters_as_a_feature_and_a_prealignment(wolf_pair):
     ident = np.arange(n)
     plain = solve("divergence-free", wolf0, wolf1, **budget)
     guided = solve("divergence-free", wolf0, wolf1, initial=InitialMatch(map_xy=noisy), **budget)
-    err_plain = geodesic_errors(plain.map_xy, wolf1, ident, ident).summary()["mean"]
-    err_guided = geodesic_errors(guided.map_xy, wolf1, ident, ident).summary()["mean"]
+    err_plain = geodesic_errors(plain.extras["flow_map_xy"], wolf1, ident, ident).summary()["mean"]
+    err_guided = geodesic_errors(guided.extras["flow_map_xy"], wolf1, ident, ident).summary()["mean"]
     err_noisy = geodesic_errors(noisy, wolf1, ident, ident).summary()["mean"]
     assert err_guided < 0.5 * err_noisy and err_guided < err_plain, (err_guided, err_noisy, err_plain)
     with pytest.raises(InputError, match="matches no vertex"):
@@ -500,23 +501,37 @@ def test_absurd_parameters_are_rejected(name, value):
 def test_cat_pair_with_symmetric_ground_truth(cat_pair):
     """Remeshed TOSCA cats in different poses. Measured (defaults): the flow's own map mean 0.043, 73 % within
     0.05, 91 % within 0.1, the same with the mirrored ground truth (SHOT in the distance tells left from
-    right); after the final ZoomOut steps 86 % within 0.05, median 0.022, mean 0.049 (about 3 % of the rows,
-    already 0.23 off, are sent farther: 0.93). The mean after the steps is 0.030 or 0.049 depending on the
-    cats' relative size to within half a per cent (see the decisions record), so the steps are tested by
-    the share they bring within 0.05, not by the mean. Thresholds keep a margin for platform noise; the
-    morph must land on the target surface."""
+    right); after the final ZoomOut (from 35 eigenfunctions, then the repeated steps) mean 0.030, 83 % within
+    0.05, 97 % within 0.1. Thresholds keep a margin for platform noise; the morph must land on the target
+    surface."""
     cat0, cat1, gt = cat_pair
     result = solve("divergence-free", cat0, cat1)
     report = geodesic_errors(result.map_xy, cat1, gt["cat0"], gt["cat1"], gt_target_sym=gt["cat1.sym"]).summary()
     flow = geodesic_errors(result.extras["flow_map_xy"], cat1, gt["cat0"], gt["cat1"]).summary()
-    assert report["mean_sym"] <= 0.055 and report["median_sym"] <= 0.03, report
-    assert report["within_0.05_sym"] >= 0.8 and report["within_0.1"] >= 0.9, report
-    assert flow["mean"] <= 0.055 and report["within_0.05"] >= flow["within_0.05"] + 0.05, (flow, report)
+    assert report["mean_sym"] <= 0.036 and report["within_0.05_sym"] >= 0.78 and report["within_0.1"] >= 0.94, report
+    assert flow["mean"] <= 0.055 and report["mean"] < 0.8 * flow["mean"], (flow, report)
     from scipy.spatial import cKDTree
 
     gap = cKDTree(cat1.vertices).query(result.extras["morphed_vertices"])[0].mean()
     assert gap < 0.01 * cat1.bbox_diagonal
     assert abs(result.extras["volume_change"]) < 0.01
+
+
+@pytest.mark.slow
+def test_a_posed_person_ends_on_the_right_limbs():
+    """human1 → human2 of the bundled people (one vertex order: the truth is the identity). The flow cannot
+    follow every posed limb (measured: its map 0.107 √area); the final steps used to start in the final basis
+    and kept the misplaced limbs (0.087), the ZoomOut from 35 eigenfunctions rebuilds them from the map's low
+    frequencies (0.021)."""
+    from corrlib.io import load_mesh
+    from corrlib.resources import resource
+
+    source, target = load_mesh(resource("people/human1.off")), load_mesh(resource("people/human2.off"))
+    result = solve("divergence-free", source, target)
+    ident = np.arange(source.n_vertices)
+    final = geodesic_errors(result.map_xy, target, ident, ident).summary()
+    flow = geodesic_errors(result.extras["flow_map_xy"], target, ident, ident).summary()
+    assert final["mean"] <= 0.035 and final["mean"] < 0.4 * flow["mean"], (flow, final)
 
 
 # ----------------------------------------------------------------------------- sequences and the CLI

@@ -395,6 +395,47 @@ def _global_step(map_xy, map_yx, unit_x, unit_y, both_directions: bool = True, s
     return new_xy, new_yx
 
 
+def zoomout_both_ways(map_xy, map_yx, spec_x, spec_y, k_init: int, k_final: int, step: int, token=None,
+                      samples_x: ZoomOutSamples | None = None, samples_y: ZoomOutSamples | None = None):
+    """ZoomOut (Melzi et al. 2019) of both maps of a pair: each one's functional map on the first ``k_init``
+    eigenfunctions (at unit area), upsampled by :func:`zoomout` to ``k_final``, and the pointwise map of the
+    last one. A map whose fine detail is wrong (a limb placed on its neighbour) keeps what is right at low
+    frequencies and gets the rest from the spectral alternation; started at ``k_final`` it would keep its
+    errors. Unmatched vertices (-1) stay unmatched.
+
+    Parameters
+    ----------
+    map_xy : (n_x,) int
+    map_yx : (n_y,) int
+    spec_x, spec_y : Spectrum
+        With at least ``k_final`` eigenpairs.
+    k_init, k_final, step : int
+        ``2 <= k_init <= k_final``.
+    token : CancelToken, optional
+    samples_x, samples_y : ZoomOutSamples, optional
+        Samples of finer meshes (see :func:`zoomout`).
+
+    Returns
+    -------
+    map_xy : (n_x,) int
+    map_yx : (n_y,) int
+    """
+    unit_x, unit_y = _unit_area_bases(spec_x, spec_y, k_final)
+    phi, psi = unit_x.evecs, unit_y.evecs
+
+    def zoomed(m, evecs_from, evecs_to, mass_from, samples_from, samples_to):  # the map from the `from` side
+        c = pointwise_to_functional(m, evecs_to[:, :k_init], evecs_from[:, :k_init], mass_from)
+        upsampling = zoomout(evecs_to, evecs_from, mass_from, c, k_final, step, token, samples_to, samples_from)
+        while True:
+            try:
+                next(upsampling)
+            except StopIteration as done:
+                return np.where(m >= 0, done.value[0], -1)
+
+    return (zoomed(map_xy, phi, psi, unit_x.mass.diagonal(), samples_x, samples_y),
+            zoomed(map_yx, psi, phi, unit_y.mass.diagonal(), samples_y, samples_x))
+
+
 def repeated_pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k, graph_x, graph_y, token=None,
                                   samples_x: ZoomOutSamples | None = None, samples_y: ZoomOutSamples | None = None):
     """The step of :func:`pointwise_from_basis`, then the same step repeated from its own maps while the

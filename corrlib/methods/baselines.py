@@ -95,18 +95,24 @@ register(MethodSpec(
 # ----------------------------------------------------------------------------- functional maps + ZoomOut
 
 
+#: the ZoomOut schedule (Melzi et al. 2019): the basis size it starts from and the functions added per
+#: iteration; also divergence-free's, which zooms out from its flow's map (:mod:`.divergence_free`)
+ZOOMOUT_K_INIT, ZOOMOUT_STEP = 35, 5
+
+
 @dataclass(frozen=True, kw_only=True)
 class FmapZoomOutParams:
     descriptor: str = param("wks", label="Descriptor", choices=DESCRIPTOR_KINDS,
                             help="Descriptor whose preservation constrains the functional map.")
     n_descriptors: int = param(20, label="Descriptor functions", low=1, high=200,
                                help="How many descriptor scales (evenly picked from 100) enter the functional map.")
-    k_init: int = param(35, label="Initial basis size", low=2, high=80,
+    k_init: int = param(ZOOMOUT_K_INIT, label="Initial basis size", low=2, high=80,
                         help="Size of the functional map solved from the descriptors (solved exactly: its "
                              "(k², k²) normal matrices: 2.4 GB at 80, growing as k⁴).")
     k_final: int = param(100, label="ZoomOut final size", low=2, high=1000,
                          help="ZoomOut upsamples the map from k_init to this spectral size.")
-    step: int = param(5, label="ZoomOut step", low=1, high=100, help="Basis functions added per ZoomOut iteration.")
+    step: int = param(ZOOMOUT_STEP, label="ZoomOut step", low=1, high=100,
+                      help="Basis functions added per ZoomOut iteration.")
     commutativity: float = param(1.0, label="Laplacian commutativity", low=0.0, high=1e6,
                                  help="Weight of the resolvent Laplacian commutativity (Ren et al. 2019), relative "
                                       "to descriptor preservation.")

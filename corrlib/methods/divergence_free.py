@@ -57,14 +57,19 @@ correspondence and the coefficients are estimated jointly by EM:
   the feature factor at the final annealed variance); the
   reverse map matches every target vertex to the nearest flowed source
   vertex.
-* Final ZoomOut steps (``smooth_k``; our addition, as in kernel matching):
-  the two maps are projected onto the first Laplace–Beltrami
-  eigenfunctions and every vertex takes its nearest partner in them, with
-  one functional map estimated from both directions, the step repeated
-  while it moves fewer partners (:func:`~corrlib.geometry.fmaps.
-  repeated_pointwise_from_basis`). A flow fits the shapes' overall
-  position and volume but not every limb; the steps move the partners
-  along the surfaces to where the intrinsic geometry agrees. By default the
+* Final ZoomOut (``smooth_k``; our addition): each of the two maps is
+  zoomed out (Melzi et al. 2019) from its functional map on the first
+  :data:`~corrlib.methods.baselines.ZOOMOUT_K_INIT` Laplace–Beltrami
+  eigenfunctions to the final basis, the functional-map baseline's
+  schedule (:func:`~corrlib.geometry.fmaps.zoomout_both_ways`); then, as
+  in kernel matching, the maps are projected onto the final basis and
+  every vertex takes its nearest partner in it, with one functional map
+  estimated from both directions, the step repeated while it moves fewer
+  partners (:func:`~corrlib.geometry.fmaps.repeated_pointwise_from_basis`).
+  A flow fits the shapes' overall position and volume but not every limb:
+  a posed arm can end on the body. What the flow's map gets right is its
+  low frequencies, from which ZoomOut rebuilds the rest; started in the
+  final basis, the steps kept a misplaced limb. By default the
   basis is the eigenfunctions kernel matching's smallest default time
   resolves (``τ λ · area ≤ 1`` at :data:`FINAL_STEP_TAU`, about 160 by Weyl's
   law), from the pair's 500 eigenpairs (kernel matching's default, so the
@@ -89,9 +94,11 @@ from corrlib.deformation.flow import check_points, flow, flow_with_jacobian
 from corrlib.deformation.mixture import mixture_moments
 from corrlib.deformation.model import Deformation, Frames, StoredSteps
 from corrlib.errors import InputError, ParameterError
-from corrlib.geometry.fmaps import ZoomOutSamples, repeated_pointwise_from_basis, resolved_eigenpairs
+from corrlib.geometry.fmaps import (ZoomOutSamples, repeated_pointwise_from_basis, resolved_eigenpairs,
+                                   zoomout_both_ways)
 from corrlib.geometry.sampling import farthest_point_sampling
 from corrlib.methods.base import MatchResult, param
+from corrlib.methods.baselines import ZOOMOUT_K_INIT, ZOOMOUT_STEP
 from corrlib.methods.kernel_matching import DEFAULT_EIGENPAIRS, DEFAULT_TAU_MIN
 from corrlib.methods.registry import MethodSpec, register
 from corrlib.neighbours import nearest_rows
@@ -637,10 +644,11 @@ def final_zoomout_steps(source, target, map_xy, map_yx, smooth_k: int, token, wa
         k = min(resolved_eigenpairs(spec_x.evals, source.area, FINAL_STEP_TAU),
                 resolved_eigenpairs(spec_y.evals, target.area, FINAL_STEP_TAU), k)
     with watch("zoomout"):
+        samples = ZoomOutSamples.of_pair(source, target, spec_x.mass.diagonal(), spec_y.mass.diagonal())
+        map_xy, map_yx = zoomout_both_ways(map_xy, map_yx, spec_x, spec_y, min(ZOOMOUT_K_INIT, k), k, ZOOMOUT_STEP,
+                                           token, *samples)
         return repeated_pointwise_from_basis(map_xy, map_yx, spec_x, spec_y, k, source.adjacency,
-                                             target.adjacency, token,
-                                             *ZoomOutSamples.of_pair(source, target, spec_x.mass.diagonal(),
-                                                                     spec_y.mass.diagonal()))
+                                             target.adjacency, token, *samples)
 
 
 def solve_divergence_free(source, target, params: DivergenceFreeParams, token, *, initial=None):

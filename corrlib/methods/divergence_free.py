@@ -156,10 +156,11 @@ class DivergenceFreeParams:
                           help="Free border of the unit cube around the shapes.")
     seed: int = param(0, label="Seed", low=0, high=2 ** 31 - 1, help="Start of the farthest-point sampling.")
     smooth_k: int = param(-1, label="Final ZoomOut basis", low=-1, high=FINAL_STEP_EIGENPAIRS,
-                          help="Final pointwise steps after the flow: both maps are projected onto this many "
-                               "eigenfunctions and every vertex takes its nearest partner in them (ZoomOut steps "
-                               "on the mean of the functional maps of the map and of its reverse, repeated while "
-                               "they move fewer partners). -1: the eigenfunctions resolved at kernel matching's "
+                          help="Final ZoomOut after the flow: both maps are zoomed out from "
+                               f"{ZOOMOUT_K_INIT} eigenfunctions to this many, then every vertex takes its nearest "
+                               "partner in them (steps on the mean of the functional maps of the map and of its "
+                               "reverse, repeated while they move fewer partners). -1: the eigenfunctions resolved "
+                               "at kernel matching's "
                                f"smallest default time (τ λ·area ≤ 1, τ = {FINAL_STEP_TAU:g}); 0: off "
                                "(the flow's map).")
 

@@ -302,7 +302,7 @@ def _connectivity_findings(v: np.ndarray, f: np.ndarray) -> list[Finding]:
         position = position.ravel()
         n_welded = np.unique(_face_components(n, position[f])[1][position[used]]).size
         if n_welded < n_comp_used:  # the parts share positions but not vertices
-            advice = (f"{n - np.unique(position).size} vertices repeat the position of another, so faces that "
+            advice = (f"{n - (position.max() + 1)} vertices repeat the position of another, so faces that "
                       f"meet there are not joined (welded, {n_welded} component{'s' if n_welded > 1 else ''} would "
                       "remain); weld coincident vertices in a mesh editor (merge by distance), or save the mesh "
                       "as .stl, which is welded when it is loaded")

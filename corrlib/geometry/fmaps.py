@@ -28,6 +28,7 @@ from scipy.spatial import cKDTree
 
 from corrlib.geometry.sampling import farthest_point_sampling, voronoi_cells
 from corrlib.neighbours import descended_nearest_rows, nearest_rows
+from corrlib.progress import run
 
 #: ZoomOut's iterations run on this many farthest-point samples of a mesh more than twice as fine (Melzi et al.
 #: 2019 run it on subsamples too): thirty and more samples per basis function at the sizes ZoomOut is given here
@@ -425,12 +426,8 @@ def zoomout_both_ways(map_xy, map_yx, spec_x, spec_y, k_init: int, k_final: int,
 
     def zoomed(m, evecs_from, evecs_to, mass_from, samples_from, samples_to):  # the map from the `from` side
         c = pointwise_to_functional(m, evecs_to[:, :k_init], evecs_from[:, :k_init], mass_from)
-        upsampling = zoomout(evecs_to, evecs_from, mass_from, c, k_final, step, token, samples_to, samples_from)
-        while True:
-            try:
-                next(upsampling)
-            except StopIteration as done:
-                return np.where(m >= 0, done.value[0], -1)
+        new, _ = run(zoomout(evecs_to, evecs_from, mass_from, c, k_final, step, token, samples_to, samples_from))
+        return np.where(m >= 0, new, -1)
 
     return (zoomed(map_xy, phi, psi, unit_x.mass.diagonal(), samples_x, samples_y),
             zoomed(map_yx, psi, phi, unit_y.mass.diagonal(), samples_y, samples_x))

@@ -491,7 +491,7 @@ def test_a_target_in_other_units_gives_the_same_map(wolf_pair):
 
 
 @pytest.mark.parametrize("name,value", [("n_fields", 0), ("n_steps", 0), ("sigma2", 0.0), ("sigma2", -1.0),
-                                        ("outlier", 1.0), ("features", "wks")])
+                                        ("outlier", 1.0), ("features", "hks")])
 def test_absurd_parameters_are_rejected(name, value):
     with pytest.raises(ParameterError, match=name):
         make_params(DivergenceFreeParams, **{name: value})
@@ -499,11 +499,12 @@ def test_absurd_parameters_are_rejected(name, value):
 
 @pytest.mark.slow
 def test_cat_pair_with_symmetric_ground_truth(cat_pair):
-    """Remeshed TOSCA cats in different poses. Measured (defaults): the flow's own map mean 0.043, 73 % within
-    0.05, 91 % within 0.1, the same with the mirrored ground truth (SHOT in the distance tells left from
-    right); after the final ZoomOut (from 35 eigenfunctions, then the repeated steps) mean 0.030, 83 % within
-    0.05, 97 % within 0.1. Thresholds keep a margin for platform noise; the morph must land on the target
-    surface."""
+    """Remeshed TOSCA cats in different poses. Measured (defaults): the flow's own map mean 0.052, 71 % within
+    0.05, 92 % within 0.1 (with the mirrored ground truth accepted 0.040: the wave kernel signatures in the
+    distance cannot tell left from right); after the final ZoomOut (from 35 eigenfunctions, then the repeated
+    steps) mean 0.026, 87 % within 0.05, 99 % within 0.1. The morph lands on the target surface: its vertices
+    0.0101 of the diagonal from the nearest target vertex on average (0.0096 with SHOT alone, the cats' mean
+    edge being 0.013). Thresholds keep a margin for platform noise."""
     cat0, cat1, gt = cat_pair
     result = solve("divergence-free", cat0, cat1)
     report = geodesic_errors(result.map_xy, cat1, gt["cat0"], gt["cat1"], gt_target_sym=gt["cat1.sym"]).summary()
@@ -513,7 +514,7 @@ def test_cat_pair_with_symmetric_ground_truth(cat_pair):
     from scipy.spatial import cKDTree
 
     gap = cKDTree(cat1.vertices).query(result.extras["morphed_vertices"])[0].mean()
-    assert gap < 0.01 * cat1.bbox_diagonal
+    assert gap < 0.0125 * cat1.bbox_diagonal
     assert abs(result.extras["volume_change"]) < 0.01
 
 
@@ -532,6 +533,37 @@ def test_a_posed_person_ends_on_the_right_limbs():
     final = geodesic_errors(result.map_xy, target, ident, ident).summary()
     flow = geodesic_errors(result.extras["flow_map_xy"], target, ident, ident).summary()
     assert final["mean"] <= 0.035 and final["mean"] < 0.4 * flow["mean"], (flow, final)
+
+
+def test_the_wave_kernel_block_does_not_depend_on_the_units(wolf_pair):
+    """The WKS block of the Eq. 10.17 distance is computed from eigenpairs at unit area, so a shape in
+    millimetres has the same signatures as in metres (the raw eigenvalues would shift the WKS energy range)."""
+    from corrlib.methods.divergence_free import pair_descriptors, pair_spectra
+    from corrlib.progress import Stopwatch
+
+    wolf0, wolf1 = wolf_pair[0], wolf_pair[1]
+    big = TriMesh(1000.0 * wolf1.vertices, wolf1.faces, name="wolf1-mm")
+    wks_x, wks_y = pair_descriptors(wolf0, wolf1, "wks", pair_spectra(wolf0, wolf1, Stopwatch()))
+    same_x, big_y = pair_descriptors(wolf0, big, "wks", pair_spectra(wolf0, big, Stopwatch()))
+    assert wks_x.shape == (wolf0.n_vertices, 100) and np.array_equal(wks_x, same_x)
+    assert np.allclose(big_y, wks_y, rtol=1e-6, atol=1e-9 * np.abs(wks_y).max())
+    raw = pair_descriptors(wolf0, big, "shot", None)[1]  # SHOT is scale-free by construction
+    assert np.allclose(raw, pair_descriptors(wolf0, wolf1, "shot", None)[1], atol=1e-6)
+
+
+@pytest.mark.slow
+def test_a_non_isometric_pair_through_the_wave_kernel_signatures():
+    """The Sumner lion -> cat (approximate ground truth lion2cat). With SHOT alone in the E-step distance the
+    map ended at 0.059 √area (median 0.019); with the wave kernel signatures beside it (the default), 0.041
+    (median 0.019). Kernel matching gets 0.117 on this pair."""
+    from _data import SUMNER
+    from corrlib.io import load_mesh
+
+    lion, cat = load_mesh(SUMNER / "lion-00.off"), load_mesh(SUMNER / "cat-00.off")
+    truth = np.loadtxt(SUMNER / "lion2cat", dtype=np.int64)
+    report = geodesic_errors(solve("divergence-free", lion, cat).map_xy, cat, np.arange(lion.n_vertices),
+                             truth).summary()
+    assert report["mean"] <= 0.05 and report["median"] <= 0.025, report
 
 
 # ----------------------------------------------------------------------------- sequences and the CLI

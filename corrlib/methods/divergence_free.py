@@ -15,11 +15,17 @@ correspondence and the coefficients are estimated jointly by EM:
   no rotation at all) has the lowest Eq. 10.17 energy (mean over source
   samples of the distance to the nearest target sample). Euclidean
   farthest-point samples of both shapes (``n_samples`` each) are fitted.
-* Distance (Eq. 10.17): ``d(x, y) = |x - y|² + w |f(x) - f(y)|²`` with SHOT
-  features ``f`` computed once on the original meshes (point clouds:
-  coordinates only, or features given by the caller); ``w`` makes the mean
-  of both terms over all sample pairs equal at the start (times
-  ``feature_weight``).
+* Distance (Eq. 10.17): ``d(x, y) = |x - y|² + w |f(x) - f(y)|²`` with
+  features ``f`` computed once on the original meshes: SHOT, as in the
+  paper, and (our addition, ``features="shot+wks"``) the wave kernel
+  signature of each shape's eigenpairs at unit area, each block scaled to
+  unit mean pair distance. SHOT describes the local extrinsic shape, which
+  a bent limb changes; the WKS is intrinsic and nearly the same in every
+  pose. It cannot tell left from right (a reflection keeps it); the
+  coordinates of the pre-aligned shapes do.
+  Point clouds (:func:`fit`): coordinates only, or features given by the
+  caller. ``w`` makes the mean of both terms over all sample pairs equal
+  at the start (times ``feature_weight``).
 * E-step (Eq. 10.14): soft correspondences of a Gaussian mixture with a
   uniform outlier term, ``P_nm = e^{-d_nm / 2σ²} / (Σ_m' e^{-d_nm' / 2σ²} + c)``
   with ``c = (2πσ²)^{3/2} ω/(1 - ω) · M/N`` (the CPD form).
@@ -135,9 +141,10 @@ class DivergenceFreeParams:
                          help="Residual length above which the penalty grows linearly (§C.2.2).")
     prior_weight: float = param(0.1, label="Prior weight β", low=0.0, high=1e8,
                                 help="Weight of the smoothness prior Σ a_k²/λ_k (Eq. 10.18).")
-    features: str = param("shot", label="Features", choices=("shot", "none"),
-                          help="Features of the Eq. 10.17 distance (SHOT on the original meshes), or "
-                               "coordinates only.")
+    features: str = param("shot+wks", label="Features", choices=("shot+wks", "shot", "wks", "none"),
+                          help="Features of the Eq. 10.17 distance: SHOT (extrinsic, local) and the wave kernel "
+                               "signature (intrinsic, the same in every pose), each block at unit mean pair "
+                               "distance; one of them; or coordinates only.")
     feature_weight: float = param(1.0, label="Feature weight", low=0.0, high=1e6,
                                   help="Multiplies the factor that equalises the means of the coordinate "
                                        "and feature terms.")
@@ -149,7 +156,7 @@ class DivergenceFreeParams:
                        help="Stop when the coefficient update is below tol × |a| (and 1e-8).")
     init: str = param("none", label="Initial map", choices=("none", "fmap-zoomout", "kernel-matching"),
                       help="Another method's map as a feature of the E-step distance (the partner's position), "
-                           "and its rigid alignment as a pre-alignment candidate; none: SHOT and coordinates only.")
+                           "and its rigid alignment as a pre-alignment candidate; none: the features and coordinates only.")
     prealign: str = param("pca", label="Pre-alignment", choices=("pca", "none"),
                           help="Rigid PCA alignment (best proper axis orientation or none), or none.")
     margin: float = param(0.15, label="Margin", low=0.0, high=0.45,
@@ -614,7 +621,31 @@ def _initial_map(source, target, params: DivergenceFreeParams, token, initial, w
     return iy[nearest_rows(source.vertices, source.vertices[ix])]
 
 
-def final_zoomout_steps(source, target, map_xy, map_yx, smooth_k: int, token, watch):
+def pair_spectra(source, target, watch):
+    """The pair's :data:`FINAL_STEP_EIGENPAIRS` eigenpairs (fewer on a coarse mesh), shared by the wave kernel
+    signatures and the final ZoomOut steps, and cached on disk for kernel matching (:class:`Spectrum` of each)."""
+    from corrlib.geometry.spectrum import available_eigenpairs, mesh_spectra
+
+    what = "the wave kernel signatures and the final ZoomOut steps (features=shot and smooth_k=0 need none)"
+    with watch("eigen"):
+        return mesh_spectra((source, target), (available_eigenpairs(source, FINAL_STEP_EIGENPAIRS, what),
+                                               available_eigenpairs(target, FINAL_STEP_EIGENPAIRS, what)))
+
+
+def pair_descriptors(source, target, kind: str, spectra) -> tuple[np.ndarray, np.ndarray]:
+    """One feature block of Eq. 10.17 on both shapes, (n_x, d) and (n_y, d): SHOT, or the WKS of each shape's
+    eigenpairs taken at unit area (``spectra``, :func:`pair_spectra`), so that the same shape in other units
+    has the same signatures."""
+    from corrlib.descriptors import mesh_descriptors
+
+    if kind == "shot":
+        return mesh_descriptors(source, "shot"), mesh_descriptors(target, "shot")
+    spec_x, spec_y = spectra
+    return (mesh_descriptors(source, kind, spectrum=spec_x.at_unit_area(source.area)),
+            mesh_descriptors(target, kind, spectrum=spec_y.at_unit_area(target.area)))
+
+
+def final_zoomout_steps(source, target, map_xy, map_yx, smooth_k: int, token, watch, spectra=None):
     """The flow's maps after the final ZoomOut steps (see the module docstring).
 
     Parameters
@@ -626,18 +657,15 @@ def final_zoomout_steps(source, target, map_xy, map_yx, smooth_k: int, token, wa
         The basis size, or -1 for the eigenfunctions resolved at :data:`FINAL_STEP_TAU`.
     token : CancelToken
     watch : Stopwatch
+    spectra : (Spectrum, Spectrum), optional
+        The pair's eigenpairs (:func:`pair_spectra`, computed here if not given).
 
     Returns
     -------
     map_xy : (n_x,) int
     map_yx : (n_y,) int
     """
-    from corrlib.geometry.spectrum import available_eigenpairs, mesh_spectra
-
-    what = "the final ZoomOut steps (smooth_k=0 turns them off)"
-    with watch("eigen"):
-        spec_x, spec_y = mesh_spectra((source, target), (available_eigenpairs(source, FINAL_STEP_EIGENPAIRS, what),
-                                                         available_eigenpairs(target, FINAL_STEP_EIGENPAIRS, what)))
+    spec_x, spec_y = spectra if spectra is not None else pair_spectra(source, target, watch)
     k = min(spec_x.evecs.shape[1], spec_y.evecs.shape[1])
     if smooth_k > 0:
         k = min(k, smooth_k)
@@ -656,13 +684,17 @@ def solve_divergence_free(source, target, params: DivergenceFreeParams, token, *
     """Registered solver: fit, dense maps, deformation record (generator returning a MatchResult)."""
     watch = Stopwatch()
     blocks_x, blocks_y = [], []
-    if params.features == "shot":
-        yield Progress("features", 0.0, "SHOT on both shapes")
-        from corrlib.descriptors import mesh_descriptors
-
+    spectra = None
+    if "wks" in params.features or params.smooth_k != 0:
+        yield Progress("eigenpairs", 0.0, f"{FINAL_STEP_EIGENPAIRS} per shape")
+        spectra = pair_spectra(source, target, watch)
+    if params.features != "none":
+        yield Progress("features", 0.0, params.features.upper().replace("+", " and "))
         with watch("descriptors"):
-            blocks_x.append(mesh_descriptors(source, "shot"))
-            blocks_y.append(mesh_descriptors(target, "shot"))
+            for kind in params.features.split("+"):
+                block_x, block_y = pair_descriptors(source, target, kind, spectra)
+                blocks_x.append(block_x)
+                blocks_y.append(block_y)
     if initial is not None or params.init != "none":
         yield Progress("initial map", 0.0, "given map" if initial is not None else params.init)
     map_xy = yield from _initial_map(source, target, params, token, initial, watch)
@@ -689,7 +721,7 @@ def solve_divergence_free(source, target, params: DivergenceFreeParams, token, *
     flow_map_xy = map_xy
     if params.smooth_k != 0:
         yield Progress("final ZoomOut steps", 0.97, "nearest partners in the Laplace–Beltrami eigenfunctions")
-        map_xy, map_yx = final_zoomout_steps(source, target, map_xy, map_yx, params.smooth_k, token, watch)
+        map_xy, map_yx = final_zoomout_steps(source, target, map_xy, map_yx, params.smooth_k, token, watch, spectra)
     extras = {
         "flow_map_xy": flow_map_xy,
         "morphed_vertices": morphed,

@@ -156,7 +156,8 @@ class DivergenceFreeParams:
                        help="Stop when the coefficient update is below tol × |a| (and 1e-8).")
     init: str = param("none", label="Initial map", choices=("none", "fmap-zoomout", "kernel-matching"),
                       help="Another method's map as a feature of the E-step distance (the partner's position), "
-                           "and its rigid alignment as a pre-alignment candidate; none: the features and coordinates only.")
+                           "and its rigid alignment as a pre-alignment candidate; none: the features and "
+                           "coordinates only.")
     prealign: str = param("pca", label="Pre-alignment", choices=("pca", "none"),
                           help="Rigid PCA alignment (best proper axis orientation or none), or none.")
     margin: float = param(0.15, label="Margin", low=0.0, high=0.45,

@@ -21,10 +21,38 @@ steps of 5. Pairs already written are skipped, so a run resumes.
 from __future__ import annotations
 
 import argparse
+import os
+import sys
 import time
 from pathlib import Path
 
 import numpy as np
+
+
+def read_pairs(dataset: Path, pairs: Path) -> list[tuple[str, str]]:
+    """The ``(source, target)`` names of ``pairs``, every mesh checked to exist as ``dataset/<name>.off``.
+
+    Raises ``ValueError`` naming the file and line of the first problem."""
+    if not dataset.is_dir():
+        raise ValueError(f"{dataset}: not a folder of meshes")
+    try:
+        lines = pairs.read_text().splitlines()
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ValueError(f"{pairs}: cannot read the pairs file ({exc})") from None
+    out = []
+    for number, line in enumerate(lines, 1):
+        if not line.strip():
+            continue
+        names = line.split()
+        if len(names) != 2:
+            raise ValueError(f"{pairs}, line {number}: expected 'source target', found {line.strip()!r}")
+        for name in names:
+            if not (dataset / f"{name}.off").is_file():
+                raise ValueError(f"{pairs}, line {number}: {dataset / f'{name}.off'} does not exist")
+        out.append((names[0], names[1]))
+    if not out:
+        raise ValueError(f"{pairs}: no pairs")
+    return out
 
 
 def main() -> None:
@@ -34,14 +62,18 @@ def main() -> None:
     parser.add_argument("out", type=Path)
     parser.add_argument("--orientation", type=float, default=0.0, help="pyFM's w_orient (default 0)")
     args = parser.parse_args()
-    from pyFM.functional import FunctionalMapping
-    from pyFM.mesh import TriMesh
-
-    args.out.mkdir(parents=True, exist_ok=True)
-    for line in args.pairs.read_text().splitlines():
-        if not line.strip():
-            continue
-        source, target = line.split()
+    try:
+        pairs = read_pairs(args.dataset, args.pairs)
+        args.out.mkdir(parents=True, exist_ok=True)
+    except (ValueError, OSError) as exc:
+        parser.error(str(exc))  # exit 2
+    try:
+        from pyFM.functional import FunctionalMapping
+        from pyFM.mesh import TriMesh
+    except ImportError:
+        parser.error("pyFM is not installed in this interpreter: pip install pyfmaps in a scratch environment "
+                     "and run the script with its python")
+    for source, target in pairs:
         out = args.out / f"{source}__{target}.txt"
         if out.exists():
             continue
@@ -52,9 +84,11 @@ def main() -> None:
         model.preprocess(n_descr=100, subsample_step=5, descr_type="WKS")
         model.fit(K=(35, 35), w_orient=args.orientation)
         model.zoomout_refine(nit=13, step=5)
-        np.savetxt(out, model.get_p2p(), fmt="%d")
+        partial = out.with_name(out.name + ".part")  # renamed when whole: a resumed run never skips half a map
+        np.savetxt(partial, model.get_p2p(), fmt="%d")
+        os.replace(partial, out)
         print(f"{source} -> {target}: {time.perf_counter() - start:.1f} s", flush=True)
 
 
 if __name__ == "__main__":
-    main()
+    sys.exit(main())

@@ -228,3 +228,31 @@ def test_retrieval_benchmark_names_broken_meshes_and_absent_classes(tmp_path, ca
     summary = strict(tmp_path / "b" / "retrieval_summary.json")
     assert summary["map"] is None and summary["failed"] == 2
     assert "no mesh of the collection could be matched" in (tmp_path / "b" / "retrieval.csv").read_text()
+
+
+@pytest.mark.parametrize("pairs_text,expected", [
+    ("cat0 cat1 cat2\n", "line 1: expected 'source target'"),
+    ("\ncat0 lion\n", "line 2: .*lion.off does not exist"),
+    ("\n\n", "no pairs"),
+])
+def test_the_pyfm_reference_script_names_bad_input_before_it_needs_pyfm(tmp_path, cat_dataset, pairs_text,
+                                                                        expected):
+    """``scripts/pyfm_maps.py`` (pyFM's maps for ``corr bench --maps``) checks its dataset and pairs file
+    before it imports pyFM, and ends with argparse's exit 2 and a message naming the file and line; nothing is
+    written."""
+    import re
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    script = Path(__file__).resolve().parents[1] / "scripts" / "pyfm_maps.py"
+    pairs = tmp_path / "pairs.txt"
+    pairs.write_text(pairs_text)
+    out = tmp_path / "out"
+    done = subprocess.run([sys.executable, str(script), str(cat_dataset), str(pairs), str(out)],
+                          capture_output=True, text=True)
+    assert done.returncode == 2 and re.search(expected, done.stderr), done.stderr
+    assert not out.exists()
+    missing = subprocess.run([sys.executable, str(script), str(tmp_path / "nowhere"), str(pairs), str(out)],
+                             capture_output=True, text=True)
+    assert missing.returncode == 2 and "not a folder of meshes" in missing.stderr

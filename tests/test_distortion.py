@@ -67,3 +67,55 @@ def test_an_isometry_up_to_scale_has_no_distortion_and_a_shuffle_has():
 def test_a_map_with_fewer_than_two_samples_matched_has_no_distortion():
     source = blob()
     assert np.isnan(geodesic_distortions(source, source, (-np.ones(source.n_vertices, dtype=np.int64),))[0])
+
+
+def capsule_surface() -> TriMesh:
+    """A capsule along z (a surface of revolution: every rotation about z is an isometry of it)."""
+    import trimesh
+
+    capsule = trimesh.creation.capsule(height=2.0, radius=0.5, count=[24, 24])
+    vertices, faces = trimesh.remesh.subdivide_to_size(capsule.vertices, capsule.faces, max_edge=0.15)
+    return TriMesh(np.asarray(vertices), np.asarray(faces), name="capsule")
+
+
+def test_a_map_turned_half_round_on_one_half_splits_at_the_seam():
+    """The identity below z = 0 and the half turn about the axis above it: each half alone is an isometry, the
+    distances across the seam are not kept. The split finds the two halves, and they disagree; the identity
+    and the whole half turn (an isometry) do not split."""
+    from scipy.spatial import cKDTree
+
+    from corrlib.geometry.distortion import DISAGREEMENT_RATIO, inconsistent_parts
+
+    mesh = capsule_surface()
+    z = mesh.vertices[:, 2]
+    _, turned = cKDTree(mesh.vertices).query(mesh.vertices * [-1.0, -1.0, 1.0])
+    twisted = np.where(z > 0, turned, np.arange(mesh.n_vertices))
+    parts = inconsistent_parts(mesh, mesh, twisted)
+    assert parts.disagree and parts.ratio > DISAGREEMENT_RATIO, parts.ratio
+    away = (np.abs(z) > 0.3) & (np.abs(z) < 1.0)  # near the seam, and near the poles that the turn keeps, either way
+    agreement = np.mean(parts.part[away] == (z[away] > 0))
+    assert max(agreement, 1 - agreement) > 0.97, agreement
+    for whole in (np.arange(mesh.n_vertices), turned):
+        assert not inconsistent_parts(mesh, mesh, whole).disagree
+
+
+def test_parts_that_disagree_by_less_than_the_mesh_resolves_do_not_disagree():
+    """The identity onto a copy with vertex noise of a tenth of an edge: the distortion within any split is
+    nearly zero, so the ratio can be large, but the parts differ by less than the edge paths resolve."""
+    from corrlib.geometry.distortion import RESOLVED_EDGES, inconsistent_parts, mean_edge_length
+
+    mesh = capsule_surface()
+    edge = np.mean(mesh.edge_lengths)
+    rng = np.random.default_rng(1)
+    noisy = TriMesh(mesh.vertices + rng.normal(scale=0.1 * edge, size=mesh.vertices.shape), mesh.faces, name="noisy")
+    parts = inconsistent_parts(mesh, noisy, np.arange(mesh.n_vertices))
+    assert parts.between < RESOLVED_EDGES * parts.resolution and not parts.disagree
+    assert parts.resolution == pytest.approx(max(mean_edge_length(mesh), mean_edge_length(noisy)))
+    assert mean_edge_length(mesh) == pytest.approx(edge / np.sqrt(mesh.area))
+
+
+def test_inconsistent_parts_of_an_unmatched_map_is_none():
+    from corrlib.geometry.distortion import inconsistent_parts
+
+    mesh = capsule_surface()
+    assert inconsistent_parts(mesh, mesh, -np.ones(mesh.n_vertices, dtype=np.int64)) is None

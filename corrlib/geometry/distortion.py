@@ -18,13 +18,61 @@ distortion compares maps of one pair, so the bias cancels.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 #: farthest-point samples of the source between which the distances are compared (100 Dijkstra runs per map)
 GEODESIC_SAMPLES = 100
 
 
-def geodesic_distortions(source, target, maps) -> list[float]:
+class PairDistances:
+    """The edge-path distances that the distortion of maps of one pair compares, each computed once.
+
+    The source's :data:`GEODESIC_SAMPLES` outermost farthest points (:attr:`sample`), their distances to every
+    source vertex (:attr:`from_sample`), and for each set of images on the target the distances between them
+    (:meth:`between_images`, kept for the images asked for again: the judges of one match ask about the same
+    maps). All per square root of the shape's area.
+    """
+
+    def __init__(self, source, target):
+        from corrlib.geometry.geodesics import GeodesicSolver
+        from corrlib.geometry.sampling import outermost_farthest_points
+
+        self.source, self.target = source, target
+        self.sample = outermost_farthest_points(source.vertices, min(GEODESIC_SAMPLES, source.n_vertices))
+        self._solver_x = GeodesicSolver(source)
+        self._solver_y = self._solver_x if target is source else GeodesicSolver(target)
+        self._from_sample = None
+        self._between = {}
+
+    @property
+    def from_sample(self) -> np.ndarray:
+        """(s, n_X) float: distances from the samples to every source vertex."""
+        if self._from_sample is None:
+            self._from_sample = self._solver_x.distances(self.sample, method="graph") / np.sqrt(self.source.area)
+        return self._from_sample
+
+    def between_images(self, images: np.ndarray) -> np.ndarray:
+        """(k, k) float: distances between the target vertices ``images`` (k,) int."""
+        key = images.tobytes()
+        if key not in self._between:
+            self._between[key] = self._solver_y.distances(images, method="graph")[:, images] / \
+                np.sqrt(self.target.area)
+        return self._between[key]
+
+    def pair_distortions(self, map_xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The samples a map matches, (k,) int positions in :attr:`sample`, and the distortion of every pair of
+        them, (k, k) float ``|d_X(a, b)/√A_X − d_Y(m a, m b)/√A_Y|``."""
+        images = np.asarray(map_xy)[self.sample]
+        matched = np.flatnonzero(images >= 0)
+        if matched.size < 2:  # no pair
+            return matched, np.zeros((matched.size, matched.size))
+        before = self.from_sample[np.ix_(matched, self.sample[matched])]
+        return matched, np.abs(before - self.between_images(images[matched]))
+
+
+def geodesic_distortions(source, target, maps, distances: PairDistances | None = None) -> list[float]:
     """:math:`D(m)` (module docstring) of several maps of one pair, the source's distances computed once.
 
     Parameters
@@ -32,27 +80,110 @@ def geodesic_distortions(source, target, maps) -> list[float]:
     source, target : TriMesh
     maps : sequence of (n_X,) int
         Target vertex of every source vertex; -1 (unmatched) leaves the sample out of that map's mean.
+    distances : PairDistances, optional
+        The pair's distances, shared with other judges of the same maps.
 
     Returns
     -------
     list of float
         One distortion per map, in their order; ``nan`` for a map that matches fewer than two samples.
     """
-    from corrlib.geometry.geodesics import GeodesicSolver
-    from corrlib.geometry.sampling import outermost_farthest_points
-
-    sample = outermost_farthest_points(source.vertices, min(GEODESIC_SAMPLES, source.n_vertices))
-    solver_x = GeodesicSolver(source)
-    before = solver_x.distances(sample, method="graph")[:, sample] / np.sqrt(source.area)
-    solver_y = solver_x if target is source else GeodesicSolver(target)
+    distances = PairDistances(source, target) if distances is None else distances
     out = []
     for map_xy in maps:
-        images = np.asarray(map_xy)[sample]
-        matched = images >= 0
-        if matched.sum() < 2:
-            out.append(float("nan"))
-            continue
-        images = images[matched]
-        after = solver_y.distances(images, method="graph")[:, images] / np.sqrt(target.area)
-        out.append(float(np.mean(np.abs(before[np.ix_(matched, matched)] - after))))
+        matched, pair_distortion = distances.pair_distortions(map_xy)
+        out.append(float(np.mean(pair_distortion)) if matched.size >= 2 else float("nan"))
     return out
+
+
+#: a map is read as two parts that disagree when the mean distortion between them is more than this many times
+#: the mean within them (measured: 1.4–2.6 on every right map of the people, cats and wolves, 3.5–5.8 on maps
+#: with a part turned against the rest; ``docs/decisions.md``) ...
+DISAGREEMENT_RATIO = 3.0
+#: ... and more than this many mean edge lengths: each of the two edge-path distances compared can be about an
+#: edge off the geodesic, so a smaller disagreement is below what the measurement resolves (a nearly exact map,
+#: whose ratio is large only because the distortion within the parts is nearly zero)
+RESOLVED_EDGES = 2.0
+
+
+@dataclass(frozen=True)
+class MapParts:
+    """A map's two mutually most inconsistent parts (:func:`inconsistent_parts`).
+
+    Attributes
+    ----------
+    part : (n_X,) bool
+        Source vertices of the first part (each vertex takes the part of its geodesically nearest sample); the
+        rest form the second.
+    ratio : float
+        Mean pair distortion between the parts over the mean within them (1 for a split that tells nothing).
+    between : float
+        Mean pair distortion between the parts, per √area.
+    resolution : float
+        The larger of the two shapes' mean edge lengths, per √area.
+    """
+
+    part: np.ndarray
+    ratio: float
+    between: float
+    resolution: float
+
+    @property
+    def disagree(self) -> bool:
+        """Whether the parts are two near-isometries that disagree with each other: by more than
+        :data:`DISAGREEMENT_RATIO` times the distortion within them and by more than :data:`RESOLVED_EDGES` edges."""
+        return self.ratio > DISAGREEMENT_RATIO and self.between > RESOLVED_EDGES * self.resolution
+
+
+def mean_edge_length(mesh) -> float:
+    """Mean edge length of a mesh per √area (the resolution of its edge-path distances)."""
+    return float(np.mean(mesh.edge_lengths) / np.sqrt(mesh.area))
+
+
+def inconsistent_parts(source, target, map_xy: np.ndarray,
+                       distances: PairDistances | None = None) -> MapParts | None:
+    """Split a map into the two parts whose geodesic distances disagree most with each other.
+
+    With farthest-point samples ``a, b`` of the source, the pair distortion is
+    ``E_ab = | d_X(a, b)/√A_X − d_Y(m a, m b)/√A_Y |`` (the terms of :math:`D(m)`, module docstring). A map
+    that is right on one part of the shape and turned on another (an upper body mapped half a turn round
+    against the hips) is two near-isometries: ``E`` is small within each part and of the order of the body's
+    width between them, while a right map's ``E`` has no such structure. The parts are the normalised-cut
+    bipartition (Shi & Malik 2000) of the affinity ``W_ab = exp(−(E_ab / median E)²)``: the signs of the
+    second eigenvector ``v`` of ``D^{-1/2} W D^{-1/2}`` scaled by ``D^{-1/2}``, with ``D`` the row sums.
+
+    Parameters
+    ----------
+    source, target : TriMesh
+        Connected shapes.
+    map_xy : (n_X,) int
+        Target vertex of every source vertex; -1 (unmatched) leaves a sample out.
+    distances : PairDistances, optional
+        The pair's distances, shared with other judges of the same map.
+
+    Returns
+    -------
+    MapParts or None
+        None where fewer than four samples are matched or a distance is infinite (a disconnected shape).
+    """
+    distances = PairDistances(source, target) if distances is None else distances
+    matched, pair_distortion = distances.pair_distortions(map_xy)
+    if matched.size < 4 or not (np.all(np.isfinite(pair_distortion)) and np.all(np.isfinite(distances.from_sample))):
+        return None
+    scale = np.median(pair_distortion)
+    resolution = max(mean_edge_length(source), mean_edge_length(target))
+    nothing = MapParts(np.ones(source.n_vertices, dtype=bool), 1.0, 0.0, resolution)
+    if not scale > 0:  # an isometry on more than half the pairs: nothing to split
+        return nothing
+    affinity = np.exp(-(pair_distortion / scale) ** 2)
+    degree = affinity.sum(axis=1)
+    _, vectors = np.linalg.eigh(affinity / np.sqrt(np.outer(degree, degree)))
+    side = vectors[:, -2] / np.sqrt(degree) > 0  # eigh orders ascending: the last is the trivial √D
+    if side.all() or not side.any():
+        return nothing
+    between = pair_distortion[np.ix_(side, ~side)].mean()
+    within = (pair_distortion[np.ix_(side, side)].sum() + pair_distortion[np.ix_(~side, ~side)].sum()) / \
+        (side.sum() ** 2 + (~side).sum() ** 2)
+    ratio = float(between / within) if within > 0 else float("inf")
+    owner = np.argmin(distances.from_sample[matched], axis=0)  # each vertex's geodesically nearest sample
+    return MapParts(side[owner], ratio, float(between), resolution)

@@ -40,6 +40,10 @@ The stages, each a function below sharing one :class:`KernelState`:
    optimum). Where it turned regions or limbs, or released limbs, the result
    stands only if it is nearer an isometry than the map without those turns
    (:func:`declined_partial_turns`, the geodesic distortion).
+9. :func:`replaced_disagreeing_part` — a final map made of two parts whose
+   geodesic distances disagree (one turned against the other) has each part
+   matched again with the other as landmarks; the run nearer an isometry
+   replaces it.
 
 Design choices, in brief (the measurements behind them are in
 ``docs/decisions.md``, "Kernel matching: measured design choices"):
@@ -131,6 +135,7 @@ from corrlib.assignment import area_capacities, linear_assignment
 from corrlib.cores import InlineExecutor, side_threads
 from corrlib.descriptors import DESCRIPTOR_KINDS, mesh_descriptors
 from corrlib.errors import Cancelled, CorrError, ParameterError
+from corrlib.geometry.distortion import PairDistances, geodesic_distortions, inconsistent_parts
 from corrlib.geometry.fmaps import (ZoomOutSamples, pointwise_from_basis, repeated_pointwise_from_basis,
                                     resolved_eigenpairs)
 from corrlib.geometry.sampling import (
@@ -257,8 +262,11 @@ class KernelMatchingParams:
                                 "agreement) is composed with an intrinsic reflection (the target's or the source's, "
                                 "the better) when that turns it, and a limb matched to the mirror-image limb is "
                                 "turned when that fits its shoulder better (the kernel energy cannot tell either "
-                                "apart); a turned map is then optimised once more. Closed, complete shapes only: a "
-                                "cut changes the reflection and the distances; at least 60 eigenpairs.")
+                                "apart); a turned map is then optimised once more. A final map made of two parts "
+                                "whose geodesic distances disagree (one turned against the other) has each part "
+                                "matched again from the other, and the result nearer an isometry is kept. Closed, "
+                                "complete shapes only: a cut changes the reflection and the distances; at least 60 "
+                                "eigenpairs.")
     backend: str = param("auction", label="Assignment backend", choices=("auction", "scipy"),
                          help="ε-scaling auction (fast) or scipy's exact solver (slow, for checks).")
 
@@ -751,6 +759,7 @@ class KernelState:
     # the final map as it was before the orientation stage turned regions or parts or released limbs (after a
     # whole-map turn, if any), (map_xy, map_yx): the alternative a second pass must beat (:func:`reoptimised`)
     before_partial_turns: tuple | None = None
+    distances: PairDistances | None = None  # the pair's edge-path distances for the judges of maps, once computed
 
     def prepared(self) -> "KernelState":
         """A state as :func:`prepare` left it (spectra, times, seeds, sample orders), with the descriptors (plain
@@ -760,7 +769,15 @@ class KernelState:
                             self.spec_y, self.seeds_x, self.seeds_y, self.order_x, self.order_y, self.n_seed)
         fresh.orientation = self.orientation
         fresh.desc_x, fresh.desc_y, fresh.seed_similarity = self.desc_x, self.desc_y, self.seed_similarity
+        fresh.distances = self.pair_distances()
         return fresh
+
+    def pair_distances(self) -> PairDistances:
+        """The pair's :class:`~corrlib.geometry.distortion.PairDistances` (created once, shared by the states
+        :meth:`prepared` makes, so that every judge of a map measures it once)."""
+        if self.distances is None:
+            self.distances = PairDistances(self.source, self.target)
+        return self.distances
 
     def descriptors(self) -> tuple[np.ndarray, np.ndarray]:
         """The standardised plain descriptors of both shapes, (n_x, d) and (n_y, d) (computed once)."""
@@ -1238,6 +1255,14 @@ def multiscale_refinement(state: KernelState):
     return full_map_xy, cell_map_yx
 
 
+def reorients(state: KernelState) -> bool:
+    """Whether the orientation stage and the check of disagreeing parts apply: ``reorient`` on, no landmarks
+    (they fix the orientation themselves), complete closed shapes (a cut changes a shape's reflection and
+    geodesic distances; :func:`~.reorientation.can_reorient`)."""
+    return state.params.reorient and state.anchors_x.size == 0 and not state.params.partial and \
+        can_reorient(state.source, state.target, state.spec_y)
+
+
 def kernel_result(state: KernelState, full_map_xy: np.ndarray, full_map_yx: np.ndarray, orient: bool = True):
     """Stage 7: the turns of reversed regions, the final ZoomOut steps
     (:func:`~corrlib.geometry.fmaps.pointwise_from_basis`, repeated by
@@ -1252,8 +1277,7 @@ def kernel_result(state: KernelState, full_map_xy: np.ndarray, full_map_yx: np.n
     turned = turned_regions = turned_parts = released = None
     released_regions = ()
     # landmarks fix the orientation themselves; a cut changes a shape's reflection and biharmonic distances
-    if orient and params.reorient and state.anchors_x.size == 0 and not params.partial and \
-            can_reorient(state.source, state.target, state.spec_y):
+    if orient and reorients(state):
         with watch("orientation"):
             done = reorient(state.source, state.target, state.spec_x, state.spec_y, full_map_xy, full_map_yx,
                             state.orientation_blocks)
@@ -1312,6 +1336,7 @@ def kernel_matching(source, target, params: KernelMatchingParams, token, initial
     """
     state = yield from prepare(source, target, params, token)
     result = yield from solved(state, initial)
+    result = yield from replaced_disagreeing_part(state, result)
     yield Progress("done", 1.0, f"energy {result.energy:.6g}")
     return result
 
@@ -1393,7 +1418,8 @@ def declined_partial_turns(state: KernelState, first: MatchResult, second: Match
     """
     before_xy, before_yx = state.before_partial_turns
     with state.watch("orientation"):
-        keep_after, measured = nearer_isometry(state.source, state.target, before_xy, second.map_xy)
+        keep_after, measured = nearer_isometry(state.source, state.target, before_xy, second.map_xy,
+                                               state.pair_distances())
     second.extras.update(measured)
     if keep_after:
         return None
@@ -1401,6 +1427,60 @@ def declined_partial_turns(state: KernelState, first: MatchResult, second: Match
                                       "the turns undone")
     kept.extras.update(declined_extras(first.extras, measured))
     return kept
+
+
+def replaced_disagreeing_part(state: KernelState, found: MatchResult):
+    """Stage 9: a map made of two parts that disagree, each part placed again from the other; a generator,
+    returns the :class:`MatchResult` kept.
+
+    The DC iterations keep what the first times decided, and a body alike in front and behind (an upper body
+    of limbs and a torso without a face) can leave the first times with one part turned half round against
+    the rest: arms swapped, chest onto back, hips and legs right. Each part is then nearly an isometry of its
+    own, and the kernel energy at the smallest time hardly sees the seam, but the geodesic distances between
+    the parts are off by the body's width. :func:`~corrlib.geometry.distortion.inconsistent_parts` finds the
+    two parts; where they disagree (:attr:`~corrlib.geometry.distortion.MapParts.disagree`), each part in
+    turn is kept as landmarks and the other matched again from it (two landmark runs, side by side,
+    :func:`side_by_side`), as a release pass places swapped limbs. The run of least geodesic distortion
+    replaces the map where it is nearer an isometry than the map found; which part was wrong is not
+    guessed. ``extras``: ``disagreement_ratio`` always, and where the runs were made
+    ``disagreement_distortions`` (the map found, then the run keeping the first part, then the second) and
+    ``replaced_part`` (the count of source vertices matched again, 0 where the map found was kept).
+    """
+    if not reorients(state):
+        return found
+    with state.watch("disagreeing parts"):
+        parts = inconsistent_parts(state.source, state.target, found.map_xy, state.pair_distances())
+    if parts is None:
+        return found
+    found.extras["disagreement_ratio"] = parts.ratio
+    if not parts.disagree:
+        return found
+    yield Progress("disagreeing parts", 1.0, f"two parts of the map disagree ({parts.ratio:.1f}× the distortion "
+                                             "within them); each is matched again from the other")
+    runs = []
+    for kept in (parts.part, ~parts.part):
+        landmarks = np.flatnonzero(kept & (found.map_xy >= 0))
+        fresh = state.prepared()
+        fresh.watch = Stopwatch()
+        runs.append((fresh, functools.partial(solve_prepared, compete=False, initial=InitialMatch(
+            landmarks_x=landmarks, landmarks_y=found.map_xy[landmarks]))))
+    with state.watch("disagreeing parts"):  # the bar stays full: the match was complete before this stage
+        placed = yield from scaled_progress(side_by_side(
+            runs[0][0], runs[1][0], lambda st: _or_its_error(runs[0][1](st)), runs[1][1],
+            ("keeping the first part", "keeping the second part")), 1.0, 1.0)
+        maps = [found.map_xy] + [p.map_xy if isinstance(p, MatchResult) else None for p in placed]
+        distortions = geodesic_distortions(state.source, state.target, [m for m in maps if m is not None],
+                                           state.pair_distances())
+    distortions = [distortions.pop(0) if m is not None else float("nan") for m in maps]
+    found.extras.update(disagreement_distortions=distortions, replaced_part=0)
+    best = 1 + int(np.nanargmin(distortions[1:])) if not np.all(np.isnan(distortions[1:])) else 0
+    if best == 0 or not distortions[best] < distortions[0]:
+        return found
+    result = placed[best - 1]
+    result.extras = {**found.extras, **result.extras, "replaced_part": int(np.sum(~parts.part if best == 1
+                                                                                 else parts.part))}
+    result.timings = found.timings  # with this stage's time (the landmark runs' own timings are its parts)
+    return result
 
 
 def solve_prepared(state: KernelState, initial: InitialMatch | None, compete: bool = True):
@@ -1476,6 +1556,12 @@ def turn_note(extras: dict) -> str | None:
         said.append(f"{extras['swapped_regions']} regions (a mirror pair of limbs with the body beside them) are "
                     f"matched swapped, each onto the other's mirror image, and were left as found (kernel matching "
                     f"matches such limbs again from the rest of the map)")
+    if extras.get("replaced_part"):
+        distortions = extras["disagreement_distortions"]
+        said.append(f"two parts of the map disagreed (the geodesic distances between them distorted "
+                    f"{extras['disagreement_ratio']:.1f}× as much as within them); {extras['replaced_part']} source "
+                    f"vertices were matched again with the rest of the map as landmarks (geodesic distortion "
+                    f"{distortions[0]:.4f} → {min(d for d in distortions[1:] if d == d):.4f} √area)")
     if not said:
         return None
     again = "; the turned map was then optimised once more" if "first_pass" in extras and (
@@ -1518,18 +1604,16 @@ def reversal_note(extras: dict) -> str | None:
             "matched to right); try landmarks (--init), or check the target is not a mirror image")
 
 
-def start_measures(source, target, results: dict) -> dict:
+def start_measures(source, target, results: dict, distances: PairDistances | None = None) -> dict:
     """The three measures by which :func:`best_of_both_starts` compares its maps, per start.
 
     Returns ``{init: {"energy", "agreement", "distortion"}}``: the final kernel energy (higher is better;
     both runs share the spectra and times, so the energies compare), the :func:`orientation_agreement`
     (higher) and the geodesic distortion per √area
-    (:func:`~corrlib.geometry.distortion.geodesic_distortions`, lower).
+    (:func:`~corrlib.geometry.distortion.geodesic_distortions`, lower; ``distances``: the pair's, shared).
     """
-    from corrlib.geometry.distortion import geodesic_distortions
-
     inits = list(results)
-    distortions = geodesic_distortions(source, target, [results[init].map_xy for init in inits])
+    distortions = geodesic_distortions(source, target, [results[init].map_xy for init in inits], distances)
     return {init: {"energy": float(results[init].energy),
                    "agreement": float(results[init].extras["orientation_agreement"]),
                    "distortion": float(d)} for init, d in zip(inits, distortions)}
@@ -1553,35 +1637,43 @@ def _or_its_error(solver):
 
 
 def both_starts(first: KernelState, second: KernelState):
-    """Kernel matching from two prepared states: ``first`` in the calling thread (its progress reported),
-    ``second`` on a thread beside it where this process may use two cores, else after it. A generator; returns
+    """Kernel matching from two prepared states (:func:`side_by_side`, each :func:`solved`). A generator; returns
     ``{init: MatchResult}``, where the second start's value is its :class:`~corrlib.errors.CorrError` if it
-    failed (the first start's errors, and a cancellation, are raised).
+    failed (the first start's errors, and a cancellation, are raised)."""
+    inits = (first.params.init, second.params.init)
+    results = yield from side_by_side(first, second, solved, solved,
+                                      (f"start 1/2 ({inits[0]})", f"start 2/2 ({inits[1]})"))
+    return dict(zip(inits, results))
+
+
+def side_by_side(first: KernelState, second: KernelState, run_first, run_second, labels: tuple[str, str]):
+    """Two runs of the solver, ``run_first(first)`` in the calling thread (its progress reported) and
+    ``run_second(second)`` on a thread beside it where this process may use two cores, else after it. A
+    generator; returns both results, the second run's being its :class:`~corrlib.errors.CorrError` if it failed
+    (the first run's errors, and a cancellation, are raised).
 
     After the spectra the solver keeps one core busy (assignments, score products, cells), so the second
-    start costs no wall time on two cores, provided that BLAS does not spread either start over both cores
+    run costs no wall time on two cores, provided that BLAS does not spread either run over both cores
     as well: within the two runs it is limited to one thread (the same maps; sums may differ in the last bit).
-    The second start has its own cancel token, set when the first ends in any way (the caller's
+    The second run has its own cancel token, set when the first ends in any way (the caller's
     cancellation included), so that neither an error nor a cancellation waits for the second run. Side by side,
     the fraction reported is that of both runs' work (:func:`~corrlib.progress.paired_progress`); once the first
-    has ended, each report of the second is relayed once, labelled with its start.
+    has ended, each report of the second is relayed once, labelled.
     """
     from threadpoolctl import threadpool_limits
 
-    inits = (first.params.init, second.params.init)
-    labels = (f"start 1/2 ({inits[0]})", f"start 2/2 ({inits[1]})")
     with side_threads(1) as pool:
-        if isinstance(pool, InlineExecutor):  # one core's share: one start after the other
-            mine = yield from scaled_progress(solved(first), 0.0, 0.5, labels[0])
-            theirs = yield from scaled_progress(_or_its_error(solved(second)), 0.5, 1.0, labels[1])
-            return dict(zip(inits, (mine, theirs)))
+        if isinstance(pool, InlineExecutor):  # one core's share: one run after the other
+            mine = yield from scaled_progress(run_first(first), 0.0, 0.5, labels[0])
+            theirs = yield from scaled_progress(_or_its_error(run_second(second)), 0.5, 1.0, labels[1])
+            return mine, theirs
         caller, second.token = second.token, CancelToken()
         latest = LatestReport()
         try:
             with threadpool_limits(1):
-                other = pool.submit(run, _or_its_error(solved(second)), latest, second.token)
-                yield Progress("kernel matching", 0.0, f"the {inits[1]} start runs beside this one, on the other core")
-                mine = yield from paired_progress(scaled_progress(solved(first), 0.0, 1.0, labels[0]), latest)
+                other = pool.submit(run, _or_its_error(run_second(second)), latest, second.token)
+                yield Progress("kernel matching", 0.0, f"{labels[1]} runs beside this one, on the other core")
+                mine = yield from paired_progress(scaled_progress(run_first(first), 0.0, 1.0, labels[0]), latest)
                 relayed = None
                 while not wait([other], timeout=WAIT_POLL).done:
                     caller.raise_if_cancelled()
@@ -1593,7 +1685,7 @@ def both_starts(first: KernelState, second: KernelState):
                 theirs = other.result()
         finally:
             second.token.cancel()  # a finished run ignores it; a running one stops at its next check
-    return dict(zip(inits, (mine, theirs)))
+    return mine, theirs
 
 
 def best_of_both_starts(source, target, params: KernelMatchingParams, token):
@@ -1632,12 +1724,13 @@ def best_of_both_starts(source, target, params: KernelMatchingParams, token):
         result.extras.update({"init": kept, "start_measures": None, "other_start_error": str(results["fmap"])})
     else:
         with state.watch("orientation"):
-            measures = start_measures(source, target, results)
+            measures = start_measures(source, target, results, state.pair_distances())
         kept = "fmap" if dominates(measures["fmap"], measures["descriptors"]) else "descriptors"
         other = "fmap" if kept == "descriptors" else "descriptors"
         result = results[kept]
         result.extras.update({"init": kept, "start_measures": measures})
         result.timings["other start"] = float(sum(results[other].timings.values()))
+    result = yield from replaced_disagreeing_part(state, result)
     for stage, seconds in state.watch.times.items():  # the shared stages: spectra, samples, the judge
         result.timings[stage] = result.timings.get(stage, 0.0) + seconds
     yield Progress("done", 1.0, f"{kept} start kept, energy {result.energy:.6g}")

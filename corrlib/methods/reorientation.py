@@ -804,7 +804,8 @@ def reorient(source, target, spec_x, spec_y, map_xy: np.ndarray, map_yx: np.ndar
                       (whole_xy, whole_yx) if partial else None)
 
 
-def nearer_isometry(source, target, before_xy: np.ndarray, after_xy: np.ndarray) -> tuple[bool, dict]:
+def nearer_isometry(source, target, before_xy: np.ndarray, after_xy: np.ndarray,
+                    distances=None) -> tuple[bool, dict]:
     """Whether a map re-optimised after partial turns (``after_xy``) is nearer an isometry than the map before
     them (``before_xy``, :attr:`Reoriented.before_partial`), by the geodesic distortion
     (:func:`~corrlib.geometry.distortion.geodesic_distortions`).
@@ -819,7 +820,8 @@ def nearer_isometry(source, target, before_xy: np.ndarray, after_xy: np.ndarray)
     low a distortion, and a turn that rights only *part* of a wholly mirrored map raises the distortion while
     it lowers the error. Kernel matching's second pass re-optimises the whole map from the turn, and there a
     right turn halved the distortion on every pair measured; product-manifold refinement from a poor input
-    met the second case, so it does not use this judge (``docs/decisions.md``).
+    met the second case, so it does not use this judge (``docs/decisions.md``). ``distances``: the pair's
+    :class:`~corrlib.geometry.distortion.PairDistances`, shared with the other judges of the match.
 
     Returns
     -------
@@ -828,7 +830,7 @@ def nearer_isometry(source, target, before_xy: np.ndarray, after_xy: np.ndarray)
     measured : dict
         ``distortion_before_turns`` and ``distortion_after_turns`` (per √area), for a result's ``extras``.
     """
-    before, after = geodesic_distortions(source, target, (before_xy, after_xy))
+    before, after = geodesic_distortions(source, target, (before_xy, after_xy), distances)
     return not before < after, {"distortion_before_turns": before, "distortion_after_turns": after}
 
 

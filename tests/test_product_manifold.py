@@ -536,8 +536,9 @@ def test_swapped_legs_are_reported_and_left_as_found(monkeypatch):
     shapes, mirror = humanoids(front=True)
     source, target = (TriMesh(*shapes[name], name=name) for name in ("human2", "human1"))
     ident = np.arange(source.n_vertices)
-    with monkeypatch.context() as patch:  # kernel matching's first pass from the descriptors: no second pass
-        patch.setattr(kernel_matching, "turned_anything", lambda extras: False)
+    with monkeypatch.context() as patch:  # kernel matching's first pass from the descriptors: no second pass,
+        patch.setattr(kernel_matching, "turned_anything", lambda extras: False)  # and its parts not split
+        patch.setattr(kernel_matching, "inconsistent_parts", lambda *args: None)
         first = solve("kernel-matching", source, target, init="descriptors")
     assert first.extras["released_regions"] == 2
     result = solve("product-manifold", source, target, initial=first.map_xy)

@@ -911,3 +911,33 @@ def test_parts_matched_again_replace_a_right_map_only_where_nearer_an_isometry(w
     assert (replaced > 0) == (min(runs) < found), result.extras
     ident = np.arange(wolf0.n_vertices)
     assert geodesic_errors(result.map_xy, wolf1, ident, ident).summary()["within_0.025"] >= 0.97
+
+
+def test_a_map_turned_on_one_half_is_replaced_by_a_run_nearer_an_isometry():
+    """Stage 9 on its own: the capsule surface onto itself, the map the identity below the middle and the half
+    turn about the axis above it (each half an isometry, the seam not). Both halves are matched again from the
+    other; either run is an isometry of the capsule (the identity, or the whole turn), so the map is replaced
+    and its distortion drops to near zero. Progress stays within [0, 1] and never goes back."""
+    from scipy.spatial import cKDTree
+    from test_distortion import capsule_surface
+
+    from corrlib.geometry.distortion import geodesic_distortions
+    from corrlib.methods import make_params
+    from corrlib.methods.base import MatchResult
+    from corrlib.methods.kernel_matching import KernelMatchingParams, prepare, replaced_disagreeing_part
+    from corrlib.progress import CancelToken, run
+
+    mesh = capsule_surface()
+    z = mesh.vertices[:, 2]
+    _, turned = cKDTree(mesh.vertices).query(mesh.vertices * [-1.0, -1.0, 1.0])
+    twisted = np.where(z > 0, turned, np.arange(mesh.n_vertices))
+    params = make_params(KernelMatchingParams, n_eigs=100, n_seeds=400, init="descriptors")
+    state = run(prepare(mesh, mesh, params, CancelToken()))
+    found = MatchResult("kernel-matching", twisted, None, 0.0, {"total": 1.0}, extras={})
+    fractions = []
+    result = run(replaced_disagreeing_part(state, found), callback=lambda report: fractions.append(report.fraction))
+    before, first, second = result.extras["disagreement_distortions"]
+    assert result is not found and result.extras["replaced_part"] > 0
+    assert min(first, second) < 0.3 * before, (before, first, second)
+    assert geodesic_distortions(mesh, mesh, [result.map_xy])[0] == pytest.approx(min(first, second))
+    assert all(0.0 <= f <= 1.0 for f in fractions if f >= 0) and np.all(np.diff([f for f in fractions if f >= 0]) >= 0)

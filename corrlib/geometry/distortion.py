@@ -97,8 +97,8 @@ def geodesic_distortions(source, target, maps, distances: PairDistances | None =
 
 
 #: a map is read as two parts that disagree when the mean distortion between them is more than this many times
-#: the mean within them (measured: 1.4–2.6 on every right map of the people, cats and wolves, 3.5–5.8 on maps
-#: with a part turned against the rest; ``docs/decisions.md``) ...
+#: the mean within them (right maps stay below, maps with a part turned against the rest above: the figures are
+#: in ``docs/decisions.md``, 2026-12-05) ...
 DISAGREEMENT_RATIO = 3.0
 #: ... and more than this many mean edge lengths: each of the two edge-path distances compared can be about an
 #: edge off the geodesic, so a smaller disagreement is below what the measurement resolves (a nearly exact map,

@@ -548,6 +548,11 @@ class TriMesh:
         return _readonly(np.linalg.norm(self.vertices[self.edges[:, 0]] - self.vertices[self.edges[:, 1]], axis=1))
 
     @cached_property
+    def relative_edge_length(self) -> float:
+        """Mean edge length per √area: the mesh's resolution in units of its size (the same in any units)."""
+        return float(np.mean(self.edge_lengths) / np.sqrt(self.area))
+
+    @cached_property
     def boundary_edges(self) -> np.ndarray:
         """(b, 2) int: directed boundary edges in face orientation (empty for closed meshes)."""
         f = self.faces

@@ -78,15 +78,20 @@ def main() -> None:
         if out.exists():
             continue
         start = time.perf_counter()
-        # pyFM's pointwise map goes from its second mesh to its first: the target first gives source -> target
-        model = FunctionalMapping(TriMesh(str(args.dataset / f"{target}.off")),
-                                  TriMesh(str(args.dataset / f"{source}.off")))
-        model.preprocess(n_descr=100, subsample_step=5, descr_type="WKS")
-        model.fit(K=(35, 35), w_orient=args.orientation)
-        model.zoomout_refine(nit=13, step=5)
         partial = out.with_name(out.name + ".part")  # renamed when whole: a resumed run never skips half a map
-        np.savetxt(partial, model.get_p2p(), fmt="%d")
-        os.replace(partial, out)
+        try:
+            # pyFM's pointwise map goes from its second mesh to its first: the target first gives source -> target
+            model = FunctionalMapping(TriMesh(str(args.dataset / f"{target}.off")),
+                                      TriMesh(str(args.dataset / f"{source}.off")))
+            model.preprocess(n_descr=100, subsample_step=5, descr_type="WKS")
+            model.fit(K=(35, 35), w_orient=args.orientation)
+            model.zoomout_refine(nit=13, step=5)
+            np.savetxt(partial, model.get_p2p(), fmt="%d")
+            os.replace(partial, out)
+        except Exception as exc:  # pyFM's own errors (an unreadable mesh, a failed fit) and the disk's
+            partial.unlink(missing_ok=True)
+            parser.exit(2, f"{parser.prog}: error: {source} -> {target}: pyFM failed ({type(exc).__name__}: {exc}); "
+                           f"the maps written so far are whole and a rerun resumes after them\n")
         print(f"{source} -> {target}: {time.perf_counter() - start:.1f} s", flush=True)
 
 

@@ -256,3 +256,41 @@ def test_the_pyfm_reference_script_names_bad_input_before_it_needs_pyfm(tmp_path
     missing = subprocess.run([sys.executable, str(script), str(tmp_path / "nowhere"), str(pairs), str(out)],
                              capture_output=True, text=True)
     assert missing.returncode == 2 and "not a folder of meshes" in missing.stderr
+
+
+def test_the_pyfm_reference_script_names_a_failed_pair_and_keeps_the_maps_it_wrote(tmp_path, cat_dataset):
+    """A stand-in for pyFM (first pair fine, second failing inside the fit): the failure ends with exit 2
+    naming the pair, the first map is whole, nothing half-written stays; a rerun skips the written map."""
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    fake = tmp_path / "fake" / "pyFM"
+    fake.mkdir(parents=True)
+    (fake / "__init__.py").write_text("")
+    (fake / "mesh.py").write_text("class TriMesh:\n    def __init__(self, path):\n        self.path = path\n")
+    (fake / "functional.py").write_text(
+        "import numpy as np\n"
+        "class FunctionalMapping:\n"
+        "    def __init__(self, target, source):\n"
+        "        self.source = source.path\n"
+        "    def preprocess(self, **kw):\n"
+        "        pass\n"
+        "    def fit(self, **kw):\n"
+        "        if self.source.endswith('cat1.off'):\n"
+        "            raise RuntimeError('the fit diverged')\n"
+        "    def zoomout_refine(self, **kw):\n"
+        "        pass\n"
+        "    def get_p2p(self):\n"
+        "        return np.arange(3)\n")
+    script = Path(__file__).resolve().parents[1] / "scripts" / "pyfm_maps.py"
+    out = tmp_path / "out"
+    env = {**os.environ, "PYTHONPATH": str(fake.parent)}
+    command = [sys.executable, str(script), str(cat_dataset), str(cat_dataset / "pairs.txt"), str(out)]
+    done = subprocess.run(command, capture_output=True, text=True, env=env)
+    assert done.returncode == 2 and "cat1 -> cat0: pyFM failed (RuntimeError: the fit diverged)" in done.stderr
+    assert sorted(p.name for p in out.iterdir()) == ["cat0__cat1.txt"]
+    assert (out / "cat0__cat1.txt").read_text().split() == ["0", "1", "2"]
+    again = subprocess.run(command, capture_output=True, text=True, env=env)
+    assert again.returncode == 2 and "cat0 -> cat1" not in again.stdout  # the written map is skipped

@@ -102,7 +102,7 @@ def test_a_map_turned_half_round_on_one_half_splits_at_the_seam():
 def test_parts_that_disagree_by_less_than_the_mesh_resolves_do_not_disagree():
     """The identity onto a copy with vertex noise of a tenth of an edge: the distortion within any split is
     nearly zero, so the ratio can be large, but the parts differ by less than the edge paths resolve."""
-    from corrlib.geometry.distortion import RESOLVED_EDGES, inconsistent_parts, mean_edge_length
+    from corrlib.geometry.distortion import RESOLVED_EDGES, inconsistent_parts
 
     mesh = capsule_surface()
     edge = np.mean(mesh.edge_lengths)
@@ -110,8 +110,10 @@ def test_parts_that_disagree_by_less_than_the_mesh_resolves_do_not_disagree():
     noisy = TriMesh(mesh.vertices + rng.normal(scale=0.1 * edge, size=mesh.vertices.shape), mesh.faces, name="noisy")
     parts = inconsistent_parts(mesh, noisy, np.arange(mesh.n_vertices))
     assert parts.between < RESOLVED_EDGES * parts.resolution and not parts.disagree
-    assert parts.resolution == pytest.approx(max(mean_edge_length(mesh), mean_edge_length(noisy)))
-    assert mean_edge_length(mesh) == pytest.approx(edge / np.sqrt(mesh.area))
+    assert parts.resolution == pytest.approx(max(mesh.relative_edge_length, noisy.relative_edge_length))
+    assert mesh.relative_edge_length == pytest.approx(edge / np.sqrt(mesh.area))
+    scaled = TriMesh(mesh.vertices * 1000.0, mesh.faces, name="in millimetres")
+    assert scaled.relative_edge_length == pytest.approx(mesh.relative_edge_length)
 
 
 def test_inconsistent_parts_of_an_unmatched_map_is_none():

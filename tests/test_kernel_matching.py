@@ -941,3 +941,42 @@ def test_a_map_turned_on_one_half_is_replaced_by_a_run_nearer_an_isometry():
     assert min(first, second) < 0.3 * before, (before, first, second)
     assert geodesic_distortions(mesh, mesh, [result.map_xy])[0] == pytest.approx(min(first, second))
     assert all(0.0 <= f <= 1.0 for f in fractions if f >= 0) and np.all(np.diff([f for f in fractions if f >= 0]) >= 0)
+
+
+def test_a_failed_run_of_the_two_leaves_the_other(monkeypatch):
+    """Stage 9 with the run that keeps the first part failing (a CorrError): its distortion is infinite, the
+    other run still replaces the map; with both failing, the map found stands."""
+    from scipy.spatial import cKDTree
+    from test_distortion import capsule_surface
+
+    import corrlib.methods.kernel_matching as km
+    from corrlib.errors import InputError
+    from corrlib.methods import make_params
+    from corrlib.methods.base import MatchResult
+    from corrlib.progress import CancelToken, run
+
+    mesh = capsule_surface()
+    z = mesh.vertices[:, 2]
+    _, turned = cKDTree(mesh.vertices).query(mesh.vertices * [-1.0, -1.0, 1.0])
+    twisted = np.where(z > 0, turned, np.arange(mesh.n_vertices))
+    params = make_params(km.KernelMatchingParams, n_eigs=100, n_seeds=400, init="descriptors")
+    state = run(km.prepare(mesh, mesh, params, CancelToken()))
+    original = km.solve_prepared
+    failing = set()
+
+    def solve_or_fail(fresh, initial, compete=True):
+        if initial.landmarks_x.size in failing:
+            raise InputError("this run fails")
+        return (yield from original(fresh, initial, compete))
+
+    monkeypatch.setattr(km, "solve_prepared", solve_or_fail)
+    parts = km.inconsistent_parts(mesh, mesh, twisted, state.pair_distances())
+    failing.add(int(np.sum(parts.part)))  # the run keeping the first part
+    found = MatchResult("kernel-matching", twisted, None, 0.0, {"total": 1.0}, extras={})
+    result = run(km.replaced_disagreeing_part(state, found))
+    before, first, second = result.extras["disagreement_distortions"]
+    assert first == np.inf and second < before and result is not found
+    failing.add(int(np.sum(~parts.part)))
+    found = MatchResult("kernel-matching", twisted, None, 0.0, {"total": 1.0}, extras={})
+    assert run(km.replaced_disagreeing_part(state, found)) is found
+    assert found.extras["disagreement_distortions"][1:] == [np.inf, np.inf] and found.extras["replaced_part"] == 0

@@ -120,7 +120,7 @@ class MapParts:
     between : float
         Mean pair distortion between the parts, per √area.
     resolution : float
-        The larger of the two shapes' mean edge lengths, per √area.
+        The larger of the two shapes' mean edge lengths, per √area (:attr:`TriMesh.relative_edge_length`).
     """
 
     part: np.ndarray
@@ -133,11 +133,6 @@ class MapParts:
         """Whether the parts are two near-isometries that disagree with each other: by more than
         :data:`DISAGREEMENT_RATIO` times the distortion within them and by more than :data:`RESOLVED_EDGES` edges."""
         return self.ratio > DISAGREEMENT_RATIO and self.between > RESOLVED_EDGES * self.resolution
-
-
-def mean_edge_length(mesh) -> float:
-    """Mean edge length of a mesh per √area (the resolution of its edge-path distances)."""
-    return float(np.mean(mesh.edge_lengths) / np.sqrt(mesh.area))
 
 
 def inconsistent_parts(source, target, map_xy: np.ndarray,
@@ -171,7 +166,7 @@ def inconsistent_parts(source, target, map_xy: np.ndarray,
     if matched.size < 4 or not (np.all(np.isfinite(pair_distortion)) and np.all(np.isfinite(distances.from_sample))):
         return None
     scale = np.median(pair_distortion)
-    resolution = max(mean_edge_length(source), mean_edge_length(target))
+    resolution = max(source.relative_edge_length, target.relative_edge_length)
     nothing = MapParts(np.ones(source.n_vertices, dtype=bool), 1.0, 0.0, resolution)
     if not scale > 0:  # an isometry on more than half the pairs: nothing to split
         return nothing

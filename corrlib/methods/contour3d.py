@@ -575,8 +575,7 @@ def contour_points_for(query: PreparedQuery, mesh: TriMesh) -> int:
     """
     closed = np.vstack([query.points, query.points[:1]])
     length = float(np.linalg.norm(np.diff(closed, axis=0), axis=1).sum())
-    mean_edge = float(np.mean(mesh.edge_lengths)) / np.sqrt(mesh.area)
-    return int(length / mean_edge)
+    return int(length / mesh.relative_edge_length)
 
 
 def query_for_mesh(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams) -> PreparedQuery:

@@ -1443,7 +1443,8 @@ def replaced_disagreeing_part(state: KernelState, found: MatchResult):
     :func:`side_by_side`), as a release pass places swapped limbs. The run of least geodesic distortion
     replaces the map where it is nearer an isometry than the map found; which part was wrong is not
     guessed. ``extras``: ``disagreement_ratio`` always, and where the runs were made
-    ``disagreement_distortions`` (the map found, then the run keeping the first part, then the second) and
+    ``disagreement_distortions`` (the map found, then the run keeping the first part, then the second; ``inf``
+    for a run that failed) and
     ``replaced_part`` (the count of source vertices matched again, 0 where the map found was kept).
     """
     if not reorients(state):
@@ -1457,28 +1458,30 @@ def replaced_disagreeing_part(state: KernelState, found: MatchResult):
         return found
     yield Progress("disagreeing parts", 1.0, f"two parts of the map disagree ({parts.ratio:.1f}× the distortion "
                                              "within them); each is matched again from the other")
-    runs = []
+    states, landmarks = [], []
     for kept in (parts.part, ~parts.part):
-        landmarks = np.flatnonzero(kept & (found.map_xy >= 0))
-        fresh = state.prepared()
-        fresh.watch = Stopwatch()
-        runs.append((fresh, functools.partial(solve_prepared, compete=False, initial=InitialMatch(
-            landmarks_x=landmarks, landmarks_y=found.map_xy[landmarks]))))
+        states.append(state.prepared())
+        states[-1].watch = Stopwatch()
+        landmarks.append(np.flatnonzero(kept & (found.map_xy >= 0)))
+
+    def placing(index):  # the run keeping part `index`; a failed run returns its error instead of a map
+        start = InitialMatch(landmarks_x=landmarks[index], landmarks_y=found.map_xy[landmarks[index]])
+        return lambda fresh: _or_its_error(solve_prepared(fresh, start, compete=False))
+
     with state.watch("disagreeing parts"):  # the bar stays full: the match was complete before this stage
-        placed = yield from scaled_progress(side_by_side(
-            runs[0][0], runs[1][0], lambda st: _or_its_error(runs[0][1](st)), runs[1][1],
-            ("keeping the first part", "keeping the second part")), 1.0, 1.0)
-        maps = [found.map_xy] + [p.map_xy if isinstance(p, MatchResult) else None for p in placed]
-        distortions = geodesic_distortions(state.source, state.target, [m for m in maps if m is not None],
-                                           state.pair_distances())
-    distortions = [distortions.pop(0) if m is not None else float("nan") for m in maps]
+        placed = yield from scaled_progress(side_by_side(states[0], states[1], placing(0), placing(1), (
+            "keeping the first part", "keeping the second part")), 1.0, 1.0)
+        maps = [found.map_xy] + [outcome.map_xy for outcome in placed if isinstance(outcome, MatchResult)]
+        measured = iter(geodesic_distortions(state.source, state.target, maps, state.pair_distances()))
+    distortions = [next(measured)] + [next(measured) if isinstance(outcome, MatchResult) else float("inf")
+                                      for outcome in placed]
     found.extras.update(disagreement_distortions=distortions, replaced_part=0)
-    best = 1 + int(np.nanargmin(distortions[1:])) if not np.all(np.isnan(distortions[1:])) else 0
-    if best == 0 or not distortions[best] < distortions[0]:
+    best = int(np.argmin(distortions))  # the map found on a tie
+    if best == 0:
         return found
     result = placed[best - 1]
-    result.extras = {**found.extras, **result.extras, "replaced_part": int(np.sum(~parts.part if best == 1
-                                                                                 else parts.part))}
+    replaced = int(found.map_xy.size - landmarks[best - 1].size)  # the source vertices matched again
+    result.extras = {**found.extras, **result.extras, "replaced_part": replaced}
     result.timings = found.timings  # with this stage's time (the landmark runs' own timings are its parts)
     return result
 
@@ -1561,7 +1564,7 @@ def turn_note(extras: dict) -> str | None:
         said.append(f"two parts of the map disagreed (the geodesic distances between them distorted "
                     f"{extras['disagreement_ratio']:.1f}× as much as within them); {extras['replaced_part']} source "
                     f"vertices were matched again with the rest of the map as landmarks (geodesic distortion "
-                    f"{distortions[0]:.4f} → {min(d for d in distortions[1:] if d == d):.4f} √area)")
+                    f"{distortions[0]:.4f} → {min(distortions[1:]):.4f} √area)")
     if not said:
         return None
     again = "; the turned map was then optimised once more" if "first_pass" in extras and (

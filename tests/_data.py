@@ -1,5 +1,5 @@
 """Location of the test shapes: ``../shared/data`` beside the repository, else the bundled copy; and the
-vertex noise the robustness tests add to them."""
+vertex noise and the needle vertices the robustness tests add to them."""
 
 from pathlib import Path
 
@@ -23,3 +23,21 @@ def with_vertex_noise(mesh, seed: int, fraction: float = 1e-3):
     diagonal = np.linalg.norm(mesh.vertices.max(axis=0) - mesh.vertices.min(axis=0))
     noise = np.random.default_rng(seed).normal(scale=fraction * diagonal, size=mesh.vertices.shape)
     return TriMesh(mesh.vertices + noise, mesh.faces, name=f"{mesh.name}-noise{seed}")
+
+
+def with_needle_vertex(vertices, faces, fraction: float):
+    """``(vertices, faces)`` with the edge of the first face split at ``fraction`` of its length from one end:
+    a vertex of next to no mass whose two needle triangles have huge cotangents (as an edge collapse can leave).
+    The new vertex is the last one."""
+    vertices, faces = np.asarray(vertices), np.asarray(faces)
+    a, b = faces[0, 0], faces[0, 1]
+    new = len(vertices)
+    out = []
+    for tri in faces.tolist():
+        if a in tri and b in tri:
+            c = next(x for x in tri if x not in (a, b))
+            forward = tri[(tri.index(a) + 1) % 3] == b
+            out += [[a, new, c], [new, b, c]] if forward else [[b, new, c], [new, a, c]]
+        else:
+            out.append(tri)
+    return np.vstack([vertices, vertices[a] + fraction * (vertices[b] - vertices[a])]), np.array(out)

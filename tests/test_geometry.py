@@ -90,30 +90,16 @@ def test_a_mesh_with_a_cap_keeps_its_spectrum():
     assert np.allclose(evals[1:], regular[1:], rtol=0.05)
 
 
-def _with_needle_vertex(vertices, faces, fraction):
-    """The mesh with the edge of its first face split at ``fraction`` of its length from one end: a vertex of
-    next to no mass whose two needle triangles have huge cotangents (as an edge collapse can leave)."""
-    a, b = faces[0, 0], faces[0, 1]
-    new = len(vertices)
-    out = []
-    for tri in faces.tolist():
-        if a in tri and b in tri:
-            c = next(x for x in tri if x not in (a, b))
-            forward = tri[(tri.index(a) + 1) % 3] == b
-            out += [[a, new, c], [new, b, c]] if forward else [[b, new, c], [new, a, c]]
-        else:
-            out.append(tri)
-    return np.vstack([vertices, vertices[a] + fraction * (vertices[b] - vertices[a])]), np.array(out)
-
-
 def test_a_needle_vertex_does_not_read_as_a_disconnected_shape():
     """A vertex 1e-10 of an edge from its end (mass ~1e-10 of a typical vertex, cotangents ~1e10) made the
     mean Rayleigh quotient of the unit vectors, against which a second zero eigenvalue was judged, 10^7 times
     the typical one: a connected sphere was refused as disconnected (a remeshed 80k-vertex cat met this). The
     spectrum is the sphere's, and two such spheres are still told disconnected."""
+    from _data import with_needle_vertex
+
     sphere = trimesh.creation.icosphere(subdivisions=3)
     regular, _ = eigenpairs(cotan_stiffness(sphere.vertices, sphere.faces), mass_matrix(sphere.vertices, sphere.faces), 6)
-    v, f = _with_needle_vertex(sphere.vertices, sphere.faces, 1e-10)
+    v, f = with_needle_vertex(sphere.vertices, sphere.faces, 1e-10)
     for method in ("eigsh", "slicing"):
         evals, _ = eigenpairs(cotan_stiffness(v, f), mass_matrix(v, f), 6, method=method)
         assert evals[0] == 0.0

@@ -101,6 +101,42 @@ def test_a_fin_and_coincident_vertices_are_removed(sphere):
     assert mesh.area == pytest.approx(sphere.area, rel=1e-12)
 
 
+def test_a_needle_vertex_is_merged_into_its_neighbour(sphere):
+    """A vertex 1e-5 of an edge from that edge's end (two needle triangles of almost no area, above the zero-area
+    test, and 1e-7 of the diagonal apart, above exact coincidence) is one point with that end at the mesh's
+    resolution: it is merged, and the surface is the sphere's."""
+    from _data import with_needle_vertex
+    from corrlib.geometry.remeshing import without_degenerate_faces
+
+    points, faces = with_needle_vertex(sphere.vertices, sphere.faces, 1e-5)
+    repaired_points, repaired_faces = without_degenerate_faces(points, faces)
+    mesh = TriMesh(repaired_points, repaired_faces, name="repaired")
+    assert mesh.n_vertices == sphere.n_vertices and mesh.n_faces == sphere.n_faces
+    assert mesh.area == pytest.approx(sphere.area, rel=1e-9)
+
+
+@pytest.mark.slow
+def test_a_twice_subdivided_cat_is_remeshed_without_needles(tmp_path):
+    """TOSCA cat1 subdivided twice at its edge midpoints and written to a file (80k vertices, quadruples of
+    faces flat up to the file's rounding): the collapse left 55 needle triangles (shortest edge under 1e-7 of
+    the longest), whose vertices made the remeshed cat read as disconnected. None is left, and the result is
+    one connected surface of the budget's size."""
+    from scipy.sparse.csgraph import connected_components
+
+    from _data import TOSCA
+    from corrlib.io import load_mesh, save_mesh
+
+    cat = load_mesh(TOSCA / "cat1.off")
+    fine = trimesh.Trimesh(cat.vertices, cat.faces, process=False).subdivide().subdivide()
+    save_mesh(tmp_path / "fine-cat.off", fine.vertices, fine.faces)
+    coarse = remeshed(load_mesh(tmp_path / "fine-cat.off"), 5000).mesh
+    lengths = np.linalg.norm(coarse.vertices[coarse.faces] - coarse.vertices[np.roll(coarse.faces, 1, axis=1)],
+                             axis=2)
+    assert (lengths.min(axis=1) / lengths.max(axis=1)).min() > 1e-3
+    assert connected_components(coarse.adjacency)[0] == 1
+    assert 4950 <= coarse.n_vertices <= 5050
+
+
 @pytest.mark.slow
 def test_decimating_a_flat_subdivision_repairs_its_zero_area_faces():
     """Edge collapse on flat regions (a mesh subdivided at its edge midpoints) leaves faces of zero area;

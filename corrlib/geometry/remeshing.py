@@ -76,7 +76,7 @@ def remeshed(mesh: TriMesh, n_vertices: int) -> Remeshed:
     if n_vertices < 4:
         raise ValueError(f"n_vertices must be at least 4, got {n_vertices}")
     # on disk like the spectra: a retrieval remeshes each mesh of its collection for every query
-    key = cache.make_key("remeshed-v3", mesh.content_hash, n_vertices, RELAXATION_STEPS, RELAXATION_DAMPING)
+    key = cache.make_key("remeshed-v4", mesh.content_hash, n_vertices, RELAXATION_STEPS, RELAXATION_DAMPING)
     entry = cache.load("remeshed", key)
     if entry is None:
         points, faces, to_original = _remesh(mesh, n_vertices)
@@ -253,6 +253,12 @@ def _face_normals(points: np.ndarray, faces: np.ndarray) -> np.ndarray:
         return n / np.linalg.norm(n, axis=1, keepdims=True)
 
 
+#: points closer than this fraction of the median edge length are one point of the surface: quadric collapse of a
+#: flat region (a subdivided mesh) leaves vertex pairs 1e-7 of an edge apart, whose needle triangles carry no area
+#: and whose tangential relaxation moves both alike
+COINCIDENT_FRACTION = 1e-4
+
+
 def without_degenerate_faces(points: np.ndarray, faces: np.ndarray, max_rounds: int = 20):
     """The surface of ``(points, faces)`` without the zero-area faces an edge collapse can leave.
 
@@ -280,10 +286,12 @@ def without_degenerate_faces(points: np.ndarray, faces: np.ndarray, max_rounds: 
 
     diag = float(np.linalg.norm(np.ptp(points, axis=0))) or 1.0
     faces = faces.copy()
+    edge_lengths = np.linalg.norm(points[faces] - points[np.roll(faces, 1, axis=1)], axis=2)
+    same_point = max(diag * 1e-9, COINCIDENT_FRACTION * float(np.median(edge_lengths)))
     for _ in range(max_rounds):
-        # coincident points (closer than 1e-9 of the diagonal): one representative each; faces repeating a
-        # vertex go
-        pairs = cKDTree(points).query_pairs(diag * 1e-9, output_type="ndarray")
+        # coincident points (closer than the mesh resolves, see COINCIDENT_FRACTION): one representative each;
+        # faces repeating a vertex go
+        pairs = cKDTree(points).query_pairs(same_point, output_type="ndarray")
         if len(pairs):
             graph = sp.coo_matrix((np.ones(len(pairs)), (pairs[:, 0], pairs[:, 1])), shape=(len(points),) * 2)
             _, component = connected_components(graph, directed=False)

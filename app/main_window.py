@@ -835,11 +835,12 @@ class MainWindow(QMainWindow):
             if outcome.sequence is not None:
                 self.sequence_view.set_sequence(self.source, *outcome.sequence)
             from corrlib.methods.kernel_matching import (  # loaded by the method that ran
-                reversal_note, start_note, turn_note)
+                copies_note, reversal_note, start_note, turn_note)
 
             from corrlib.evaluation import collapse_note
 
-            for note in (reversal_note(result.extras), turn_note(result.extras), start_note(result.extras),
+            for note in (copies_note(result.extras), reversal_note(result.extras), turn_note(result.extras),
+                         start_note(result.extras),
                          collapse_note(result.map_xy, self.source, self.target)):
                 if note:
                     self.job_panel.write(f"{result.method}: {note}")

@@ -404,12 +404,12 @@ def _print_collapse_note(result, source, target) -> None:
 
 def _print_reversal_note(result) -> None:
     """Warn (on stderr) when a mesh-to-mesh map reverses orientation on most of the shape, or was turned."""
-    from corrlib.methods.kernel_matching import reversal_note, start_note, turn_note
+    from corrlib.methods.kernel_matching import copies_note, reversal_note, start_note, turn_note
 
     note = reversal_note(result.extras)
     if note:
         print(f"warning: {note}", file=sys.stderr)
-    for said in (turn_note(result.extras), start_note(result.extras)):
+    for said in (copies_note(result.extras), turn_note(result.extras), start_note(result.extras)):
         if said:
             print(f"note: {said}", file=sys.stderr)
 

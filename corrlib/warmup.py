@@ -23,6 +23,7 @@ def warm_up() -> None:
     from corrlib.geometry.cholesky import CholeskySolver
     from corrlib.geometry.cyclic_paths import ProductGraph, branch_and_bound
     from corrlib.geometry.geodesics import GeodesicSolver
+    from corrlib.geometry.lifting import closest_surface_points
     from corrlib.geometry.sampling import farthest_point_sampling
     from corrlib.geometry.segmentation import persistent_protrusions
     from corrlib.methods.contour3d import node_costs
@@ -45,6 +46,7 @@ def warm_up() -> None:
     sphere = TriMesh(sphere_v, sphere_f, validate=False)
     shot(sphere.vertices, sphere.faces, radius=2.0, min_neighbors=1)  # a mesh's arrays are read-only
     farthest_point_sampling(rng.random((6, 3)), 3)
+    closest_surface_points(rng.random((3, 3)), sphere, np.array([[0, 1], [2, 3], [4, 5]]))
     persistent_protrusions(rng.random(6), adj, 0.1)
     ring_graph = (adj + adj.T).tocsr()
     descended_nearest_rows(rng.random((6, 3)), rng.random((6, 3)), np.arange(6), ring_graph.indptr,

@@ -98,8 +98,9 @@ def test_a_needle_vertex_does_not_read_as_a_disconnected_shape():
     from _data import with_needle_vertex
 
     sphere = trimesh.creation.icosphere(subdivisions=3)
-    regular, _ = eigenpairs(cotan_stiffness(sphere.vertices, sphere.faces), mass_matrix(sphere.vertices, sphere.faces), 6)
-    v, f = with_needle_vertex(sphere.vertices, sphere.faces, 1e-10)
+    v, f = sphere.vertices, sphere.faces
+    regular, _ = eigenpairs(cotan_stiffness(v, f), mass_matrix(v, f), 6)
+    v, f = with_needle_vertex(v, f, 1e-10)
     for method in ("eigsh", "slicing"):
         evals, _ = eigenpairs(cotan_stiffness(v, f), mass_matrix(v, f), 6, method=method)
         assert evals[0] == 0.0

@@ -146,6 +146,7 @@ from corrlib.geometry.sampling import (
     voronoi_bands,
     voronoi_cells,
 )
+from corrlib.geometry.lifting import MatchedCopy, lifted_maps, matched_copy
 from corrlib.geometry.spectrum import Spectrum, mesh_spectra
 from corrlib.methods.base import InitialMatch, MatchResult, param
 from corrlib.methods.registry import MethodSpec, register
@@ -185,6 +186,12 @@ PROGRESS_INIT, PROGRESS_SMOOTHING = 0.05, 0.98
 #: the default eigenpairs per shape and smallest relative diffusion time (divergence-free's final steps use the
 #: same, so that a pair's spectra are shared through the cache and the basis is the same)
 DEFAULT_EIGENPAIRS = 500
+#: the resolution that ``mesh_vertices`` suggests for finer meshes: 500 eigenpairs, of which the smallest default time
+#: resolves about 160, are represented accurately on 5,000 vertices (the benchmarks' meshes have 4.3k-7.2k)
+SUGGESTED_MESH_VERTICES = 5000
+#: meshes above this many vertices get the suggestion of ``mesh_vertices`` in the progress messages: at full
+#: resolution an 80k pair takes minutes and gigabytes (see docs/decisions.md), a 20k pair half a minute
+LARGE_MESH_VERTICES = 40_000
 DEFAULT_TAU_MIN = 5.18e-4
 
 
@@ -267,10 +274,23 @@ class KernelMatchingParams:
                                 "matched again from the other, and the result nearer an isometry is kept. Closed, "
                                 "complete shapes only: a cut changes the reflection and the distances; at least 60 "
                                 "eigenpairs.")
+    mesh_vertices: int = param(0, label="Mesh vertices", low=0, high=10_000_000,
+                               help="0: full resolution. Else a mesh with more than twice this many vertices is "
+                                    f"matched on a copy remeshed to this many (e.g. {SUGGESTED_MESH_VERTICES}), and "
+                                    "the map is carried to its own vertices by the final steps at full resolution "
+                                    "in the copy's eigenfunctions: the smallest kernel resolves no finer detail, "
+                                    "and the eigenpairs of a fine mesh take minutes (80k-vertex cats: 30 s instead "
+                                    "of 5 min, as accurate). The copies are meshed differently, so a pair whose "
+                                    "left and right are a close call can come out otherwise. Not with a given map "
+                                    "or landmarks, which are refined at full resolution.")
     backend: str = param("auction", label="Assignment backend", choices=("auction", "scipy"),
                          help="ε-scaling auction (fast) or scipy's exact solver (slow, for checks).")
 
     def __post_init__(self):
+        if isinstance(self.mesh_vertices, int) and isinstance(self.n_eigs, int) and \
+                0 < self.mesh_vertices <= self.n_eigs:
+            raise ParameterError(f"mesh_vertices must be 0 (full resolution) or more than the {self.n_eigs} "
+                                 f"eigenpairs (n_eigs), got {self.mesh_vertices}")
         if isinstance(self.times, str) and isinstance(self.tau_min, (int, float)) and \
                 isinstance(self.tau_max, (int, float)):
             try:
@@ -1522,6 +1542,15 @@ def orientation_agreement(source, target, map_xy: np.ndarray, spec_x: Spectrum, 
     return mean_agreement(*orientation_blocks(source, target, spec_x, spec_y), map_xy)
 
 
+def copies_note(extras: dict) -> str | None:
+    """What the user is told when finer meshes were matched on remeshed copies (``mesh_vertices``), else None."""
+    if not extras or "matched_on" not in extras:
+        return None
+    n_x, n_y = extras["matched_on"]
+    return (f"matched on copies remeshed to {n_x} and {n_y} vertices and carried to every vertex by the final steps "
+            f"(mesh_vertices; 0 matches at full resolution, slower)")
+
+
 def turn_note(extras: dict) -> str | None:
     """What the user is told when the map, or some of its limbs, was turned by the target's reflection
     (:mod:`.reorientation`), else None."""
@@ -1743,9 +1772,51 @@ def best_of_both_starts(source, target, params: KernelMatchingParams, token):
 def solve_kernel_matching(source, target, params: KernelMatchingParams, token, *,
                           initial: InitialMatch | None = None):
     """Registered solver (``initial``: optional :class:`InitialMatch` for refinement)."""
+    if initial is None:
+        copy_x, copy_y = matched_copy(source, params.mesh_vertices), matched_copy(target, params.mesh_vertices)
+        if copy_x.remeshed or copy_y.remeshed:
+            return (yield from matched_on_copies(source, target, copy_x, copy_y, params, token))
+        if max(source.n_vertices, target.n_vertices) > LARGE_MESH_VERTICES:
+            yield Progress("eigenpairs", 0.0, f"{max(source.n_vertices, target.n_vertices)} vertices at full "
+                                              f"resolution take minutes; mesh_vertices={SUGGESTED_MESH_VERTICES} "
+                                              "matches on remeshed copies in seconds")
     if initial is None and params.init == "best":
         return (yield from best_of_both_starts(source, target, params, token))
     return (yield from kernel_matching(source, target, params, token, initial))
+
+
+#: the share of the progress bar of the match on the copies (the rest: carrying the map to the fine meshes)
+PROGRESS_COPIES = 0.9
+
+
+def matched_on_copies(source, target, copy_x: MatchedCopy, copy_y: MatchedCopy, params: KernelMatchingParams,
+                      token):
+    """Kernel matching of meshes finer than ``mesh_vertices``: the copies matched, the maps carried to the
+    originals (:mod:`corrlib.geometry.lifting`) with the final steps' basis (``smooth_k``).
+
+    Diagnostics that name vertices of the copies (arrays in ``extras``) are dropped; ``extras["matched_on"]``
+    gives the copies' vertex counts.
+    """
+    inner = replace(params, mesh_vertices=0)
+    label = f"matched on copies of {copy_x.mesh.n_vertices} and {copy_y.mesh.n_vertices} vertices"
+    solver = (best_of_both_starts(copy_x.mesh, copy_y.mesh, inner, token) if params.init == "best" else
+              kernel_matching(copy_x.mesh, copy_y.mesh, inner, token, None))
+    result = yield from scaled_progress(solver, 0.0, PROGRESS_COPIES, label)
+    spec_x, spec_y = mesh_spectra((copy_x.mesh, copy_y.mesh), params.n_eigs)  # the copies' (cached)
+    tau_last = diffusion_times(params)[-1]
+    k = min(params.smooth_k, params.n_eigs) if params.smooth_k >= 0 else min(
+        resolved_eigenpairs(spec_x.evals, copy_x.mesh.area, tau_last),
+        resolved_eigenpairs(spec_y.evals, copy_y.mesh.area, tau_last))
+    yield Progress("final ZoomOut step", PROGRESS_COPIES,
+                   f"the map carried to {source.n_vertices} and {target.n_vertices} vertices, {k} eigenfunctions")
+    watch = Stopwatch()
+    with watch("lift"):
+        result.map_xy, result.map_yx = lifted_maps(result.map_xy, result.map_yx, source, target, copy_x, copy_y,
+                                                   spec_x, spec_y, k, token)
+    result.timings.update(watch.times)
+    result.extras = {key: value for key, value in result.extras.items() if not isinstance(value, np.ndarray)}
+    result.extras["matched_on"] = (copy_x.mesh.n_vertices, copy_y.mesh.n_vertices)
+    return result
 
 
 register(MethodSpec(

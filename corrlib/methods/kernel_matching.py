@@ -190,7 +190,7 @@ DEFAULT_EIGENPAIRS = 500
 #: resolves about 160, are represented accurately on 5,000 vertices (the benchmarks' meshes have 4.3k-7.2k)
 SUGGESTED_MESH_VERTICES = 5000
 #: meshes above this many vertices get the suggestion of ``mesh_vertices`` in the progress messages: at full
-#: resolution an 80k pair takes minutes and gigabytes (see docs/decisions.md), a 20k pair half a minute
+#: resolution their pairs take minutes and gigabytes (see docs/decisions.md)
 LARGE_MESH_VERTICES = 40_000
 DEFAULT_TAU_MIN = 5.18e-4
 
@@ -279,10 +279,10 @@ class KernelMatchingParams:
                                     f"matched on a copy remeshed to this many (e.g. {SUGGESTED_MESH_VERTICES}), and "
                                     "the map is carried to its own vertices by the final steps at full resolution "
                                     "in the copy's eigenfunctions: the smallest kernel resolves no finer detail, "
-                                    "and the eigenpairs of a fine mesh take minutes (80k-vertex cats: 30 s instead "
-                                    "of 5 min, as accurate). The copies are meshed differently, so a pair whose "
-                                    "left and right are a close call can come out otherwise. Not with a given map "
-                                    "or landmarks, which are refined at full resolution.")
+                                    "and the eigenpairs of a fine mesh take minutes. The copies are meshed "
+                                    "differently, so a pair whose left and right are a close call can come out "
+                                    "otherwise. Not with a given map or landmarks, which are refined at full "
+                                    "resolution.")
     backend: str = param("auction", label="Assignment backend", choices=("auction", "scipy"),
                          help="ε-scaling auction (fast) or scipy's exact solver (slow, for checks).")
 
@@ -1773,6 +1773,8 @@ def solve_kernel_matching(source, target, params: KernelMatchingParams, token, *
                           initial: InitialMatch | None = None):
     """Registered solver (``initial``: optional :class:`InitialMatch` for refinement)."""
     if initial is None:
+        if 0 < 2 * params.mesh_vertices < max(source.n_vertices, target.n_vertices):
+            yield Progress("remeshing", 0.0, f"copies of {params.mesh_vertices} vertices (mesh_vertices)")
         copy_x, copy_y = matched_copy(source, params.mesh_vertices), matched_copy(target, params.mesh_vertices)
         if copy_x.remeshed or copy_y.remeshed:
             return (yield from matched_on_copies(source, target, copy_x, copy_y, params, token))

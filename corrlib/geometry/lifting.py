@@ -50,13 +50,18 @@ class MatchedCopy:
         The remeshed copy, or the input itself where it is not finer than the budget.
     to_original : (k,) int or None
         The input vertex nearest to every vertex of the copy (None: the copy is the input).
-    nearest_copy : (n,) int or None
-        The vertex of the copy nearest to every input vertex (None: the copy is the input).
+    nearby : (n, STAR_CENTRES) int or None
+        The vertices of the copy nearest to every input vertex, nearest first (None: the copy is the input).
     """
 
     mesh: object
     to_original: np.ndarray | None = None
-    nearest_copy: np.ndarray | None = None
+    nearby: np.ndarray | None = None
+
+    @property
+    def nearest_copy(self) -> np.ndarray | None:
+        """(n,) int: the vertex of the copy nearest to every input vertex (None: the copy is the input)."""
+        return None if self.nearby is None else self.nearby[:, 0]
 
     @property
     def remeshed(self) -> bool:
@@ -73,8 +78,8 @@ def matched_copy(mesh, budget: int) -> MatchedCopy:
     if budget <= 0 or mesh.n_vertices <= 2 * budget:
         return MatchedCopy(mesh)
     copy = remeshed(mesh, budget)
-    nearest = cKDTree(copy.mesh.vertices).query(mesh.vertices)[1]
-    return MatchedCopy(copy.mesh, copy.to_original, nearest)
+    nearby = cKDTree(copy.mesh.vertices).query(mesh.vertices, k=min(STAR_CENTRES, copy.mesh.n_vertices))[1]
+    return MatchedCopy(copy.mesh, copy.to_original, nearby.reshape(mesh.n_vertices, -1))
 
 
 def carried_basis(spectrum: Spectrum, copy: MatchedCopy, original) -> Spectrum:
@@ -97,8 +102,7 @@ def carried_basis(spectrum: Spectrum, copy: MatchedCopy, original) -> Spectrum:
     """
     if not copy.remeshed:
         return spectrum
-    nearby = cKDTree(copy.mesh.vertices).query(original.vertices, k=STAR_CENTRES)[1]
-    faces, weights = closest_surface_points(original.vertices, copy.mesh, nearby)
+    faces, weights = closest_surface_points(original.vertices, copy.mesh, copy.nearby)
     rows = np.repeat(np.arange(original.n_vertices), 3)
     corners = copy.mesh.faces[faces].ravel()
     blend = sp.csr_matrix((weights.ravel(), (rows, corners)), shape=(original.n_vertices, copy.mesh.n_vertices))

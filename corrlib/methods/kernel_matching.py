@@ -1283,6 +1283,16 @@ def reorients(state: KernelState) -> bool:
         can_reorient(state.source, state.target, state.spec_y)
 
 
+def final_basis_size(params: KernelMatchingParams, spec_x: Spectrum, spec_y: Spectrum, area_x: float,
+                     area_y: float) -> int:
+    """The eigenfunctions of the final steps: ``smooth_k`` (at most the eigenpairs computed), or for -1 those
+    the smallest kernel resolves on both shapes (:func:`~corrlib.geometry.fmaps.resolved_eigenpairs`)."""
+    if params.smooth_k >= 0:
+        return min(params.smooth_k, spec_x.k, spec_y.k)
+    tau_last = diffusion_times(params)[-1]
+    return min(resolved_eigenpairs(spec_x.evals, area_x, tau_last), resolved_eigenpairs(spec_y.evals, area_y, tau_last))
+
+
 def kernel_result(state: KernelState, full_map_xy: np.ndarray, full_map_yx: np.ndarray, orient: bool = True):
     """Stage 7: the turns of reversed regions, the final ZoomOut steps
     (:func:`~corrlib.geometry.fmaps.pointwise_from_basis`, repeated by
@@ -1305,9 +1315,7 @@ def kernel_result(state: KernelState, full_map_xy: np.ndarray, full_map_yx: np.n
         full_map_xy, full_map_yx = done.map_xy, done.map_yx
         turned, turned_regions, turned_parts = done.turned, done.turned_regions, done.turned_parts
         released, released_regions = done.released, done.released_regions
-    smooth_k = min(params.smooth_k, k) if params.smooth_k >= 0 else min(
-        resolved_eigenpairs(state.spec_x.evals, state.source.area, state.taus[-1]),
-        resolved_eigenpairs(state.spec_y.evals, state.target.area, state.taus[-1]))
+    smooth_k = final_basis_size(params, state.spec_x, state.spec_y, state.source.area, state.target.area)
     if smooth_k > 0:
         yield Progress("final ZoomOut step", PROGRESS_SMOOTHING, f"nearest partners in {smooth_k} eigenfunctions")
         with watch("zoomout"):
@@ -1805,10 +1813,7 @@ def matched_on_copies(source, target, copy_x: MatchedCopy, copy_y: MatchedCopy, 
               kernel_matching(copy_x.mesh, copy_y.mesh, inner, token, None))
     result = yield from scaled_progress(solver, 0.0, PROGRESS_COPIES, label)
     spec_x, spec_y = mesh_spectra((copy_x.mesh, copy_y.mesh), params.n_eigs)  # the copies' (cached)
-    tau_last = diffusion_times(params)[-1]
-    k = min(params.smooth_k, params.n_eigs) if params.smooth_k >= 0 else min(
-        resolved_eigenpairs(spec_x.evals, copy_x.mesh.area, tau_last),
-        resolved_eigenpairs(spec_y.evals, copy_y.mesh.area, tau_last))
+    k = final_basis_size(params, spec_x, spec_y, copy_x.mesh.area, copy_y.mesh.area)
     yield Progress("final ZoomOut step", PROGRESS_COPIES,
                    f"the map carried to {source.n_vertices} and {target.n_vertices} vertices, {k} eigenfunctions")
     watch = Stopwatch()

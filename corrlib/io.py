@@ -552,14 +552,17 @@ def parse_svg_path(d: str, source: str = "svg") -> list[np.ndarray]:
     """
     reader = _SvgPathReader(d, source)
     cmd = None
-    while reader.i < len(reader.tokens):
-        tok = reader.tokens[reader.i]
-        if tok.isalpha():
-            cmd = tok
-            reader.i += 1
-        elif cmd is None:
-            raise reader.error("SVG path data must start with a command")
-        cmd = reader.step(cmd)
+    # relative steps, reflected control points and curve samples of coordinates near the largest float overflow
+    # to infinity: such a contour is then refused by name as non-finite (Contour2D), like a coordinate of 1e400
+    with np.errstate(over="ignore", invalid="ignore"):
+        while reader.i < len(reader.tokens):
+            tok = reader.tokens[reader.i]
+            if tok.isalpha():
+                cmd = tok
+                reader.i += 1
+            elif cmd is None:
+                raise reader.error("SVG path data must start with a command")
+            cmd = reader.step(cmd)
     return [np.array(sp_) for sp_ in reader.subpaths if len(sp_) >= 3]
 
 

@@ -159,10 +159,13 @@ def test_svg_path_with_curves(tmp_path):
 
 @pytest.mark.parametrize("d, message", [("M 0 0 L 1e308 0 L 0 10 Z", "overflow squared lengths"),
                                         ("Q 1e308 0x10 3.", "overflow squared lengths"),
-                                        ("M 0 0 L 1e400 0 L 0 1 Z", "NaN or infinite")])
+                                        ("M 0 0 L 1e400 0 L 0 1 Z", "NaN or infinite"),
+                                        ("M 0 0 T 1e308 0 T 0 1 Z", "NaN or infinite"),  # a reflected control point
+                                        ("M 1e308 0 l 1e308 0 l 0 1 Z", "NaN or infinite")])  # a relative step
 def test_svg_with_coordinates_too_large_is_refused_by_name(tmp_path, d, message):
     """Found by the fuzzing test: the largest of an SVG's polygons was chosen by an area that overflowed (a
-    RuntimeWarning, not a message). The areas are compared at a common scale; the contour is then refused."""
+    RuntimeWarning, not a message). The areas are compared at a common scale; the contour is then refused. Path
+    arithmetic (relative steps, reflected control points) that overflows gives infinite coordinates, refused too."""
     (tmp_path / "huge.svg").write_text(f'<svg xmlns="http://www.w3.org/2000/svg"><path d="{d}"/></svg>')
     (tmp_path / "two.svg").write_text('<svg><polygon points="0,0 1e-3,0 0,1e-3"/>'
                                       '<polygon points="0,0 1,0 2,0 2,1 2,2 1,2 0,2 0,1.5 0,1 0,0.5"/></svg>')

@@ -110,7 +110,7 @@ def scaled_progress(generator: Generator[Progress, None, T], low: float, high: f
 class LatestReport:
     """A progress callback that keeps the last report of a run on another thread (``report``, None before the
     first) and its last known fraction (``fraction``), for the calling thread to relay
-    (:func:`~corrlib.methods.kernel_matching.both_starts`)."""
+    (:func:`~corrlib.methods.kernel_matching.starts.both_starts`)."""
 
     def __init__(self):
         self.report: Progress | None = None

@@ -116,17 +116,17 @@ def test_mirror_image_of_the_target_gives_the_mirrored_map(cat_pair):
     assert report["mean"] <= 1.3 * report["mean_sym"], report
 
 
-def test_area_capacities_and_sample_masses(cat_pair):
+def test_area_capacities_andsample_masses(cat_pair):
     from corrlib.geometry.laplacian import mass_matrix
     from corrlib.assignment import area_capacities
-    from corrlib.methods.kernel_matching import _sample_masses
+    from corrlib.methods.kernel_matching.state import sample_masses
 
     cat1 = cat_pair[1]
     areas = mass_matrix(cat1.vertices, cat1.faces).diagonal()
     everything = np.random.default_rng(0).permutation(cat1.n_vertices)
-    np.testing.assert_array_equal(_sample_masses(cat1, areas, everything), areas[everything])
+    np.testing.assert_array_equal(sample_masses(cat1, areas, everything), areas[everything])
     sample = everything[:700]
-    masses = _sample_masses(cat1, areas, sample)
+    masses = sample_masses(cat1, areas, sample)
     assert masses.sum() == pytest.approx(cat1.area) and np.all(masses > 0)
     caps = area_capacities(1000, masses)
     share = 1000 * masses / masses.sum()
@@ -287,7 +287,7 @@ def test_every_row_can_reach_its_current_partner_in_its_target_cell():
     """Target cells transferred through the centres alone miss a row's partner where the two shapes' Voronoi
     borders differ (here: the centres' images swapped); with the neighbourhoods of the current partners every
     row's partner is in its cell."""
-    from corrlib.methods.kernel_matching import transferred_cells
+    from corrlib.methods.kernel_matching.multiscale import transferred_cells
 
     sphere = trimesh.creation.icosphere(subdivisions=3)
     mesh = TriMesh(sphere.vertices, sphere.faces, name="sphere")
@@ -400,7 +400,7 @@ def test_fmap_initialisation_and_final_smoothing(wolf_pair):
 
 def test_scores_without_negligible_decays_equal_the_full_product(cat_pair):
     from corrlib.geometry.spectrum import mesh_spectrum
-    from corrlib.methods.kernel_matching import DECAY_CUTOFF, kernel_score
+    from corrlib.methods.kernel_matching.scores import DECAY_CUTOFF, kernel_score
 
     cat0, cat1 = cat_pair[0], cat_pair[1]
     s0, s1 = mesh_spectrum(cat0, 500), mesh_spectrum(cat1, 500)
@@ -663,7 +663,8 @@ def test_best_of_both_starts_keeps_the_functional_maps_start_only_where_it_domin
     orientation agreement and a lower geodesic distortion, so it is kept. Progress stays within [0, 1] and
     never goes back."""
     from corrlib.methods import solve_iter
-    from corrlib.methods.kernel_matching import dominates, start_note
+    from corrlib.methods.kernel_matching import start_note
+    from corrlib.methods.kernel_matching.starts import dominates
     from corrlib.progress import run
 
     human3, mirror, partner = _people_mirror_pair()
@@ -684,7 +685,8 @@ def test_best_of_both_starts_keeps_the_functional_maps_start_only_where_it_domin
 def test_a_start_gives_way_only_to_a_map_better_by_every_measure():
     """The functional map's start replaces the default's only where no measure finds it worse: a tie or one
     contrary measure keeps the descriptor start. The user is told when it was kept, with the measures."""
-    from corrlib.methods.kernel_matching import dominates, start_note
+    from corrlib.methods.kernel_matching import start_note
+    from corrlib.methods.kernel_matching.starts import dominates
 
     base = {"energy": 1.0, "agreement": 5.0, "distortion": 0.05}
     assert dominates({"energy": 1.1, "agreement": 6.0, "distortion": 0.04}, base)
@@ -706,19 +708,19 @@ def _starts_side_by_side(wolf_pair, monkeypatch, first_start_raises: bool):
     import gc
     import threading
 
-    import corrlib.methods.kernel_matching as km
+    import corrlib.methods.kernel_matching.starts as starts
     from corrlib.methods import solve_iter
     from corrlib.progress import CancelToken, run
 
-    states, solved = {}, km.solved
+    states, solved = {}, starts.solved
 
-    def recording(state, initial=None):  # a generator, as km.solved
+    def recording(state, initial=None):  # a generator, as starts.solved
         states[state.params.init] = state
         if first_start_raises and state.params.init == "descriptors":
             raise ValueError("the first start failed")
         return (yield from solved(state, initial))
 
-    monkeypatch.setattr(km, "solved", recording)
+    monkeypatch.setattr(starts, "solved", recording)
     threads = threading.active_count()
     token = CancelToken()
 
@@ -764,9 +766,9 @@ def test_while_one_start_waits_for_the_other_each_of_its_reports_is_relayed_once
     0.1 s, for minutes on large meshes), and the bar shows both runs' work, never going back."""
     import time
 
-    import corrlib.methods.kernel_matching as km
+    import corrlib.methods.kernel_matching.starts as starts
 
-    solved, second_reports = km.solved, []
+    solved, second_reports = starts.solved, []
 
     def slowed(state, initial=None):  # the functional map's start made slower than the descriptor start
         generator = solved(state, initial)
@@ -782,7 +784,7 @@ def test_while_one_start_waits_for_the_other_each_of_its_reports_is_relayed_once
 
     from corrlib import cores
 
-    monkeypatch.setattr(km, "solved", slowed)
+    monkeypatch.setattr(starts, "solved", slowed)
     monkeypatch.setattr(cores, "_core_share", 2)  # side by side, as on the two-core machine
     reports = []
     result = solve("kernel-matching", *wolf_pair, callback=reports.append, n_eigs=150, n_seeds=800, n_times=5,
@@ -924,7 +926,9 @@ def test_a_map_turned_on_one_half_is_replaced_by_a_run_nearer_an_isometry():
     from corrlib.geometry.distortion import geodesic_distortions
     from corrlib.methods import make_params
     from corrlib.methods.base import MatchResult
-    from corrlib.methods.kernel_matching import KernelMatchingParams, prepare, replaced_disagreeing_part
+    from corrlib.methods.kernel_matching import KernelMatchingParams
+    from corrlib.methods.kernel_matching.passes import replaced_disagreeing_part
+    from corrlib.methods.kernel_matching.state import prepare
     from corrlib.progress import CancelToken, run
 
     mesh = capsule_surface()
@@ -949,8 +953,9 @@ def test_a_failed_run_of_the_two_leaves_the_other(monkeypatch):
     from scipy.spatial import cKDTree
     from test_distortion import capsule_surface
 
-    import corrlib.methods.kernel_matching as km
+    import corrlib.methods.kernel_matching.passes as passes
     from corrlib.errors import InputError
+    from corrlib.geometry.distortion import inconsistent_parts
     from corrlib.methods import make_params
     from corrlib.methods.base import MatchResult
     from corrlib.progress import CancelToken, run
@@ -959,9 +964,12 @@ def test_a_failed_run_of_the_two_leaves_the_other(monkeypatch):
     z = mesh.vertices[:, 2]
     _, turned = cKDTree(mesh.vertices).query(mesh.vertices * [-1.0, -1.0, 1.0])
     twisted = np.where(z > 0, turned, np.arange(mesh.n_vertices))
-    params = make_params(km.KernelMatchingParams, n_eigs=100, n_seeds=400, init="descriptors")
-    state = run(km.prepare(mesh, mesh, params, CancelToken()))
-    original = km.solve_prepared
+    from corrlib.methods.kernel_matching import KernelMatchingParams
+    from corrlib.methods.kernel_matching.state import prepare
+
+    params = make_params(KernelMatchingParams, n_eigs=100, n_seeds=400, init="descriptors")
+    state = run(prepare(mesh, mesh, params, CancelToken()))
+    original = passes.solve_prepared
     failing = set()
 
     def solve_or_fail(fresh, initial, compete=True):
@@ -969,16 +977,16 @@ def test_a_failed_run_of_the_two_leaves_the_other(monkeypatch):
             raise InputError("this run fails")
         return (yield from original(fresh, initial, compete))
 
-    monkeypatch.setattr(km, "solve_prepared", solve_or_fail)
-    parts = km.inconsistent_parts(mesh, mesh, twisted, state.pair_distances())
+    monkeypatch.setattr(passes, "solve_prepared", solve_or_fail)
+    parts = inconsistent_parts(mesh, mesh, twisted, state.pair_distances())
     failing.add(int(np.sum(parts.part)))  # the run keeping the first part
     found = MatchResult("kernel-matching", twisted, None, 0.0, {"total": 1.0}, extras={})
-    result = run(km.replaced_disagreeing_part(state, found))
+    result = run(passes.replaced_disagreeing_part(state, found))
     before, first, second = result.extras["disagreement_distortions"]
     assert first == np.inf and second < before and result is not found
     failing.add(int(np.sum(~parts.part)))
     found = MatchResult("kernel-matching", twisted, None, 0.0, {"total": 1.0}, extras={})
-    assert run(km.replaced_disagreeing_part(state, found)) is found
+    assert run(passes.replaced_disagreeing_part(state, found)) is found
     assert found.extras["disagreement_distortions"][1:] == [np.inf, np.inf] and found.extras["replaced_part"] == 0
 
 
@@ -1022,14 +1030,15 @@ def test_large_meshes_at_full_resolution_are_told_of_the_copies(wolf_pair, monke
     """Above LARGE_MESH_VERTICES the first progress message suggests mesh_vertices (the run itself is stopped
     there: the message comes before any work)."""
     from corrlib.methods import kernel_matching as km
+    from corrlib.methods.kernel_matching import solver as km_solver
     from corrlib.progress import CancelToken
 
-    monkeypatch.setattr(km, "LARGE_MESH_VERTICES", 1000)
+    monkeypatch.setattr(km_solver, "LARGE_MESH_VERTICES", 1000)
     solver = km.solve_kernel_matching(*wolf_pair, km.KernelMatchingParams(), CancelToken())
     first = next(solver)
     solver.close()
     assert "mesh_vertices=5000 matches on remeshed copies" in first.message
-    monkeypatch.setattr(km, "LARGE_MESH_VERTICES", 10_000)
+    monkeypatch.setattr(km_solver, "LARGE_MESH_VERTICES", 10_000)
     solver = km.solve_kernel_matching(*wolf_pair, km.KernelMatchingParams(), CancelToken())
     assert "mesh_vertices" not in next(solver).message
     solver.close()

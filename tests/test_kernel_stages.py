@@ -6,21 +6,18 @@ import scipy.linalg as sla
 import trimesh
 
 from corrlib.geometry.laplacian import mesh_laplacian
-from corrlib.methods.kernel_matching import (
+from corrlib.methods.kernel_matching.dc import (
     MONOTONE_RTOL,
     SeedProblem,
-    cell_centres,
     dc_objective,
     dc_step,
     free_assignment,
-    heat_decays,
-    kernel_energy,
-    most_similar_matches,
     seed_alignment,
     seed_score,
-    split_large_cells,
     updated_alignment,
 )
+from corrlib.methods.kernel_matching.multiscale import cell_centres, split_large_cells
+from corrlib.methods.kernel_matching.scores import heat_decays, kernel_energy, most_similar_matches
 from corrlib.methods.resolution import surplus_partners
 from corrlib.shapes import TriMesh
 
@@ -323,7 +320,9 @@ def test_a_second_pass_reuses_the_descriptors_of_the_first():
     prepared again for a second pass (:meth:`KernelState.prepared`) carries them instead of recomputing them,
     and its seed problem is the first one's."""
     from corrlib.methods.base import make_params
-    from corrlib.methods.kernel_matching import KernelMatchingParams, prepare, seed_problem
+    from corrlib.methods.kernel_matching import KernelMatchingParams
+    from corrlib.methods.kernel_matching.seed_stage import seed_problem
+    from corrlib.methods.kernel_matching.state import prepare
     from corrlib.progress import CancelToken, run
 
     ico = trimesh.creation.icosphere(subdivisions=3)

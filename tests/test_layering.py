@@ -151,6 +151,19 @@ def test_no_private_names_imported_across_modules():
     assert not offenders, offenders
 
 
+#: a module holds one concept; beyond this many lines it is split into a package of modules
+MAX_MODULE_LINES = 1200
+
+
+def test_modules_are_small():
+    """No module of corrlib or app has more than 1200 lines (the largest had 1833: kernel matching, now a
+    package with a module per stage)."""
+    long = [f"{path.relative_to(ROOT)} ({count} lines)" for package in ("corrlib", "app")
+            for path in (ROOT / package).rglob("*.py")
+            if (count := len(path.read_text().splitlines())) > MAX_MODULE_LINES]
+    assert not long, long
+
+
 #: functions may be longer only when they are numba kernels, unrolled on purpose
 MAX_FUNCTION_LINES = 80
 

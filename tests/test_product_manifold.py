@@ -527,7 +527,7 @@ def test_swapped_legs_are_reported_and_left_as_found(monkeypatch):
     (``swapped_regions``), the user is told, and the map is left as found."""
     from _humanoid import humanoids
 
-    import corrlib.methods.kernel_matching as kernel_matching
+    import corrlib.methods.kernel_matching.passes as kernel_passes
     from corrlib.evaluation import geodesic_errors
     from corrlib.methods import solve
     from corrlib.methods.kernel_matching import turn_note
@@ -537,8 +537,8 @@ def test_swapped_legs_are_reported_and_left_as_found(monkeypatch):
     source, target = (TriMesh(*shapes[name], name=name) for name in ("human2", "human1"))
     ident = np.arange(source.n_vertices)
     with monkeypatch.context() as patch:  # kernel matching's first pass from the descriptors: no second pass,
-        patch.setattr(kernel_matching, "turned_anything", lambda extras: False)  # and its parts not split
-        patch.setattr(kernel_matching, "inconsistent_parts", lambda *args: None)
+        patch.setattr(kernel_passes, "turned_anything", lambda extras: False)  # and its parts not split
+        patch.setattr(kernel_passes, "inconsistent_parts", lambda *args: None)
         first = solve("kernel-matching", source, target, init="descriptors")
     assert first.extras["released_regions"] == 2
     result = solve("product-manifold", source, target, initial=first.map_xy)

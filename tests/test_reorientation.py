@@ -59,11 +59,11 @@ def test_kernel_matching_turns_a_map_that_started_reversed(cat_pair, monkeypatch
     target's signed area forms negated in the initial assignment) ends at the mirrored map, which the kernel
     energy cannot tell from the right one (measured: 0.216 direct, 0.029 mirror-accepted). The result is
     turned by cat1's reflection (measured 0.030); with reorient=false it stays reversed."""
-    import corrlib.methods.kernel_matching as km
+    import corrlib.methods.kernel_matching.seed_stage as km_seed_stage
 
     cat0, cat1, gt = cat_pair
-    with_orientation = km._with_orientation
-    monkeypatch.setattr(km, "_with_orientation",
+    with_orientation = km_seed_stage.with_orientation
+    monkeypatch.setattr(km_seed_stage, "with_orientation",
                         lambda dx, dy, ox, oy, w: with_orientation(dx, dy, ox, -oy, w))
     turned = solve("kernel-matching", cat0, cat1, init="descriptors")
     kept = solve("kernel-matching", cat0, cat1, init="descriptors", reorient=False)
@@ -228,11 +228,11 @@ def test_turned_limbs_are_reported():
 def test_too_few_eigenpairs_for_a_reflection_leave_the_map_alone(wolf_pair, monkeypatch):
     """The reflection needs 60 eigenpairs; with fewer, a reversed map is reported, not turned, and no error
     is raised (the wolves' start reversed as in the cats' test)."""
-    import corrlib.methods.kernel_matching as km
+    import corrlib.methods.kernel_matching.seed_stage as km_seed_stage
 
     wolf0, wolf1 = wolf_pair
-    with_orientation = km._with_orientation
-    monkeypatch.setattr(km, "_with_orientation",
+    with_orientation = km_seed_stage.with_orientation
+    monkeypatch.setattr(km_seed_stage, "with_orientation",
                         lambda dx, dy, ox, oy, w: with_orientation(dx, dy, ox, -100.0 * oy, w))
     result = solve("kernel-matching", wolf0, wolf1, n_eigs=30, n_seeds=300, n_times=3)
     assert result.extras["orientation_agreement"] < 0  # reversed (measured -3.1), yet not turned

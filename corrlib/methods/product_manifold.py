@@ -281,7 +281,7 @@ def _refined_again(source, target, fx: pm.Factor, fy: pm.Factor, turned_xy: np.n
                    token, watch):
     """The refinement once more from a map the orientation stage turned, then the stage again (no third pass).
 
-    As in kernel matching (:func:`corrlib.methods.kernel_matching.reoptimised`): a turn composes the map
+    As in kernel matching (:func:`corrlib.methods.kernel_matching.passes.reoptimised`): a turn composes the map
     with a computed reflection, so the turned part is a rough copy of the right one, and the density is
     diffused again from it. A generator; returns the maps and the extras (with the first pass's decisions,
     :func:`~corrlib.methods.reorientation.with_first_pass`).

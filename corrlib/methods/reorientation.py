@@ -88,7 +88,7 @@ alike in front and behind, feet the only front) it can be the other flip,
 which the left–right reflection turns into a half turn with the arms
 swapped; kernel matching therefore keeps a turned and re-optimised map only
 where it is nearer an isometry than the map as found
-(:func:`corrlib.methods.kernel_matching.declined_partial_turns`).
+(:func:`corrlib.methods.kernel_matching.passes.declined_partial_turns`).
 
 **Crossed limbs.** A map of a complete shape onto a complete one sends every
 limb onto a limb of its own. A single reversed region whose limb shares its

@@ -1124,4 +1124,7 @@ def contour_reading(result) -> str:
         line += (f"; the contour was matched at {extras['contour_points']} points instead of "
                  f"{extras['contour_points_asked']}: the target's mean edge is longer than the finer step, "
                  "which would press the curve short")
-    return line
+    from corrlib.methods.contour3d import remeshing_note
+
+    note = remeshing_note(extras)
+    return line + (f"; {note}" if note else "")

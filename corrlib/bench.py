@@ -44,7 +44,7 @@ from pathlib import Path
 
 import numpy as np
 
-from corrlib.errors import FileFormatError, InputError, ParameterError
+from corrlib.errors import CorrError, FileFormatError, InputError, ParameterError
 from corrlib.io import suffixes
 from corrlib.parallel import job_executor
 from corrlib.progress import peak_rss_mb
@@ -113,6 +113,58 @@ def load_dataset(folder, pairs_file=None, *, require_pairs: bool = True) -> Data
     return Dataset(root, shapes, pairs, gt, gt_sym)
 
 
+def checked_ground_truth(data: Dataset, pairs) -> tuple[dict[str, np.ndarray], dict[str, np.ndarray]]:
+    """The dataset's ground truth, checked before any method runs: ``({name: .vts rows},
+    {name: .sym.vts rows})`` (0-based), both empty for meshes of one connectivity (the identity is their ground
+    truth).
+
+    Row r of the two ``.vts`` files of a pair is the same surface point, so a pair's files (and a target's
+    ``.sym.vts`` against its ``.vts``) must have as many rows, each index within its mesh; without ``.vts``
+    files the two meshes of a pair must share their faces. Every violation is a
+    :class:`~corrlib.errors.FileFormatError` naming the file (or the two meshes). A mesh that cannot be read is
+    left out here: its pairs fail in their jobs, with the reason, and the run goes on.
+
+    Parameters
+    ----------
+    data : Dataset
+    pairs : iterable of (str, str)
+        The shape names whose rows are compared.
+    """
+    from corrlib.io import load_mesh, load_vts
+
+    if data.gt_sym and not data.gt:
+        first = next(iter(data.gt_sym.values()))
+        raise FileFormatError(f"{first}: mirrored ground truth (.sym.vts) without the ground truth itself; give "
+                              f"corres/<name>.vts for every mesh")
+    meshes = {}
+    for name, path in data.shapes.items():
+        try:
+            meshes[name] = load_mesh(path)
+        except CorrError:
+            continue
+    rows = {name: load_vts(path, meshes[name].n_vertices if name in meshes else None)
+            for name, path in data.gt.items()}
+    mirror = {name: load_vts(path, meshes[name].n_vertices if name in meshes else None)
+              for name, path in data.gt_sym.items() if name in data.shapes}
+    for name, sym in mirror.items():
+        if sym.size != rows[name].size:
+            raise FileFormatError(f"{data.gt_sym[name]}: {sym.size} rows against {rows[name].size} in "
+                                  f"{data.gt[name].name}; a mirrored ground truth has a row for every row")
+    for a, b in pairs:
+        if a not in meshes or b not in meshes:
+            continue
+        if rows and rows[a].size != rows[b].size:
+            raise FileFormatError(f"{data.gt[a]} has {rows[a].size} rows and {data.gt[b]} {rows[b].size}: the rows "
+                                  f"of a pair's .vts files are corresponding points, so their counts must be equal")
+        n_a, n_b = meshes[a].n_vertices, meshes[b].n_vertices
+        if not rows and (n_a != n_b or not np.array_equal(meshes[a].faces, meshes[b].faces)):
+            found = f"{n_a} and {n_b} vertices" if n_a != n_b else f"both {n_a} vertices, other faces"
+            raise FileFormatError(f"{data.shapes[a]} and {data.shapes[b]}: without .vts files the ground truth is "
+                                  f"the identity, which needs one connectivity ({found}); give corres/<name>.vts "
+                                  f"files")
+    return rows, mirror
+
+
 @dataclass(frozen=True)
 class MethodRun:
     """A method of the registry with parameters, under a label (one column of the results)."""
@@ -151,10 +203,22 @@ def methods_from_toml(path) -> list[MethodRun]:
         doc = tomllib.loads(Path(path).read_text())
     except (OSError, tomllib.TOMLDecodeError) as exc:
         raise FileFormatError(f"{path}: cannot read the methods file: {exc}") from None
+    tables = doc.get("method", [])
+    if not isinstance(tables, list) or not all(isinstance(t, dict) for t in tables):
+        raise FileFormatError(f"{path}: 'method' must be an array of tables ([[method]] sections), got "
+                              f"{type(tables).__name__}")
     out = []
-    for i, table in enumerate(doc.get("method", [])):
+    for i, table in enumerate(tables, 1):
+        unknown = sorted(set(table) - {"name", "label", "params"})
+        if unknown:
+            raise FileFormatError(f"{path}: method {i} has unknown keys {', '.join(unknown)} (use name, label, "
+                                  f"params)")
+        for key, kind in (("name", str), ("label", str), ("params", dict)):
+            if key in table and not isinstance(table[key], kind):
+                raise FileFormatError(f"{path}: method {i}: {key} must be a {'table' if kind is dict else 'string'}, "
+                                      f"got {table[key]!r}")
         if "name" not in table:
-            raise FileFormatError(f"{path}: method {i + 1} has no name")
+            raise FileFormatError(f"{path}: method {i} has no name")
         spec = get_method(table["name"])
         params = dict(table.get("params", {}))
         make_params(spec.params, **params)
@@ -259,6 +323,14 @@ class Runner:
         labels = [m.label for m in self.methods] + list(self.external)
         if len(set(labels)) != len(labels):
             raise ParameterError(f"method labels must be unique, got {labels}")
+        folders = [_label_dir(label) for label in labels]
+        for label, folder in zip(labels, folders):
+            if folder.strip(".") == "":
+                raise ParameterError(f"method label {label!r} names no folder; use letters or digits")
+            if folders.count(folder) > 1:
+                raise ParameterError(f"method labels {[l for l, f in zip(labels, folders) if f == folder]} share "
+                                     f"the results folder {folder!r}; choose labels that differ in letters or "
+                                     f"digits")
         self.out = Path(out)
         self.geodesics = geodesics
 
@@ -282,14 +354,49 @@ class Runner:
     def _record_path(self, label: str, job: Job) -> Path:
         return self.out / "records" / _label_dir(label) / f"{job.key}.json"
 
+    def settings(self, label: str) -> dict:
+        """What produced a label's results (stored with each record): the method with every parameter, or the
+        folder of external maps, and the geodesics of the evaluation (JSON values)."""
+        method = next((m for m in self.methods if m.label == label), None)
+        what = {"maps": str(self.external[label])} if method is None else {"method": method.name,
+                                                                            "params": _all_params(method)}
+        return json.loads(json.dumps({**what, "geodesics": self.geodesics}, default=str))
+
     def pending(self) -> list[tuple[str, Job]]:
-        """Jobs without a record yet (what a resumed run still has to do)."""
-        return [(label, job) for label, job in self.jobs() if not self._record_path(label, job).exists()]
+        """Jobs without a record yet, or whose record is a failure (what a resumed run still has to do; a
+        failure is retried, its input may have been fixed). A record made with other settings under the same
+        label (:meth:`settings`) is refused by name: its numbers would be reported as this run's."""
+        todo, settings, clashes = [], {}, []
+        for label, job in self.jobs():
+            path = self._record_path(label, job)
+            if not path.exists():
+                todo.append((label, job))
+                continue
+            record = json.loads(path.read_text())
+            if label not in settings:
+                settings[label] = self.settings(label)
+            stored = record.get("settings", settings[label])  # records of older versions carry none
+            if stored != settings[label]:
+                clashes.append((label, stored))
+            elif record.get("status") == "failed":
+                todo.append((label, job))
+        if clashes:
+            label, stored = clashes[0]
+            now = settings[label]
+            changed = sorted(k for k in set(stored) | set(now) if stored.get(k) != now.get(k))
+            if "params" in changed:
+                changed.remove("params")
+                changed += sorted(f"{k}={stored['params'].get(k)!r} → {now['params'].get(k)!r}"
+                                  for k in set(stored["params"]) | set(now["params"])
+                                  if stored["params"].get(k) != now["params"].get(k))
+            raise ParameterError(f"{self.out} holds {len(clashes)} result(s) of {label!r} made with other settings "
+                                 f"({', '.join(changed)}); choose a new output folder (-o) or another label")
+        return todo
 
     def _store(self, label: str, job: Job, outcome: dict) -> None:
         from corrlib.io import atomic_write, save_map
 
-        rec = dict(outcome["record"], method=label)
+        rec = dict(outcome["record"], method=label, settings=self.settings(label))
         folder = self.out / "maps" / _label_dir(label)
         if outcome["map_xy"] is not None and job.external_map is None:
             folder.mkdir(parents=True, exist_ok=True)
@@ -309,7 +416,9 @@ class Runner:
 
     def run(self, *, jobs: int | None = None, scheduler: str | None = None, callback=None,
             limit: int | None = None) -> dict:
-        """Run every pending job, then write the summary. ``limit`` stops after that many jobs (tests)."""
+        """Run every pending job, then write the summary. ``limit`` stops after that many jobs (tests). The
+        dataset's ground truth is checked first (:func:`checked_ground_truth`)."""
+        checked_ground_truth(self.dataset, self.dataset.pairs)
         todo = self.pending()
         if limit is not None:
             todo = todo[:limit]

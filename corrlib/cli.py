@@ -403,13 +403,16 @@ def _print_collapse_note(result, source, target) -> None:
 
 
 def _print_reversal_note(result) -> None:
-    """Warn (on stderr) when a mesh-to-mesh map reverses orientation on most of the shape, or was turned."""
+    """Warn (on stderr) when a mesh-to-mesh map reverses orientation on most of the shape, or was turned; note
+    the other things a method tells about its result (copies, starts, a target matched unremeshed)."""
+    from corrlib.methods.contour3d import remeshing_note
     from corrlib.methods.kernel_matching import copies_note, reversal_note, start_note, turn_note
 
     note = reversal_note(result.extras)
     if note:
         print(f"warning: {note}", file=sys.stderr)
-    for said in (copies_note(result.extras), turn_note(result.extras), start_note(result.extras)):
+    for said in (copies_note(result.extras), turn_note(result.extras), start_note(result.extras),
+                 remeshing_note(result.extras)):
         if said:
             print(f"note: {said}", file=sys.stderr)
 
@@ -543,7 +546,7 @@ def cmd_morph(args) -> int:
     result = solve(spec, source, target, callback=_progress_printer(args.quiet), **_parse_overrides(args.param))
     times = np.linspace(0.0, args.t_max, args.frames)
     frames = frame_positions(result, source, target, times)
-    with staged_output(out) as stage:  # the result and every frame, or nothing
+    with staged_output(out, replaces="frame_*") as stage:  # the result and every frame, or nothing
         _stage_match_outputs(result, source, target, stage / "result", pictures=True)
         written = export_sequence(stage, frames, source.faces, times, fmt=args.format, closed=source.is_closed)
     written["animation"] = written["animation"] and out / Path(written["animation"]).name
@@ -692,6 +695,11 @@ def cmd_retrieve(args) -> int:
             for rank, hit in enumerate(hits, 1):
                 fh.write(f"{rank}\t{hit.energy:.9g}\t{hit.path}\t{hit.error}\n")
         print(f"wrote {args.output}")
+    failed = sum(1 for hit in hits if hit.error)
+    if failed:  # as corr bench: exit 1 when a mesh could not be ranked, with every reason above
+        print(f"error: {failed} of {len(hits)} meshes could not be matched"
+              f"{' (none ranked)' if failed == len(hits) else ''}; see the reasons above", file=sys.stderr)
+        return 1
     return 0
 
 
@@ -948,12 +956,14 @@ def main(argv: list[str] | None = None) -> int:
     parser = build_parser()
     args = parser.parse_args(argv)
     previous = _terminate_like_interrupt()
+    code = 1  # until the command returns: an exception is a failure
     try:
         if getattr(args, "scheduler", None) is not None:
             from corrlib.parallel import check_scheduler_address
 
             check_scheduler_address(args.scheduler)  # before any output exists
-        return int(args.func(args) or 0)
+        code = int(args.func(args) or 0)
+        return code
     except CorrError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
@@ -975,6 +985,10 @@ def main(argv: list[str] | None = None) -> int:
             import signal
 
             signal.signal(signal.SIGTERM, previous)
+        if code != 0 and "corrlib.io" in sys.modules:  # a failed command leaves no empty output folder
+            from corrlib.io import remove_created_empty_folders
+
+            remove_created_empty_folders()
 
 
 if __name__ == "__main__":

@@ -570,8 +570,8 @@ def contour_jobs(datasets, planes=DEFAULT_PLANES) -> list[ContourJob]:
         Folders in the layouts of :func:`corrlib.bench.load_dataset`.
     planes : sequence of str
     """
-    from corrlib.bench import load_dataset
-    from corrlib.io import load_map, load_mesh, load_vts
+    from corrlib.bench import checked_ground_truth, load_dataset
+    from corrlib.io import load_map, load_mesh
     from corrlib.retrieval import class_of
 
     for plane in planes:
@@ -580,8 +580,9 @@ def contour_jobs(datasets, planes=DEFAULT_PLANES) -> list[ContourJob]:
     jobs = []
     for folder in datasets:
         data = load_dataset(folder, require_pairs=False)
-        rows = {name: load_vts(path) for name, path in data.gt.items()}
-        mirror = {name: (rows[name], load_vts(path)) for name, path in data.gt_sym.items() if name in rows}
+        rows, mirror = checked_ground_truth(data, [(a, b) for a in data.shapes for b in data.shapes
+                                                  if a != b and class_of(a) == class_of(b)])
+        mirror = {name: (rows[name], sym) for name, sym in mirror.items()}
         maps = _shape_maps(data.folder, data.shapes)
         for name, path in data.shapes.items():
             for plane in planes:
@@ -609,8 +610,8 @@ class SketchJob:
 
 def sketch_jobs(datasets, sketch_folders) -> list[SketchJob]:
     """Every labelled sketch of ``sketch_folders`` against every mesh of ``datasets`` with part labels."""
-    from corrlib.bench import load_dataset
-    from corrlib.io import load_labels, load_mesh, load_vts
+    from corrlib.bench import checked_ground_truth, load_dataset
+    from corrlib.io import load_labels, load_mesh
 
     sketches = [q for folder in sketch_folders for q in sketch_queries(folder)]
     if not sketches:
@@ -618,8 +619,8 @@ def sketch_jobs(datasets, sketch_folders) -> list[SketchJob]:
     jobs = []
     for folder in datasets:
         data = load_dataset(folder, require_pairs=False)
-        rows = {name: load_vts(path) for name, path in data.gt.items()}
-        mirror = {name: (rows[name], load_vts(path)) for name, path in data.gt_sym.items() if name in rows}
+        rows, mirror = checked_ground_truth(data, [])
+        mirror = {name: (rows[name], sym) for name, sym in mirror.items()}
         for name, path in data.shapes.items():
             labels = path.with_name(f"{name}{PART_LABELS_SUFFIX}")
             if labels.is_file():

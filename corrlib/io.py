@@ -112,14 +112,17 @@ def check_output_file(path, what: str = "output") -> Path:
 
 
 @contextlib.contextmanager
-def staged_output(folder):
+def staged_output(folder, replaces: str | None = None):
     """Write a set of files all-or-nothing into ``folder`` (a generator-based context manager).
 
     Yields a hidden staging folder inside ``folder``; on success its files
     move into ``folder`` (each move atomic; Ctrl-C and SIGTERM are held
     until the last one has moved, so an interruption gets the whole set),
     on any failure or interruption before that it is removed, so no partial
-    set of outputs is left behind.
+    set of outputs is left behind. ``replaces``: a glob of the files the set
+    replaces as a whole (a sequence's frames): those in ``folder`` that the new
+    set does not have are removed once it is in place, so that a shorter
+    sequence does not leave an earlier one's last frames beside it.
     """
     folder = ensure_output_folder(folder)
     try:
@@ -139,6 +142,10 @@ def staged_output(folder):
         with signals_held():  # an interrupt during the moves waits until the whole set is in place
             for entry in entries:
                 os.replace(entry, folder / entry.name)
+            names = {entry.name for entry in entries}
+            for old in (folder.glob(replaces) if replaces else ()):
+                if old.name not in names and old.is_file():
+                    old.unlink()
     except BaseException as exc:
         shutil.rmtree(stage, ignore_errors=True)
         if isinstance(exc, OSError):
@@ -169,10 +176,27 @@ def ensure_output_folder(path, what: str = "output") -> Path:
     return folder
 
 
+#: the output folders this process created (:func:`ensure_output_folder`), so that a command that fails can
+#: remove those it left empty (:func:`remove_created_empty_folders`)
+_CREATED_FOLDERS: set[Path] = set()
+
+
+def remove_created_empty_folders() -> None:
+    """Remove the output folders this process created that are still empty, deepest first: a command that
+    stops with an error leaves no empty folder behind (its outputs are written all-or-nothing,
+    :func:`staged_output`). Folders that hold anything, and folders that existed before, stay."""
+    for folder in sorted(_CREATED_FOLDERS, key=lambda p: len(p.parts), reverse=True):
+        with contextlib.suppress(OSError):  # not empty, or gone
+            folder.rmdir()
+    _CREATED_FOLDERS.clear()
+
+
 def _make_folder(folder: Path, what: str) -> Path:
     """``mkdir -p`` with an :class:`InputError` naming the folder and, if so, the file in its way."""
     try:
+        missing = [p for p in (folder, *folder.parents) if not p.exists()]
         folder.mkdir(parents=True, exist_ok=True)
+        _CREATED_FOLDERS.update(p.absolute() for p in missing)
     except OSError as exc:
         blocking = next((p for p in [folder, *folder.parents] if p.exists() and not p.is_dir()), None)
         if blocking == folder:

@@ -115,6 +115,83 @@ def test_bad_datasets_and_methods(tmp_path, wolf_dataset):
     assert methods_from_toml(toml)[0].label == "nn30"
 
 
+def test_ground_truth_is_checked_before_any_method_runs(tmp_path, cat_dataset, wolf_dataset):
+    """Found by fuzzing: meshes of other faces were scored against the identity, a target's .sym.vts of other
+    length or a .vts index beyond the mesh gave a raw IndexError (bench-contour) or failed only after the
+    method had run; a dataset of .sym.vts files alone was scored against the identity."""
+    from corrlib.contour_bench import contour_jobs
+
+    def refused(folder, message):
+        for run in (lambda: Runner(load_dataset(folder), [parse_method(FAST)], tmp_path / "out").run(jobs=1),
+                    lambda: contour_jobs([folder], ["main"])):
+            with pytest.raises(FileFormatError, match=message):
+                run()
+        assert not (tmp_path / "out").exists()  # nothing written
+
+    lines = (wolf_dataset / "wolf1.off").read_text().splitlines()
+    header = 1 if lines[0].strip() == "OFF" else 0
+    n_v, n_f = map(int, lines[header].split()[:2])
+    first_face = header + 1 + n_v
+    a, b, c = lines[first_face].split()[1:4]
+    lines[first_face] = f"3 {a} {c} {b}"  # one face reversed: other faces, same vertex count
+    (wolf_dataset / "wolf1.off").write_text("\n".join(lines) + "\n")
+    refused(wolf_dataset, "the identity, which needs one connectivity")
+    corres = cat_dataset / "corres"
+    rows = (corres / "cat1.sym.vts").read_text().split()
+    (corres / "cat1.sym.vts").write_text("\n".join(rows[:100]) + "\n")
+    refused(cat_dataset, "cat1.sym.vts: 100 rows against")
+    shutil.copy(TOSCA / "cat1.sym.vts", corres)
+    (corres / "cat1.vts").write_text("\n".join((TOSCA / "cat1.vts").read_text().split()[:-10]) + "\n")
+    (corres / "cat1.sym.vts").unlink()
+    refused(cat_dataset, "the rows of a pair's .vts files are corresponding points")
+    (corres / "cat1.vts").write_text((TOSCA / "cat1.vts").read_text().replace("\n1\n", "\n99999\n", 1))
+    refused(cat_dataset, "cat1.vts: index 99999 exceeds")
+    for name in ("cat0", "cat1"):
+        (corres / f"{name}.vts").unlink()
+        shutil.copy(TOSCA / f"{name}.sym.vts", corres)
+    refused(cat_dataset, "mirrored ground truth")
+
+
+def test_a_rerun_with_other_settings_is_refused_and_failures_are_retried(wolf_dataset, tmp_path):
+    """A rerun into the same folder resumed every pair that had a record, whatever the method's parameters or
+    the geodesics were then: the old numbers were reported under the new settings. Failed pairs were never
+    retried after their input was fixed."""
+    from corrlib.cli import main
+
+    wolf1 = (wolf_dataset / "wolf1.off").read_text()
+    (wolf_dataset / "wolf1.off").write_text("OFF\n3 1 0\n0 0 0\n1 nan 0\n")
+    out = tmp_path / "out"
+    args = ["bench", str(wolf_dataset), "-o", str(out), "--jobs", "1", "-q"]
+    assert main(args + ["--method", FAST + "@nn"]) == 1  # both pairs failed: wolf1 cannot be read
+    (wolf_dataset / "wolf1.off").write_text(wolf1)
+    runner = Runner(load_dataset(wolf_dataset), [parse_method(FAST + "@nn")], out)
+    assert len(runner.pending()) == 2  # the failures are run again
+    assert main(args + ["--method", FAST + "@nn"]) == 0
+    assert json.loads((out / "summary.json").read_text())["nn"]["failed"] == 0
+    other = Runner(load_dataset(wolf_dataset), [parse_method("descriptor-nn:n_eigs=20,n_scales=20@nn")], out)
+    with pytest.raises(ParameterError, match=r"other settings \(n_eigs=30 → 20\)"):
+        other.pending()
+    assert main(args + ["--method", FAST + "@nn", "--geodesics", "graph"]) == 2
+    assert not Runner(load_dataset(wolf_dataset), [parse_method(FAST + "@nn")], out).pending()
+
+
+def test_labels_sharing_a_folder_and_bad_methods_files_are_refused(tmp_path, wolf_dataset):
+    ds = load_dataset(wolf_dataset)
+    with pytest.raises(ParameterError, match="share the results folder 'x_y'"):
+        Runner(ds, [parse_method(FAST + "@x y"), parse_method(FAST + "@x_y")], tmp_path / "out")
+    with pytest.raises(ParameterError, match="names no folder"):
+        Runner(ds, [parse_method(FAST + "@..")], tmp_path / "out")
+    toml = tmp_path / "methods.toml"
+    for text, message in [('[[method]]\nname = "descriptor-nn"\nparams = "n_eigs=5"\n', "params must be a table"),
+                          ('[[method]]\nname = "descriptor-nn"\nlabel = 5\n', "label must be a string"),
+                          ('[method]\nname = "descriptor-nn"\n', "array of tables"),
+                          ('[[method]]\nname = [1, 2]\n', "name must be a string"),
+                          ('[[method]]\nname = "descriptor-nn"\nparam = {n_eigs = 5}\n', "unknown keys param")]:
+        toml.write_text(text)
+        with pytest.raises(FileFormatError, match=message):
+            methods_from_toml(toml)
+
+
 @pytest.mark.slow
 def test_dask_cluster_gives_the_local_results(wolf_dataset, tmp_path):
     import distributed  # the dist extra is part of the test setup (scripts/test.sh)

@@ -107,6 +107,36 @@ def test_a_morph_extrapolates_at_most_as_far_as_the_studio_scrubs(capsys, tmp_pa
     assert not (tmp_path / "m").exists() or files_in(tmp_path / "m") == []
 
 
+def test_a_failed_command_leaves_no_empty_folder_and_fewer_frames_replace_the_sequence(capsys, tmp_path):
+    """Found by fuzzing: a morph stopped by its input left its new, empty output folder behind, and a morph of
+    fewer frames into the folder of an earlier one left that one's last frames beside the new ones."""
+    corners = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float)
+    faces = np.array([[0, 2, 1], [0, 1, 3], [0, 3, 2], [1, 2, 3]])
+    from corrlib.io import save_mesh
+
+    save_mesh(tmp_path / "two.off", np.vstack([corners, corners + 5]), np.vstack([faces, faces + 4]))  # two parts
+    assert "connected components" in error_of(capsys, ["morph", tmp_path / "two.off", WOLF1, *FAST,
+                                                       "-o", tmp_path / "new" / "deep"])
+    assert not (tmp_path / "new").exists()
+    out = tmp_path / "m"
+    for frames in ("5", "3"):
+        assert main(["morph", WOLF0, WOLF1, *FAST, "--frames", frames, "-o", str(out), "-q"]) == 0
+    assert sorted(p.name for p in out.glob("frame_*")) == ["frame_000.obj", "frame_001.obj", "frame_002.obj"]
+
+
+def test_a_retrieval_in_which_meshes_fail_exits_with_one(capsys, tmp_path):
+    """Found by fuzzing: a ranking of which every mesh failed was written with exit status 0."""
+    (tmp_path / "meshes").mkdir()
+    (tmp_path / "meshes" / "broken.off").write_text("OFF\n3 1 0\n0 0 0\n1 nan 0\n0 1 0\n3 0 1 2\n")
+    angles = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    np.savetxt(tmp_path / "q.txt", np.column_stack([np.cos(angles), np.sin(angles)]))
+    assert main(["retrieve", str(tmp_path / "q.txt"), str(tmp_path / "meshes"), "--jobs", "1", "-q",
+                 "-o", str(tmp_path / "ranking.tsv")]) == 1
+    err = capsys.readouterr().err
+    assert "1 of 1 meshes could not be matched (none ranked)" in err and "Traceback" not in err
+    assert "broken.off" in (tmp_path / "ranking.tsv").read_text()
+
+
 def test_counts_below_one_are_refused(capsys, tmp_path):
     assert "--top must be at least 1" in error_of(capsys, ["retrieve", tmp_path / "q.txt", tmp_path, "--top", "-5"])
     assert "--repeat must be at least 1" in error_of(capsys, ["perf", "foundation", "--repeat", "0"])
@@ -166,7 +196,7 @@ def test_full_disk_leaves_no_partial_result_set(tmp_path, kilobytes):
     assert done.returncode == 2, done.stderr
     last = done.stderr.strip().splitlines()[-1]
     assert last.startswith(f"error: {out}/res") and "file too large" in last and ".partial" not in last, last
-    assert [p.name for p in out.iterdir()] == []  # not even hidden temporary files
+    assert not out.exists()  # not even hidden temporary files: the folder the command made is gone too
 
 
 @pytest.mark.parametrize("sig, status", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
@@ -188,7 +218,7 @@ def test_interrupted_morph_leaves_nothing(tmp_path, sig, status):
     stderr = proc.stderr.read()
     assert code == status, stderr
     assert "Traceback" not in stderr
-    assert [p.name for p in out.iterdir()] == []
+    assert not out.exists()  # the staging folder and the output folder the command made
 
 
 # ----------------------------------------------------------------------------- bad files

@@ -884,6 +884,18 @@ def match_prepared(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams,
     return on_input_vertices(result, coarse)
 
 
+def remeshing_note(extras: dict) -> str | None:
+    """What the user is told when the target could not be remeshed to ``mesh_vertices`` and was matched as
+    given (:func:`match_prepared`), else None: its energy does not compare with those of meshes remeshed alike
+    (retrieval leaves such a mesh out of the ranking)."""
+    reason = (extras or {}).get("remeshing_failed")
+    if not reason:
+        return None
+    return (f"the target could not be remeshed ({reason}); it was matched at its own resolution, so its energy "
+            "does not compare with those of meshes remeshed to the budget (mesh_vertices=0 matches every mesh "
+            "as given)")
+
+
 def on_input_vertices(result: MatchResult, coarse: Remeshed) -> MatchResult:
     """A match on a remeshed mesh with its map and curve on the input mesh's vertices."""
     to_original = coarse.to_original

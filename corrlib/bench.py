@@ -91,7 +91,7 @@ def load_dataset(folder, pairs_file=None, *, require_pairs: bool = True) -> Data
             raise FileFormatError(f"{root}: no ground truth (.vts) for {', '.join(missing[:5])}")
     pairs_path = Path(pairs_file) if pairs_file else root / "pairs.txt"
     if pairs_path.exists():
-        pairs = []
+        pairs, first_line = [], {}
         for number, line in enumerate(pairs_path.read_text().splitlines(), 1):
             if not line.strip() or line.lstrip().startswith("#"):
                 continue
@@ -102,7 +102,12 @@ def load_dataset(folder, pairs_file=None, *, require_pairs: bool = True) -> Data
             for n in names:
                 if n not in shapes:
                     raise FileFormatError(f"{pairs_path}:{number}: unknown shape {n!r}")
-            pairs.append((names[0], names[1]))
+            pair = (names[0], names[1])
+            if pair in first_line:  # it would be run, and counted, twice
+                raise FileFormatError(f"{pairs_path}:{number}: the pair {pair[0]} {pair[1]} again (first on line "
+                                      f"{first_line[pair]})")
+            first_line[pair] = number
+            pairs.append(pair)
     elif pairs_file:
         raise FileFormatError(f"{pairs_path}: pairs file not found")
     else:

@@ -577,6 +577,10 @@ def contour_jobs(datasets, planes=DEFAULT_PLANES) -> list[ContourJob]:
     for plane in planes:
         if plane not in QUERY_KINDS:
             raise ParameterError(f"plane must be one of {', '.join(QUERY_KINDS)}, got {plane!r}")
+    repeated = sorted({p for p in planes if list(planes).count(p) > 1}) + sorted(
+        {str(d) for d in datasets if [Path(e).resolve() for e in datasets].count(Path(d).resolve()) > 1})
+    if repeated:  # each query would be matched, and counted, twice
+        raise ParameterError(f"{', '.join(repeated)} given twice; name each plane and dataset once")
     jobs = []
     for folder in datasets:
         data = load_dataset(folder, require_pairs=False)

@@ -100,6 +100,9 @@ def check_output_file(path, what: str = "output") -> Path:
     """
     if str(path).strip() == "" or Path(path).name in ("", ".", ".."):
         raise InputError(f"the {what} path {str(path)!r} does not name a file")
+    if str(path).endswith(("/", os.sep)):  # Path() drops the separator that says "a folder"
+        raise InputError(f"{path}: the {what} path ends with a separator, so it names a folder; expected a file "
+                         f"name")
     path = Path(path)
     try:
         is_folder = path.is_dir()
@@ -332,6 +335,12 @@ def _read_trimesh(path: Path, *, weld: bool) -> tuple[np.ndarray, np.ndarray]:
 
     try:
         loaded = trimesh.load(str(path), process=False, maintain_order=True, force="mesh")
+    except KeyError as exc:  # a PLY element without a property the reader needs
+        raise FileFormatError(f"{path}: cannot read mesh: the property {exc} is missing (vertices need x, y "
+                              f"and z)") from None
+    except IndexError as exc:  # a face naming a vertex the file does not have
+        raise FileFormatError(f"{path}: cannot read mesh: a face refers to a vertex the file does not have "
+                              f"({exc})") from None
     except Exception as exc:  # trimesh raises many exception types for malformed files
         raise FileFormatError(f"{path}: cannot read mesh: {exc}") from exc
     if weld and hasattr(loaded, "merge_vertices"):

@@ -192,6 +192,19 @@ def test_labels_sharing_a_folder_and_bad_methods_files_are_refused(tmp_path, wol
             methods_from_toml(toml)
 
 
+def test_what_would_be_run_and_counted_twice_is_refused(tmp_path, wolf_dataset):
+    from corrlib.contour_bench import contour_jobs
+
+    (wolf_dataset / "pairs.txt").write_text("wolf0 wolf1\n\nwolf1 wolf0\nwolf0 wolf1\n")
+    with pytest.raises(FileFormatError, match="pairs.txt:4: the pair wolf0 wolf1 again \\(first on line 1\\)"):
+        load_dataset(wolf_dataset)
+    (wolf_dataset / "pairs.txt").unlink()
+    with pytest.raises(ParameterError, match="main given twice"):
+        contour_jobs([wolf_dataset], ["main", "silhouette", "main"])
+    with pytest.raises(ParameterError, match="given twice"):
+        contour_jobs([wolf_dataset, tmp_path / "wolves" / ".." / "wolves"], ["main"])
+
+
 @pytest.mark.slow
 def test_dask_cluster_gives_the_local_results(wolf_dataset, tmp_path):
     import distributed  # the dist extra is part of the test setup (scripts/test.sh)

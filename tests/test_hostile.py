@@ -137,6 +137,24 @@ def test_a_retrieval_in_which_meshes_fail_exits_with_one(capsys, tmp_path):
     assert "broken.off" in (tmp_path / "ranking.tsv").read_text()
 
 
+def test_a_file_path_ending_in_a_separator_and_unreadable_ply_and_obj_files_are_named(capsys, tmp_path):
+    """Found by fuzzing: `eval --plot DIR/` wrote a picture named like the folder; a PLY without the y
+    property and an OBJ face beyond its vertices gave trimesh's bare KeyError / IndexError text."""
+    from corrlib.io import check_output_file
+    from corrlib.errors import InputError
+
+    with pytest.raises(InputError, match="ends with a separator, so it names a folder"):
+        check_output_file(f"{tmp_path}/plots/", "--plot")
+    assert not (tmp_path / "plots").exists()
+    (tmp_path / "bad.ply").write_text("ply\nformat ascii 1.0\nelement vertex 3\nproperty float x\nend_header\n"
+                                      "0\n1\n2\n")
+    (tmp_path / "bad.obj").write_text("v 0 0 0\nv 1 0 0\nf 1 2 9\n")
+    message = error_of(capsys, ["match", tmp_path / "bad.ply", WOLF1, *FAST, "-o", tmp_path / "r"])
+    assert "bad.ply: cannot read mesh: the property 'y' is missing" in message
+    message = error_of(capsys, ["match", tmp_path / "bad.obj", WOLF1, *FAST, "-o", tmp_path / "r"])
+    assert "bad.obj: cannot read mesh: a face refers to a vertex the file does not have" in message
+
+
 def test_counts_below_one_are_refused(capsys, tmp_path):
     assert "--top must be at least 1" in error_of(capsys, ["retrieve", tmp_path / "q.txt", tmp_path, "--top", "-5"])
     assert "--repeat must be at least 1" in error_of(capsys, ["perf", "foundation", "--repeat", "0"])

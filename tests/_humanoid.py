@@ -190,7 +190,7 @@ def mirror_image(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, n
     return vertices * [-1.0, 1.0, 1.0], faces[:, ::-1]
 
 
-def write_kernel_battery(folder, noise: float = 0.0, seed: int = 0, subdivide: int = 0) -> Path:
+def write_kernel_battery(folder, noise: float = 0.0, seed: int = 0, subdivide: int = 0, remesh: int = 0) -> Path:
     """The people pairs that kernel matching's left/right decisions are judged on, as two ``corr bench``
     datasets: ``capsule`` (the bundled people of ``resources/people``: no front but the feet) and ``face``
     (``front=True``: a nose, a chest and buttocks). Each holds the four poses ``human0..3``, their mirror
@@ -201,8 +201,16 @@ def write_kernel_battery(folder, noise: float = 0.0, seed: int = 0, subdivide: i
 
     ``noise``: every vertex moved by Gaussian noise of that fraction of the bounding-box diagonal (each mesh
     its own draw from ``seed``); ``subdivide``: edge-midpoint subdivisions of every mesh (the rows of the
-    original vertices are kept, the new vertices have no ground truth row)."""
+    original vertices are kept, the new vertices have no ground truth row); ``remesh``: every mesh remeshed to
+    about that many vertices (:func:`corrlib.geometry.remeshing.remeshed`, each pose meshed on its own, as
+    scans are), the rows carried to the remeshed vertex nearest to their vertex (within half an edge). The
+    poses share one connectivity otherwise, on which a method that ends in a bijection recovers every vertex
+    exactly; remeshed, no method can, and the comparison is that of shapes meshed apart."""
     import trimesh
+    from scipy.spatial import cKDTree
+
+    from corrlib.geometry.remeshing import remeshed
+    from corrlib.shapes import TriMesh
 
     rng = np.random.default_rng(seed)
     out = Path(folder)
@@ -219,11 +227,17 @@ def write_kernel_battery(folder, noise: float = 0.0, seed: int = 0, subdivide: i
                 if noise > 0:
                     v = v + rng.normal(scale=noise * np.linalg.norm(np.ptp(v, axis=0)), size=v.shape)
                 name = f"{prefix}{number}"
-                trimesh.Trimesh(v, f, process=False).export(target / f"{name}.off")
-                # identity rows on the original vertices: a subdivision appends its new vertices after them
-                np.savetxt(target / "corres" / f"{name}.vts", rows[prefix] + 1, fmt="%d")
                 other = "mirror" if prefix == "human" else "human"
-                np.savetxt(target / "corres" / f"{name}.sym.vts", rows[other] + 1, fmt="%d")
+                # identity rows on the original vertices: a subdivision appends its new vertices after them
+                own, mirrored = rows[prefix], rows[other]
+                if remesh:
+                    coarse = remeshed(TriMesh(v, f, name=name), remesh).mesh
+                    nearest = cKDTree(np.asarray(coarse.vertices))
+                    own, mirrored = nearest.query(v[own])[1], nearest.query(v[mirrored])[1]
+                    v, f = np.asarray(coarse.vertices), np.asarray(coarse.faces)
+                trimesh.Trimesh(v, f, process=False).export(target / f"{name}.off")
+                np.savetxt(target / "corres" / f"{name}.vts", own + 1, fmt="%d")
+                np.savetxt(target / "corres" / f"{name}.sym.vts", mirrored + 1, fmt="%d")
         poses = [pose[len("human"):] for pose in sorted(shapes)]
         pairs = [f"human{a} {prefix}{b}\n" for a in poses for b in poses if a != b for prefix in ("human", "mirror")]
         (target / "pairs.txt").write_text("".join(pairs))
@@ -245,7 +259,12 @@ def _kernel_battery_main(argv: list[str]) -> None:
                         help="vertex noise, a fraction of the bounding-box diagonal (default 0)")
     parser.add_argument("subdivisions", type=int, nargs="?", default=0,
                         help="edge-midpoint subdivisions of every mesh (default 0)")
+    parser.add_argument("--remesh", type=int, default=0, metavar="N",
+                        help="every mesh remeshed on its own to about N vertices (default 0: the poses share "
+                             "one connectivity)")
     args = parser.parse_args(argv)
+    if args.remesh and not 100 <= args.remesh <= 100_000:
+        parser.error(f"--remesh must be 100 to 100000 vertices, got {args.remesh}")
     if not (np.isfinite(args.noise) and args.noise >= 0):
         parser.error(f"noise must be a finite fraction >= 0 of the diagonal, got {args.noise}")
     if not 0 <= args.subdivisions <= 3:
@@ -259,12 +278,12 @@ def _kernel_battery_main(argv: list[str]) -> None:
             ensure_output_folder(folder)
         except CorrError as exc:
             parser.error(str(exc))
-    print(write_kernel_battery(args.out, noise=args.noise, subdivide=args.subdivisions))
+    print(write_kernel_battery(args.out, noise=args.noise, subdivide=args.subdivisions, remesh=args.remesh))
 
 
 if __name__ == "__main__":
     # python tests/_humanoid.py OUT: the ground-truth dataset; --people OUT: the bundled retrieval people;
-    # --kernel-battery OUT [NOISE [SUBDIVISIONS]]: kernel matching's people pairs (write_kernel_battery)
+    # --kernel-battery OUT [NOISE [SUBDIVISIONS]] [--remesh N]: kernel matching's people pairs (write_kernel_battery)
     if len(sys.argv) > 2 and sys.argv[1] == "--people":
         print(write_retrieval_people(sys.argv[2]))
     elif len(sys.argv) > 1 and sys.argv[1] == "--kernel-battery":

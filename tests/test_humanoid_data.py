@@ -36,10 +36,32 @@ def test_kernel_battery_rows_name_the_same_body_point_in_poses_and_mirror_images
     np.testing.assert_allclose(load_mesh(tmp_path / "capsule" / "human3.off").vertices, bundled.vertices, atol=1e-5)
 
 
+@pytest.mark.slow
+def test_the_remeshed_battery_carries_its_rows_to_each_pose_s_own_meshing(tmp_path):
+    """``remesh``: each pose and mirror image meshed on its own (no shared connectivity, as scans), every row
+    moved to the nearest remeshed vertex: the rest pose's rows still land on the mirror image's within an edge
+    or two, and the mirrored rows on the other side."""
+    write_kernel_battery(tmp_path, remesh=1500)
+    for kind in ("capsule", "face"):
+        dataset = load_dataset(tmp_path / kind)
+        meshes = {name: load_mesh(path) for name, path in dataset.shapes.items()}
+        assert all(abs(mesh.n_vertices - 1500) <= 15 for mesh in meshes.values())
+        assert not np.array_equal(meshes["human0"].faces, meshes["human1"].faces)
+        size = np.linalg.norm(np.ptp(meshes["human0"].vertices, axis=0))
+        edge = np.sqrt(meshes["human0"].area / 1500) * 1.5
+        points = {name: meshes[name].vertices[load_vts(dataset.gt[name], meshes[name].n_vertices)]
+                  for name in ("human0", "mirror0")}
+        mirrored = meshes["mirror0"].vertices[load_vts(dataset.gt_sym["mirror0"], meshes["mirror0"].n_vertices)]
+        assert np.median(np.linalg.norm(points["mirror0"] - points["human0"], axis=1)) < edge
+        lateral = np.abs(points["human0"][:, 0]) > 0.05 * size
+        assert np.mean(np.sign(mirrored[lateral, 0]) == -np.sign(points["human0"][lateral, 0])) > 0.99
+
+
 @pytest.mark.parametrize("args, message", [
     (["OUT", "lots"], "invalid float value: 'lots'"),
     (["OUT", "-0.1"], "noise must be a finite fraction >= 0"),
     (["OUT", "0", "5"], "subdivisions must be 0 to 3"),
+    (["OUT", "--remesh", "50"], "--remesh must be 100 to 100000 vertices"),
     (["FILE/out"], "is a file, not a folder"),
     (["FULL"], "is not empty; choose a new output folder"),
 ])

@@ -89,8 +89,8 @@ def start_note(extras: dict) -> str | None:
 def reversal_note(extras: dict) -> str | None:
     """A warning when a map reverses orientation on most of the shape (its
     :func:`~.passes.orientation_agreement`, ``extras["orientation_agreement"]``, is negative: left matched to
-    right), else None. The kernel energy cannot see this (a reflection of a symmetric shape keeps every heat kernel), so it
-    is said with the result rather than left to the user's eye."""
+    right), else None. The kernel energy cannot see this (a reflection of a symmetric shape keeps every heat
+    kernel), so it is said with the result rather than left to the user's eye."""
     agreement = extras.get("orientation_agreement") if extras else None
     if agreement is None or not agreement < 0:
         return None

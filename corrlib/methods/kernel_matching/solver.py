@@ -26,7 +26,7 @@ PROGRESS_COPIES = 0.9
 
 
 def kernel_matching(source, target, params: KernelMatchingParams, token, initial: InitialMatch | None = None):
-    """Solver generator (thesis ch. 8, see the module docstring); returns a :class:`MatchResult`.
+    """Solver generator (thesis ch. 8, see the package docstring); returns a :class:`MatchResult`.
 
     Prepare the spectra and seeds, assign the seeds initially, run the DC iterations of the first time from
     one or two starts and keep the better, continue over the decreasing times, refine on finer scales; a

@@ -37,8 +37,9 @@ def dominates(a: dict, b: dict) -> bool:
 
 def both_starts(first: KernelState, second: KernelState):
     """Kernel matching from two prepared states (:func:`~.pairing.side_by_side`, each :func:`~.passes.solved`).
-    A generator; returns ``{init: MatchResult}``, where the second start's value is its :class:`~corrlib.errors.CorrError` if it
-    failed (the first start's errors, and a cancellation, are raised)."""
+    A generator; returns ``{init: MatchResult}``, where the second start's value is its
+    :class:`~corrlib.errors.CorrError` if it failed (the first start's errors, and a cancellation, are
+    raised)."""
     inits = (first.params.init, second.params.init)
     results = yield from side_by_side(first, second, solved, solved,
                                       (f"start 1/2 ({inits[0]})", f"start 2/2 ({inits[1]})"))

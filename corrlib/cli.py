@@ -985,10 +985,10 @@ def main(argv: list[str] | None = None) -> int:
             import signal
 
             signal.signal(signal.SIGTERM, previous)
-        if code != 0 and "corrlib.io" in sys.modules:  # a failed command leaves no empty output folder
+        if "corrlib.io" in sys.modules:  # a failed command leaves no empty output folder
             from corrlib.io import remove_created_empty_folders
 
-            remove_created_empty_folders()
+            remove_created_empty_folders(remove=code != 0)
 
 
 if __name__ == "__main__":

@@ -184,11 +184,12 @@ def ensure_output_folder(path, what: str = "output") -> Path:
 _CREATED_FOLDERS: set[Path] = set()
 
 
-def remove_created_empty_folders() -> None:
+def remove_created_empty_folders(remove: bool = True) -> None:
     """Remove the output folders this process created that are still empty, deepest first: a command that
     stops with an error leaves no empty folder behind (its outputs are written all-or-nothing,
-    :func:`staged_output`). Folders that hold anything, and folders that existed before, stay."""
-    for folder in sorted(_CREATED_FOLDERS, key=lambda p: len(p.parts), reverse=True):
+    :func:`staged_output`). Folders that hold anything, and folders that existed before, stay. Either way
+    the record starts afresh (``remove=False``: after a command that succeeded, its folders are the user's)."""
+    for folder in sorted(_CREATED_FOLDERS, key=lambda p: len(p.parts), reverse=True) if remove else ():
         with contextlib.suppress(OSError):  # not empty, or gone
             folder.rmdir()
     _CREATED_FOLDERS.clear()

@@ -124,6 +124,21 @@ def test_a_failed_command_leaves_no_empty_folder_and_fewer_frames_replace_the_se
     assert sorted(p.name for p in out.glob("frame_*")) == ["frame_000.obj", "frame_001.obj", "frame_002.obj"]
 
 
+def test_only_the_failed_command_s_own_empty_folders_are_removed(tmp_path):
+    """The record of created folders starts afresh with every command: an earlier command's folder, even an
+    empty one, is the user's once that command succeeded."""
+    from corrlib.io import ensure_output_folder, remove_created_empty_folders
+
+    ensure_output_folder(tmp_path / "earlier" / "deep")
+    remove_created_empty_folders(remove=False)  # that command succeeded
+    ensure_output_folder(tmp_path / "later" / "deep")
+    (tmp_path / "existing").mkdir()
+    ensure_output_folder(tmp_path / "existing")
+    remove_created_empty_folders()  # this one failed
+    assert (tmp_path / "earlier" / "deep").is_dir() and (tmp_path / "existing").is_dir()
+    assert not (tmp_path / "later").exists()
+
+
 def test_a_retrieval_in_which_meshes_fail_exits_with_one(capsys, tmp_path):
     """Found by fuzzing: a ranking of which every mesh failed was written with exit status 0."""
     (tmp_path / "meshes").mkdir()

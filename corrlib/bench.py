@@ -338,6 +338,7 @@ class Runner:
                                      f"digits")
         self.out = Path(out)
         self.geodesics = geodesics
+        self._settings = {}
 
     def jobs(self) -> list[tuple[str, Job]]:
         ds = self.dataset
@@ -361,33 +362,33 @@ class Runner:
 
     def settings(self, label: str) -> dict:
         """What produced a label's results (stored with each record): the method with every parameter, or the
-        folder of external maps, and the geodesics of the evaluation (JSON values)."""
-        method = next((m for m in self.methods if m.label == label), None)
-        what = {"maps": str(self.external[label])} if method is None else {"method": method.name,
-                                                                            "params": _all_params(method)}
-        return json.loads(json.dumps({**what, "geodesics": self.geodesics}, default=str))
+        folder of external maps, and the geodesics of the evaluation (JSON values; formed once per label)."""
+        if label not in self._settings:
+            method = next((m for m in self.methods if m.label == label), None)
+            what = {"maps": str(self.external[label])} if method is None else {"method": method.name,
+                                                                                "params": _all_params(method)}
+            self._settings[label] = json.loads(json.dumps({**what, "geodesics": self.geodesics}, default=str))
+        return self._settings[label]
 
     def pending(self) -> list[tuple[str, Job]]:
         """Jobs without a record yet, or whose record is a failure (what a resumed run still has to do; a
         failure is retried, its input may have been fixed). A record made with other settings under the same
         label (:meth:`settings`) is refused by name: its numbers would be reported as this run's."""
-        todo, settings, clashes = [], {}, []
+        todo, clashes = [], []
         for label, job in self.jobs():
             path = self._record_path(label, job)
             if not path.exists():
                 todo.append((label, job))
                 continue
             record = json.loads(path.read_text())
-            if label not in settings:
-                settings[label] = self.settings(label)
-            stored = record.get("settings", settings[label])  # records of older versions carry none
-            if stored != settings[label]:
+            stored = record.get("settings", self.settings(label))  # records of older versions carry none
+            if stored != self.settings(label):
                 clashes.append((label, stored))
             elif record.get("status") == "failed":
                 todo.append((label, job))
         if clashes:
             label, stored = clashes[0]
-            now = settings[label]
+            now = self.settings(label)
             changed = sorted(k for k in set(stored) | set(now) if stored.get(k) != now.get(k))
             if "params" in changed:
                 changed.remove("params")

@@ -69,6 +69,7 @@ from __future__ import annotations
 
 import json
 import time
+from collections import Counter
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -577,8 +578,8 @@ def contour_jobs(datasets, planes=DEFAULT_PLANES) -> list[ContourJob]:
     for plane in planes:
         if plane not in QUERY_KINDS:
             raise ParameterError(f"plane must be one of {', '.join(QUERY_KINDS)}, got {plane!r}")
-    repeated = sorted({p for p in planes if list(planes).count(p) > 1}) + sorted(
-        {str(d) for d in datasets if [Path(e).resolve() for e in datasets].count(Path(d).resolve()) > 1})
+    repeated = [name for name, count in Counter(planes).items() if count > 1] + [
+        str(folder) for folder, count in Counter(Path(d).resolve() for d in datasets).items() if count > 1]
     if repeated:  # each query would be matched, and counted, twice
         raise ParameterError(f"{', '.join(repeated)} given twice; name each plane and dataset once")
     jobs = []

@@ -145,10 +145,6 @@ def staged_output(folder, replaces: str | None = None):
         with signals_held():  # an interrupt during the moves waits until the whole set is in place
             for entry in entries:
                 os.replace(entry, folder / entry.name)
-            names = {entry.name for entry in entries}
-            for old in (folder.glob(replaces) if replaces else ()):
-                if old.name not in names and old.is_file():
-                    old.unlink()
     except BaseException as exc:
         shutil.rmtree(stage, ignore_errors=True)
         if isinstance(exc, OSError):
@@ -157,6 +153,15 @@ def staged_output(folder, replaces: str | None = None):
             raise type(exc)(str(exc).replace(str(stage), str(folder))) from None
         raise
     shutil.rmtree(stage, ignore_errors=True)
+    if replaces:  # the new set is in place: what it replaces and does not have goes
+        names = {entry.name for entry in entries}
+        for stale in folder.glob(replaces):
+            if stale.name not in names and stale.is_file():
+                try:
+                    stale.unlink()
+                except OSError as exc:
+                    raise InputError(f"{stale}: the new set is written, but this file of an earlier one cannot be "
+                                     f"removed ({_os_reason(exc)})") from None
 
 
 def ensure_output_folder(path, what: str = "output") -> Path:
@@ -189,9 +194,10 @@ def remove_created_empty_folders(remove: bool = True) -> None:
     stops with an error leaves no empty folder behind (its outputs are written all-or-nothing,
     :func:`staged_output`). Folders that hold anything, and folders that existed before, stay. Either way
     the record starts afresh (``remove=False``: after a command that succeeded, its folders are the user's)."""
-    for folder in sorted(_CREATED_FOLDERS, key=lambda p: len(p.parts), reverse=True) if remove else ():
-        with contextlib.suppress(OSError):  # not empty, or gone
-            folder.rmdir()
+    if remove:
+        for folder in sorted(_CREATED_FOLDERS, key=lambda p: len(p.parts), reverse=True):
+            with contextlib.suppress(OSError):  # not empty, or gone
+                folder.rmdir()
     _CREATED_FOLDERS.clear()
 
 

@@ -25,8 +25,7 @@ import numpy as np
 from corrlib.errors import CorrError, InputError, ParameterError
 from corrlib.io import MESH_SUFFIXES, load_mesh
 from corrlib.parallel import check_jobs, job_executor
-from corrlib.methods.contour3d import (Contour3DParams, PreparedQuery, match_prepared, prepare_query,
-                                      remeshing_note)
+from corrlib.methods.contour3d import Contour3DParams, PreparedQuery, match_prepared, prepare_query
 from corrlib.progress import CancelToken, Progress, run
 
 #: contour points of a retrieval query (the method's default is 200): a ranking matches the query to every mesh
@@ -87,12 +86,10 @@ def _match_one(query: PreparedQuery, path: str, params: Contour3DParams) -> Retr
     start = time.perf_counter()
     try:
         mesh = load_mesh(path)
-        result = run(match_prepared(query, mesh, params, CancelToken()))
+        # a mesh that cannot be remeshed is not matched as given: its energy would not compare with the others'
+        result = run(match_prepared(query, mesh, params, CancelToken(), as_given_if_unremeshable=False))
     except CorrError as exc:
         return RetrievalHit(Path(path), np.inf, str(exc), seconds=time.perf_counter() - start)
-    if "remeshing_failed" in result.extras:  # matched as given: its energy would not compare with the others'
-        return RetrievalHit(Path(path), np.inf, f"not ranked: {remeshing_note(result.extras)}",
-                            seconds=time.perf_counter() - start)
     return RetrievalHit(Path(path), float(result.energy), "", result.path.vertices, result.path.contour_index,
                         time.perf_counter() - start)
 

@@ -170,6 +170,23 @@ def test_a_file_path_ending_in_a_separator_and_unreadable_ply_and_obj_files_are_
     assert "bad.obj: cannot read mesh: a face refers to a vertex the file does not have" in message
 
 
+def test_a_target_that_cannot_be_remeshed_is_said_and_left_out_of_a_ranking(capsys, tmp_path):
+    """Found by fuzzing: at 800 vertices the quadric collapse pinches wolf0's tail into an edge of four faces.
+    The match fell back to the mesh as given silently, and retrieval ranked that energy among those of meshes
+    remeshed alike (first). A match now says so; a ranking leaves the mesh out, without matching it."""
+    angles = np.linspace(0, 2 * np.pi, 60, endpoint=False)
+    np.savetxt(tmp_path / "q.txt", np.column_stack([2 * np.cos(angles), np.sin(angles)]))
+    (tmp_path / "meshes").mkdir()
+    (tmp_path / "meshes" / "wolf0.off").write_text(Path(WOLF0).read_text())
+    assert main(["retrieve", str(tmp_path / "q.txt"), str(tmp_path / "meshes"), "--jobs", "1", "-q",
+                 "--param", "mesh_vertices=800"]) == 1
+    out = capsys.readouterr()
+    assert "inf" in out.out and "remeshing to 800 vertices gave an invalid mesh" in out.out, out.out
+    assert main(["match", str(tmp_path / "q.txt"), WOLF0, "--method", "contour3d", "--param", "mesh_vertices=800",
+                 "--param", "n_contour=60", "-q", "-o", str(tmp_path / "m")]) == 0
+    assert "note: the target could not be remeshed" in capsys.readouterr().err
+
+
 def test_counts_below_one_are_refused(capsys, tmp_path):
     assert "--top must be at least 1" in error_of(capsys, ["retrieve", tmp_path / "q.txt", tmp_path, "--top", "-5"])
     assert "--repeat must be at least 1" in error_of(capsys, ["perf", "foundation", "--repeat", "0"])

@@ -862,14 +862,17 @@ def _view_models(models, side_view: bool) -> list[str]:
     return list(models)
 
 
-def match_prepared(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams, token):
+def match_prepared(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams, token, *,
+                   as_given_if_unremeshable: bool = True):
     """Solver generator for a prepared query against one mesh (see :func:`solve_contour3d`).
 
     The mesh is matched remeshed to ``params.mesh_vertices`` vertices
     (:func:`~corrlib.geometry.remeshing.remeshed`), and the map and the curve are reported on the input
     vertices nearest to the remeshed ones (``extras["matched_vertices"]`` says how many were matched). Where
     the remeshing cannot give a valid mesh, the mesh is matched as given and ``extras["remeshing_failed"]``
-    says why. A mesh too small for a spectrum of its own (a tetrahedron) is refused: the curve is reported on
+    says why (:func:`remeshing_note`); ``as_given_if_unremeshable=False`` raises the remeshing's
+    :class:`~corrlib.errors.MeshError` instead (a ranking, whose energies compare only between meshes remeshed
+    alike). A mesh too small for a spectrum of its own (a tetrahedron) is refused: the curve is reported on
     its vertices, and on four vertices every contour point lands on one.
     """
     available_eigenpairs(mesh, params.k, "2D-to-3D matching")
@@ -878,6 +881,8 @@ def match_prepared(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams,
     try:
         coarse = remeshed(mesh, params.mesh_vertices)
     except MeshError as err:
+        if not as_given_if_unremeshable:
+            raise
         result = yield from _match_mesh(query, mesh, params, token)
         return replace(result, extras={**result.extras, "remeshing_failed": str(err)})
     result = yield from _match_mesh(query, coarse.mesh, params, token)
@@ -886,8 +891,8 @@ def match_prepared(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams,
 
 def remeshing_note(extras: dict) -> str | None:
     """What the user is told when the target could not be remeshed to ``mesh_vertices`` and was matched as
-    given (:func:`match_prepared`), else None: its energy does not compare with those of meshes remeshed alike
-    (retrieval leaves such a mesh out of the ranking)."""
+    given (:func:`match_prepared`), else None: its energy does not compare with those of meshes remeshed
+    alike."""
     reason = (extras or {}).get("remeshing_failed")
     if not reason:
         return None

@@ -236,6 +236,12 @@ def _stage_match_pictures(result, source, target, out: Path) -> list:
         from corrlib.plotting import save_torus_pictures
 
         written.append(save_torus_pictures(_beside(out, ".png"), result))
+    elif isinstance(source, Contour2D) and result.path is not None:  # 2D-to-3D: the query and its curve on the mesh
+        from corrlib.plotting import save_contour_match
+
+        path = result.path
+        written.append(save_contour_match(_beside(out, ".png"), path.contour_points, target, path.vertices,
+                                          path.contour_index, title=f"energy {result.energy:.4g}"))
     return written
 
 
@@ -636,7 +642,6 @@ def _contour3d_params(args, *, retrieval: bool = False):
 def cmd_match_contour(args) -> int:
     from corrlib.io import load_mesh
     from corrlib.methods import solve
-    from corrlib.plotting import save_contour_match
 
     out = _check_output_stem(args)
     contour = _query_contour(args.query, args.query_labels)
@@ -646,7 +651,7 @@ def cmd_match_contour(args) -> int:
 
         mesh = mesh.with_labels(load_labels(args.mesh_labels, mesh.n_vertices, what="--mesh-labels"))
     result = solve("contour3d", contour, mesh, _contour3d_params(args), callback=_progress_printer(args.quiet))
-    search, path = result.search, result.path
+    search = result.search
     print(f"energy {result.energy:.6g} (lower bound {search.lower_bound:.6g}, "
           f"{search.describe()}), {search.iterations} branch-and-bound "
           f"iterations, {search.dijkstra_runs} layered Dijkstra runs of {search.seconds_per_dijkstra:.3f} s, "
@@ -654,9 +659,7 @@ def cmd_match_contour(args) -> int:
     from corrlib.io import staged_output
 
     with staged_output(out.parent) as stage:
-        staged = [*result.save(stage / out.name),
-                  save_contour_match(_beside(stage / out.name, ".png"), path.contour_points, mesh, path.vertices,
-                                     path.contour_index, title=f"energy {result.energy:.4g}")]
+        staged = [*result.save(stage / out.name), *_stage_match_pictures(result, contour, mesh, stage / out.name)]
     if not args.quiet:
         for written in staged:
             print(f"wrote {out.parent / Path(written).name}")
@@ -776,7 +779,7 @@ def _add_eval_parser(sub) -> None:
 def _add_pictures_flag(p) -> None:
     p.add_argument("--pictures", action="store_true",
                    help="also write the pictures (colour transfer onto the target, the energy trace, the contours "
-                        "on their torus); they take about a second")
+                        "on their torus, a contour's matched curve on the mesh); they take about a second")
 
 
 def _add_match_parsers(sub) -> None:

@@ -154,10 +154,8 @@ def _draw_query(ax, contour_points: np.ndarray, hue: np.ndarray) -> None:
 
 def save_contour_match(path, contour_points: np.ndarray, mesh, path_vertices: np.ndarray,
                        path_contour_index: np.ndarray, *, title: str = "") -> Path:
-    """PNG: the query contour (left) and the mesh with the matched closed curve (right).
-
-    Both are coloured by contour position (hue from 0 to 1 along the contour),
-    so corresponding parts share a colour.
+    """PNG: the query contour and the matched closed curve over two projections of the mesh
+    (:func:`save_curve_comparison` without a ground truth).
 
     Parameters
     ----------
@@ -168,24 +166,7 @@ def save_contour_match(path, contour_points: np.ndarray, mesh, path_vertices: np
     path_contour_index : (p,) int
         Contour point of every path step.
     """
-    plt = _pyplot()
-    from matplotlib import cm
-
-    m = contour_points.shape[0]
-    hue = cm.hsv(np.arange(m) / m)[:, :3]
-    fig = plt.figure(figsize=(11, 5), dpi=100)
-    _draw_query(fig.add_subplot(1, 2, 1), contour_points, hue)
-    ax2 = fig.add_subplot(1, 2, 2, projection="3d")
-    axes = view_axes(mesh.vertices)
-    draw_mesh(ax2, mesh.vertices, mesh.faces, np.full((mesh.n_vertices, 3), 0.8), f"{mesh.name}: matched curve")
-    pts = (mesh.vertices[path_vertices] - mesh.vertices.mean(axis=0)) @ axes.T
-    # lift the curve slightly towards the viewer so the surface does not hide it
-    pts[:, 1] -= 0.01 * (mesh.vertices.max() - mesh.vertices.min())
-    for a in range(len(pts) - 1):
-        ax2.plot(pts[a:a + 2, 0], pts[a:a + 2, 1], pts[a:a + 2, 2], color=hue[path_contour_index[a] % m], lw=2.5)
-    if title:
-        fig.suptitle(title)
-    return _save_figure(fig, path)
+    return save_curve_comparison(path, contour_points, mesh, path_vertices, path_contour_index, None, title=title)
 
 
 def save_energy_trace(path, energy: np.ndarray, tau: np.ndarray | None = None) -> Path:
@@ -249,12 +230,14 @@ def save_torus_pictures(path, result) -> Path:
 
 
 def save_curve_comparison(path, contour_points: np.ndarray, mesh, path_vertices: np.ndarray,
-                          path_contour_index: np.ndarray, gt_vertices: np.ndarray, *, title: str = "") -> Path:
+                          path_contour_index: np.ndarray, gt_vertices: np.ndarray | None, *,
+                          title: str = "") -> Path:
     """PNG: the query contour, and the matched and ground-truth curves over two projections of the mesh.
 
     The mesh is drawn as a faint cloud of its vertices, so neither curve is
-    hidden behind the surface; the matched curve and the query are coloured
-    by contour position, the ground truth is black and dashed.
+    hidden behind the surface (a shaded surface would hide the curve's far
+    side); the matched curve and the query are coloured by contour position,
+    the ground truth (if given) is black and dashed.
 
     Parameters
     ----------
@@ -262,7 +245,7 @@ def save_curve_comparison(path, contour_points: np.ndarray, mesh, path_vertices:
     mesh : TriMesh
     path_vertices, path_contour_index : (p,) int
         Mesh vertex and contour point of every step of the matched path.
-    gt_vertices : (m,) int
+    gt_vertices : (m,) int or None
         Ground-truth vertex of every contour point.
     """
     plt = _pyplot()
@@ -277,14 +260,15 @@ def save_curve_comparison(path, contour_points: np.ndarray, mesh, path_vertices:
     axes = view_axes(mesh.vertices)
     v = (mesh.vertices - mesh.vertices.mean(axis=0)) @ axes.T
     curve = v[path_vertices]
-    gt = v[np.r_[gt_vertices, gt_vertices[:1]]]
     for ax, (a, b), label in ((axs[1], (0, 2), "side view"), (axs[2], (0, 1), "top view")):
         ax.scatter(v[:, a], v[:, b], s=0.3, color="0.8")
-        ax.plot(gt[:, a], gt[:, b], color="black", lw=1.0, ls="--", label="ground truth")
+        if gt_vertices is not None:
+            gt = v[np.r_[gt_vertices, gt_vertices[:1]]]
+            ax.plot(gt[:, a], gt[:, b], color="black", lw=1.0, ls="--", label="ground truth")
+            ax.legend(loc="lower right")
         segments = np.stack([curve[:-1][:, [a, b]], curve[1:][:, [a, b]]], axis=1)
         ax.add_collection(LineCollection(segments, colors=hue[np.asarray(path_contour_index[:-1]) % m], lw=2.5))
         ax.set_title(f"{mesh.name}: {label}")
-        ax.legend(loc="lower right")
         ax.set_aspect("equal")
         ax.set_axis_off()
     if title:

@@ -141,6 +141,12 @@ def test_match_picks_the_method_of_the_inputs_and_names_a_wrong_pair(tmp_path, c
     np.savetxt(tmp_path / "map.txt", np.arange(60), fmt="%d")
     assert main(["match", str(circle), mesh, "--param", "n_contour=40", "-o", str(tmp_path / "c"), "-q"]) == 0
     assert "method contour3d" in capsys.readouterr().out
+    assert not (tmp_path / "c.png").exists()  # pictures only when asked; asked, the query and its curve on the mesh
+    assert main(["match", str(circle), mesh, "--param", "n_contour=40", "--pictures", "-o", str(tmp_path / "p"),
+                 "-q"]) == 0
+    picture = (tmp_path / "p.png").read_bytes()
+    assert picture[:8] == b"\x89PNG\r\n\x1a\n" and len(picture) > 10_000
+    capsys.readouterr()
     assert main(["match", mesh, str(circle), "-o", str(tmp_path / "m"), "-q"]) == 2
     assert "swap the two inputs" in capsys.readouterr().err
     for command in (["match", "--method", "kernel-matching"], ["refine"]):

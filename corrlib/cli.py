@@ -672,6 +672,8 @@ def cmd_retrieve(args) -> int:
 
     if args.top < 1:
         raise CorrError(f"--top must be at least 1, got {args.top}")
+    if args.pictures and not args.output:
+        raise CorrError("--pictures writes its pictures beside the ranking: give the ranking's file with -o")
     if args.output:
         from corrlib.io import check_output_file
 
@@ -691,19 +693,41 @@ def cmd_retrieve(args) -> int:
         print(f"average precision for class {query_class!r}: "
               f"{mean_average_precision([(query_class, labels)]):.4f}")
     if args.output:
-        from corrlib.io import atomic_write
-
-        with atomic_write(args.output) as fh:
-            fh.write("rank\tenergy\tmesh\terror\n")
-            for rank, hit in enumerate(hits, 1):
-                fh.write(f"{rank}\t{hit.energy:.9g}\t{hit.path}\t{hit.error}\n")
-        print(f"wrote {args.output}")
+        for path in _write_ranking(hits, Path(args.output), args.top if args.pictures else 0):
+            print(f"wrote {path}")
     failed = sum(1 for hit in hits if hit.error)
     if failed:  # as corr bench: exit 1 when a mesh could not be ranked, with every reason above
         print(f"error: {failed} of {len(hits)} meshes could not be matched"
               f"{' (none ranked)' if failed == len(hits) else ''}; see the reasons above", file=sys.stderr)
         return 1
     return 0
+
+
+def _write_ranking(hits, out: Path, pictures: int) -> list[Path]:
+    """The ranking as TSV at ``out`` and, for the first ``pictures`` ranks that were matched, the query and its
+    matched curve on the mesh (``STEM.RANK-MESH.png`` beside it), as one set: pictures of an earlier ranking
+    with the same stem go (they would show other ranks)."""
+    import glob
+
+    from corrlib.io import load_mesh, staged_output
+
+    width = len(str(pictures))
+    with staged_output(out.parent, replaces=f"{glob.escape(out.stem)}.[0-9]*-*.png" if pictures else None) as stage:
+        written = [stage / out.name]
+        with open(written[0], "w") as fh:
+            fh.write("rank\tenergy\tmesh\terror\n")
+            for rank, hit in enumerate(hits, 1):
+                fh.write(f"{rank}\t{hit.energy:.9g}\t{hit.path}\t{hit.error}\n")
+        for rank, hit in enumerate(hits[:pictures], 1):
+            if hit.error:
+                continue
+            from corrlib.plotting import save_contour_match
+
+            written.append(save_contour_match(stage / f"{out.stem}.{rank:0{width}d}-{hit.path.stem}.png",
+                                              hit.contour_points, load_mesh(hit.path), hit.path_vertices,
+                                              hit.path_contour_index,
+                                              title=f"rank {rank}: {hit.path.name}, energy {hit.energy:.4g}"))
+    return [out.parent / path.name for path in written]
 
 
 def cmd_methods(args) -> int:
@@ -830,6 +854,9 @@ def _add_retrieve_parser(sub) -> None:
     p.add_argument("--k", type=int)
     p.add_argument("--n-contour", dest="n_contour", type=int, help=RETRIEVAL_N_CONTOUR_HELP)
     p.add_argument("--param", action="append", metavar="NAME=VALUE")
+    p.add_argument("--pictures", action="store_true",
+                   help="also write, beside the ranking (-o), the query and its matched curve on each of the --top "
+                        "meshes (STEM.RANK-MESH.png)")
     _add_output(p, None, "write the full ranking as TSV")
 
 

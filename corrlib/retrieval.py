@@ -65,6 +65,9 @@ class RetrievalHit:
     path_vertices, path_contour_index : (p,) int
         The matched closed curve on the mesh.
     seconds : float
+    contour_points : (m, 2) float or None
+        The resampled query contour that ``path_contour_index`` indexes (the same for every mesh remeshed to
+        the budget; a coarser mesh may have been matched with fewer points).
     """
 
     path: Path
@@ -73,6 +76,7 @@ class RetrievalHit:
     path_vertices: np.ndarray | None = None
     path_contour_index: np.ndarray | None = None
     seconds: float = 0.0
+    contour_points: np.ndarray | None = None
 
     @property
     def label(self) -> str:
@@ -91,7 +95,7 @@ def _match_one(query: PreparedQuery, path: str, params: Contour3DParams) -> Retr
     except CorrError as exc:
         return RetrievalHit(Path(path), np.inf, str(exc), seconds=time.perf_counter() - start)
     return RetrievalHit(Path(path), float(result.energy), "", result.path.vertices, result.path.contour_index,
-                        time.perf_counter() - start)
+                        time.perf_counter() - start, result.path.contour_points)
 
 
 def mesh_files(folder) -> list[Path]:

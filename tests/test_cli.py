@@ -3,6 +3,7 @@
 import json
 import subprocess
 import sys
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -117,9 +118,17 @@ def test_match_contour_and_retrieve(tmp_path, capsys):
     for name in ("wolf0.off", "wolf1.off", "cat0.off"):
         (folder / name).write_bytes((TOSCA / name).read_bytes())
     assert main(["retrieve", str(SILHOUETTES / "mpeg7" / "dog-1.gif"), str(folder), "--jobs", "1",
-                 "--n-contour", "50", "-o", str(tmp_path / "rank.tsv"), "-q"]) == 0
+                 "--n-contour", "50", "-o", str(tmp_path / "rank.tsv"), "-q", "--pictures", "--top", "2"]) == 0
     lines = (tmp_path / "rank.tsv").read_text().strip().split("\n")
     assert len(lines) == 4 and lines[0].startswith("rank")
+    ranked = [Path(line.split("\t")[2]).stem for line in lines[1:]]
+    pictures = sorted(p.name for p in tmp_path.glob("rank.*.png"))
+    assert pictures == [f"rank.1-{ranked[0]}.png", f"rank.2-{ranked[1]}.png"]  # the query's curve on the top two
+    assert all((tmp_path / name).stat().st_size > 10_000 for name in pictures)
+    # a new ranking under the same name replaces the earlier one's pictures as a whole
+    assert main(["retrieve", str(SILHOUETTES / "mpeg7" / "dog-1.gif"), str(folder), "--jobs", "1",
+                 "--n-contour", "50", "-o", str(tmp_path / "rank.tsv"), "-q", "--pictures", "--top", "1"]) == 0
+    assert sorted(p.name for p in tmp_path.glob("rank.*.png")) == [f"rank.1-{ranked[0]}.png"]
 
 
 def test_match_contour_bad_input(tmp_path, capsys):
@@ -129,6 +138,8 @@ def test_match_contour_bad_input(tmp_path, capsys):
     assert "open contour" in capsys.readouterr().err
     assert main(["retrieve", str(SILHOUETTES / "horse.png"), str(tmp_path)]) == 2
     assert "no mesh files" in capsys.readouterr().err
+    assert main(["retrieve", str(SILHOUETTES / "horse.png"), str(TOSCA), "--pictures"]) == 2
+    assert "give the ranking's file with -o" in capsys.readouterr().err
 
 
 def test_match_picks_the_method_of_the_inputs_and_names_a_wrong_pair(tmp_path, capsys):

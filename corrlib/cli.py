@@ -714,7 +714,7 @@ def _write_ranking(hits, out: Path, pictures: int) -> list[Path]:
     width = len(str(pictures))
     with staged_output(out.parent, replaces=f"{glob.escape(out.stem)}.[0-9]*-*.png" if pictures else None) as stage:
         written = [stage / out.name]
-        with open(written[0], "w") as fh:
+        with open(written[0], "w", encoding="utf-8") as fh:
             fh.write("rank\tenergy\tmesh\terror\n")
             for rank, hit in enumerate(hits, 1):
                 fh.write(f"{rank}\t{hit.energy:.9g}\t{hit.path}\t{hit.error}\n")

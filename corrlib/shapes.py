@@ -27,8 +27,8 @@ from corrlib.errors import ContourError, MeshError
 class Tolerances:
     """Numerical tolerances used by validation (relative to the shape's size)."""
 
-    #: a face is degenerate if its area <= zero_area * bbox_diagonal**2
-    zero_area: float = 1e-14
+    #: a face is degenerate if its area <= zero_area * its longest edge * bbox_diagonal (:func:`degenerate_faces`)
+    zero_area: float = 1e-12
     #: contour segments shorter than this fraction of the perimeter are merged
     zero_length: float = 1e-12
     #: a contour file is "closed" if its end-to-start gap is at most this many median spacings
@@ -76,6 +76,23 @@ def triangle_areas(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
     e1 = vertices[faces[:, 1]] - vertices[faces[:, 0]]
     e2 = vertices[faces[:, 2]] - vertices[faces[:, 0]]
     return 0.5 * np.linalg.norm(np.cross(e1, e2), axis=1)
+
+
+def degenerate_faces(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray:
+    """(f,) bool: faces flat to the precision of their coordinates, whose area is at most
+    ``TOL.zero_area`` × their longest edge × the bounding-box diagonal ``d``.
+
+    That is a height over the longest edge of at most ``2 TOL.zero_area d``. Coordinates of size ``d`` are
+    rounded to about ``1e-16 d``, so such a face's vertices are collinear or coincide as far as the numbers
+    tell: its normal and angles are undefined (cotangents 0/0 or infinite). A face that is merely small but
+    well shaped (marching cubes leaves them where the surface passes near a grid point) is not degenerate,
+    however small against the shape: its angles are as well defined as any face's.
+    """
+    v, f = np.asarray(vertices, dtype=np.float64), np.asarray(faces)
+    diag = float(np.linalg.norm(v.max(axis=0) - v.min(axis=0))) if v.size else 0.0
+    corners = v[f]
+    longest = np.linalg.norm(corners - np.roll(corners, 1, axis=1), axis=2).max(axis=1)
+    return triangle_areas(v, f) <= TOL.zero_area * longest * max(diag, 1e-300)
 
 
 def signed_volume(vertices: np.ndarray, faces: np.ndarray) -> float:
@@ -222,14 +239,11 @@ def _face_findings(v: np.ndarray, f: np.ndarray) -> list[Finding]:
             Finding("error", "degenerate-face", f"{repeated.size} faces repeat a vertex index "
                     f"(e.g. face {_examples(repeated)})")
         )
-    diag = float(np.linalg.norm(v.max(axis=0) - v.min(axis=0)))
-    areas = triangle_areas(v, f)
-    zero = np.flatnonzero(areas <= TOL.zero_area * max(diag, 1e-300) ** 2)
-    zero = np.setdiff1d(zero, repeated)
+    zero = np.setdiff1d(np.flatnonzero(degenerate_faces(v, f)), repeated)
     if zero.size:
         findings.append(
-            Finding("error", "zero-area-face", f"{zero.size} faces have zero area "
-                    f"(e.g. face {_examples(zero)})")
+            Finding("error", "zero-area-face", f"{zero.size} faces have zero area: their vertices are collinear "
+                    f"or coincide to the precision of the coordinates (e.g. face {_examples(zero)})")
         )
     return findings
 

@@ -68,6 +68,24 @@ def test_zero_area_face():
         TriMesh(v, f)
 
 
+def test_a_small_face_is_not_a_degenerate_one():
+    """A well-shaped face 1e-8 of the shape's size (marching cubes leaves such faces where the surface passes near
+    a grid point) has well-defined angles: the mesh is valid. A long face whose apex lies 1e-13 of the shape's size
+    off its base is flat to the coordinates' precision: refused, although its area is 25 times the smallest one's."""
+    from corrlib.shapes import degenerate_faces
+
+    # a unit right triangle cut at its corner: a tiny right triangle (a, p, q) and two large faces
+    v = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [1e-8, 0, 0], [0, 1e-8, 0]], dtype=float)
+    f = np.array([[0, 3, 4], [3, 1, 2], [3, 2, 4]])
+    assert not degenerate_faces(v, f).any()
+    assert "zero-area-face" not in codes(v, f)
+    assert TriMesh(v, f).face_areas[0] == pytest.approx(5e-17)
+    flat = np.array([[0, 0, 0], [1, 0, 0], [0.5, 1e-13, 0], [0.5, 1, 0]], dtype=float)
+    assert degenerate_faces(flat, np.array([[0, 1, 2], [0, 2, 3]])).tolist() == [True, False]
+    with pytest.raises(MeshError, match="collinear or coincide"):
+        TriMesh(flat, np.array([[0, 1, 2], [2, 1, 3], [0, 2, 3]]))
+
+
 def test_components_error_and_largest_component():
     a = trimesh.creation.icosphere(subdivisions=2)
     v = np.vstack([TETRA_V + 10, a.vertices])

@@ -76,7 +76,7 @@ def remeshed(mesh: TriMesh, n_vertices: int) -> Remeshed:
     if n_vertices < 4:
         raise ValueError(f"n_vertices must be at least 4, got {n_vertices}")
     # on disk like the spectra: a retrieval remeshes each mesh of its collection for every query
-    key = cache.make_key("remeshed-v4", mesh.content_hash, n_vertices, RELAXATION_STEPS, RELAXATION_DAMPING)
+    key = cache.make_key("remeshed-v5", mesh.content_hash, n_vertices, RELAXATION_STEPS, RELAXATION_DAMPING)
     entry = cache.load("remeshed", key)
     if entry is None:
         points, faces, to_original = _remesh(mesh, n_vertices)
@@ -282,7 +282,7 @@ def without_degenerate_faces(points: np.ndarray, faces: np.ndarray, max_rounds: 
     from scipy.sparse.csgraph import connected_components
     from scipy.spatial import cKDTree
 
-    from corrlib.shapes import TOL
+    from corrlib.shapes import degenerate_faces
 
     diag = float(np.linalg.norm(np.ptp(points, axis=0))) or 1.0
     faces = faces.copy()
@@ -299,9 +299,7 @@ def without_degenerate_faces(points: np.ndarray, faces: np.ndarray, max_rounds: 
             np.minimum.at(representative, component, np.arange(len(points)))
             faces = representative[component][faces]
         faces = faces[(faces[:, 0] != faces[:, 1]) & (faces[:, 1] != faces[:, 2]) & (faces[:, 2] != faces[:, 0])]
-        area = 0.5 * np.linalg.norm(np.cross(points[faces[:, 1]] - points[faces[:, 0]],
-                                             points[faces[:, 2]] - points[faces[:, 0]]), axis=1)
-        caps = np.flatnonzero(area <= TOL.zero_area * diag ** 2)
+        caps = np.flatnonzero(degenerate_faces(points, faces))
         if caps.size == 0:
             break
         if not _flip_cap_edges(points, faces, caps):  # blocked flips: the cap's apex joins its nearer end

@@ -45,7 +45,7 @@ from pathlib import Path
 import numpy as np
 
 from corrlib.errors import CorrError, FileFormatError, InputError, ParameterError
-from corrlib.io import suffixes
+from corrlib.io import read_text, suffixes
 from corrlib.parallel import job_executor
 from corrlib.progress import peak_rss_mb
 
@@ -92,7 +92,7 @@ def load_dataset(folder, pairs_file=None, *, require_pairs: bool = True) -> Data
     pairs_path = Path(pairs_file) if pairs_file else root / "pairs.txt"
     if pairs_path.exists():
         pairs, first_line = [], {}
-        for number, line in enumerate(pairs_path.read_text().splitlines(), 1):
+        for number, line in enumerate(read_text(pairs_path, "pairs").splitlines(), 1):
             if not line.strip() or line.lstrip().startswith("#"):
                 continue
             names = line.split()
@@ -205,8 +205,8 @@ def methods_from_toml(path) -> list[MethodRun]:
     from corrlib.methods import get_method, make_params
 
     try:
-        doc = tomllib.loads(Path(path).read_text())
-    except (OSError, tomllib.TOMLDecodeError) as exc:
+        doc = tomllib.loads(read_text(path, "methods"))
+    except (FileFormatError, tomllib.TOMLDecodeError) as exc:
         raise FileFormatError(f"{path}: cannot read the methods file: {exc}") from None
     tables = doc.get("method", [])
     if not isinstance(tables, list) or not all(isinstance(t, dict) for t in tables):
@@ -301,6 +301,15 @@ def run_job(job: Job) -> dict:
 # ----------------------------------------------------------------------------- runner
 
 
+def _read_record(path: Path) -> dict | None:
+    """A pair's record (JSON object), or None where the file is not one (cut short or edited by hand)."""
+    try:
+        record = json.loads(read_text(path, "record"))
+    except (FileFormatError, json.JSONDecodeError):
+        return None
+    return record if isinstance(record, dict) else None
+
+
 def _label_dir(label: str) -> str:
     return "".join(c if c.isalnum() or c in "-_.()=," else "_" for c in label)
 
@@ -380,7 +389,10 @@ class Runner:
             if not path.exists():
                 todo.append((label, job))
                 continue
-            record = json.loads(path.read_text())
+            record = _read_record(path)
+            if record is None:  # damaged (cut short, edited): run again, its new record replaces it
+                todo.append((label, job))
+                continue
             stored = record.get("settings", self.settings(label))  # records of older versions carry none
             if stored != self.settings(label):
                 clashes.append((label, stored))
@@ -463,8 +475,9 @@ class Runner:
         out = []
         for label, job in self.jobs():
             path = self._record_path(label, job)
-            if path.exists():
-                out.append(json.loads(path.read_text()))
+            record = _read_record(path) if path.exists() else None
+            if record is not None:
+                out.append(record)
         return out
 
     def summarize(self) -> dict:

@@ -94,11 +94,14 @@ def cmd_eval(args) -> int:
     import numpy as np
 
     from corrlib.evaluation import cumulative_curve, geodesic_errors
-    from corrlib.io import check_output_file, load_map, load_mesh, load_vts
+    from corrlib.io import check_output_file, check_outputs_apart, load_map, load_mesh, load_vts
 
-    for option, value in (("--errors", args.errors), ("--plot", args.plot)):
-        if value is not None:
-            check_output_file(value, option)
+    outputs = [(option, value) for option, value in (("--errors", args.errors), ("--plot", args.plot)) if value]
+    for option, value in outputs:
+        check_output_file(value, option)
+    check_outputs_apart(outputs, [("the map", args.map), ("--gt-source", args.gt_source),
+                                  ("--gt-target", args.gt_target), ("--target", args.target),
+                                  ("--gt-target-sym", args.gt_target_sym)])
     target = load_mesh(args.target)
     map_xy = load_map(args.map, n_target=target.n_vertices)
     gt_source = load_vts(args.gt_source)
@@ -108,6 +111,11 @@ def cmd_eval(args) -> int:
                               f"for another source?)")
     gt_target = load_vts(args.gt_target, target.n_vertices)
     gt_sym = load_vts(args.gt_target_sym, target.n_vertices) if args.gt_target_sym else None
+    for option, rows in (("--gt-target", gt_target), ("--gt-target-sym", gt_sym)):
+        if rows is not None and rows.shape != gt_source.shape:  # row i of each names one point of the truth
+            raise FileFormatError(f"{getattr(args, option[2:].replace('-', '_'))} ({option}) has {rows.size} rows, "
+                                  f"but {args.gt_source} (--gt-source) has {gt_source.size}; the ground-truth files "
+                                  "must have one row per corresponding point")
     start = time.perf_counter()
     report = geodesic_errors(map_xy, target, gt_source, gt_target, gt_target_sym=gt_sym,
                              normalize=args.normalize, method=args.geodesics)
@@ -196,7 +204,7 @@ def _write_match_outputs(result, source, target, out: Path, *, quiet: bool = Fal
     """The result files of a match beside the stem ``out``, all or none of them (the pictures if asked)."""
     from corrlib.io import staged_output
 
-    with staged_output(out.parent) as stage:
+    with staged_output(out.parent, replaces=_match_output_names(out.name).__contains__) as stage:
         written = [out.parent / p.name for p in _stage_match_outputs(result, source, target, stage / out.name,
                                                                      pictures)]
     if not quiet:
@@ -249,15 +257,22 @@ def _stage_match_pictures(result, source, target, out: Path) -> list:
 MATCH_OUTPUT_SUFFIXES = (".npz", ".json", ".map_xy.txt", ".map_yx.txt", ".png", ".energy.png")
 
 
-def _check_output_stem(args) -> Path:
-    """The ``-o`` stem, checked before any work (its folder created and writable, and no folder where one of
-    its files goes)."""
-    from corrlib.io import check_output_file
+def _check_output_stem(args, inputs) -> Path:
+    """The ``-o`` stem, checked before any work (its folder created and writable, no folder where one of its
+    files goes, and none of its files one of the ``inputs``, ``(role, path)`` pairs)."""
+    from corrlib.io import check_output_file, check_outputs_apart
 
     stem = check_output_file(Path(args.output), "-o")
     for suffix in MATCH_OUTPUT_SUFFIXES:
         check_output_file(_beside(stem, suffix), "-o")
+    check_outputs_apart([("-o", _beside(stem, suffix)) for suffix in MATCH_OUTPUT_SUFFIXES], inputs)
     return stem
+
+
+def _match_output_names(stem: str) -> set[str]:
+    """Every file name a match may write beside the stem named ``stem``: a new match replaces them as a set, so that
+    an earlier match's picture or reverse map is not left beside the new result."""
+    return {stem + suffix for suffix in MATCH_OUTPUT_SUFFIXES}
 
 
 def _beside(stem: Path, suffix: str) -> Path:
@@ -337,7 +352,7 @@ def cmd_match(args) -> int:
     from corrlib.methods import get_method, solve
     from corrlib.methods.registry import check_inputs
 
-    _check_output_stem(args)
+    _check_output_stem(args, [("source", args.source), ("target", args.target), ("--init", args.init)])
     source, target = _load_shape(args.source), _load_shape(args.target)
     overrides = _parse_overrides(args.param)
     spec = get_method(args.method) if args.method else _best_method(source, target)
@@ -372,7 +387,7 @@ def cmd_refine(args) -> int:
     from corrlib.methods import get_method, solve
     from corrlib.methods.registry import check_inputs
 
-    _check_output_stem(args)
+    _check_output_stem(args, [("source", args.source), ("target", args.target), ("--init", args.init)])
     source, target = _load_shape(args.source), _load_shape(args.target)
     spec = get_method(args.method)
     if not spec.refines:
@@ -542,9 +557,17 @@ def cmd_morph(args) -> int:
     if not (np.isfinite(args.t_max) and 0 < args.t_max <= SEQUENCE_T_MAX):
         raise CorrError(f"--t-max must be a positive number of at most {SEQUENCE_T_MAX:g} (the way between the "
                         f"shapes extrapolated {SEQUENCE_T_MAX:g} times), got {args.t_max}")
-    from corrlib.io import ensure_output_folder, staged_output
+    from corrlib.io import check_outputs_apart, ensure_output_folder, staged_output
 
     out = ensure_output_folder(args.output, "-o")
+    # the folder's set: the result, every frame; an earlier morph's frames and result files go
+    replaced_names = _match_output_names("result") | {"animation.glb", "volumes.csv"}
+
+    def replaced(name: str) -> bool:
+        return name.startswith("frame_") or name in replaced_names
+
+    inputs = [("source", args.source), ("target", args.target)]
+    check_outputs_apart([("-o", out / Path(path).name) for _, path in inputs if replaced(Path(path).name)], inputs)
     source, target = _load_shape(args.source), _load_shape(args.target)
     if not (isinstance(source, TriMesh) and isinstance(target, TriMesh)):
         raise CorrError("corr morph takes two meshes")
@@ -552,7 +575,7 @@ def cmd_morph(args) -> int:
     result = solve(spec, source, target, callback=_progress_printer(args.quiet), **_parse_overrides(args.param))
     times = np.linspace(0.0, args.t_max, args.frames)
     frames = frame_positions(result, source, target, times)
-    with staged_output(out, replaces="frame_*") as stage:  # the result and every frame, or nothing
+    with staged_output(out, replaces=replaced) as stage:  # the result and every frame, or nothing
         _stage_match_outputs(result, source, target, stage / "result", pictures=True)
         written = export_sequence(stage, frames, source.faces, times, fmt=args.format, closed=source.is_closed)
     written["animation"] = written["animation"] and out / Path(written["animation"]).name
@@ -643,7 +666,8 @@ def cmd_match_contour(args) -> int:
     from corrlib.io import load_mesh
     from corrlib.methods import solve
 
-    out = _check_output_stem(args)
+    out = _check_output_stem(args, [("query", args.query), ("mesh", args.mesh), ("--query-labels", args.query_labels),
+                                    ("--mesh-labels", args.mesh_labels)])
     contour = _query_contour(args.query, args.query_labels)
     mesh = _warned(load_mesh(args.mesh))
     if args.mesh_labels:
@@ -658,7 +682,7 @@ def cmd_match_contour(args) -> int:
           f"{result.timings['total']:.2f} s in total")
     from corrlib.io import staged_output
 
-    with staged_output(out.parent) as stage:
+    with staged_output(out.parent, replaces=_match_output_names(out.name).__contains__) as stage:
         staged = [*result.save(stage / out.name), *_stage_match_pictures(result, contour, mesh, stage / out.name)]
     if not args.quiet:
         for written in staged:
@@ -674,13 +698,15 @@ def cmd_retrieve(args) -> int:
         raise CorrError(f"--top must be at least 1, got {args.top}")
     if args.pictures and not args.output:
         raise CorrError("--pictures writes its pictures beside the ranking: give the ranking's file with -o")
+    files = mesh_files(args.folder)
     if args.output:
-        from corrlib.io import check_output_file
+        from corrlib.io import check_output_file, check_outputs_apart
 
         check_output_file(args.output, "-o")
+        check_outputs_apart([("-o", args.output)], [("the query", args.query),
+                                                     *[("a mesh of the folder", path) for path in files]])
     contour = _query_contour(args.query)
     params = _contour3d_params(args, retrieval=True)
-    files = mesh_files(args.folder)
     hits = run(retrieve(contour, files, params, jobs=args.jobs, scheduler=args.scheduler),
                callback=_progress_printer(args.quiet))
     print(f"{'rank':>4}  {'energy':>12}  {'seconds':>7}  mesh")
@@ -705,19 +731,28 @@ def cmd_retrieve(args) -> int:
 
 def _write_ranking(hits, out: Path, pictures: int) -> list[Path]:
     """The ranking as TSV at ``out`` and, for the first ``pictures`` ranks that were matched, the query and its
-    matched curve on the mesh (``STEM.RANK-MESH.png`` beside it), as one set: pictures of an earlier ranking
-    with the same stem go (they would show other ranks)."""
-    import glob
+    matched curve on the mesh (``STEM.RANK-MESH.png`` beside it), as one set: pictures that an earlier ranking
+    of these meshes wrote under the same stem go, with or without new ones (they would show other ranks)."""
+    import csv
+    import re
 
     from corrlib.io import load_mesh, staged_output
 
+    picture = re.compile(re.escape(out.stem) + r"\.[0-9]+-(.+)\.png")
+    meshes = {hit.path.stem for hit in hits} | _ranked_mesh_stems(out)
+
+    def earlier_picture(name: str) -> bool:
+        match = picture.fullmatch(name)
+        return match is not None and match.group(1) in meshes
+
     width = len(str(pictures))
-    with staged_output(out.parent, replaces=f"{glob.escape(out.stem)}.[0-9]*-*.png" if pictures else None) as stage:
+    with staged_output(out.parent, replaces=earlier_picture) as stage:
         written = [stage / out.name]
-        with open(written[0], "w", encoding="utf-8") as fh:
-            fh.write("rank\tenergy\tmesh\terror\n")
+        with open(written[0], "w", encoding="utf-8", newline="") as fh:
+            table = csv.writer(fh, delimiter="\t", lineterminator="\n")  # quotes a name with a tab or line break
+            table.writerow(["rank", "energy", "mesh", "error"])
             for rank, hit in enumerate(hits, 1):
-                fh.write(f"{rank}\t{hit.energy:.9g}\t{hit.path}\t{hit.error}\n")
+                table.writerow([rank, f"{hit.energy:.9g}", hit.path, hit.error])
         for rank, hit in enumerate(hits[:pictures], 1):
             if hit.error:
                 continue
@@ -728,6 +763,21 @@ def _write_ranking(hits, out: Path, pictures: int) -> list[Path]:
                                               hit.path_contour_index,
                                               title=f"rank {rank}: {hit.path.name}, energy {hit.energy:.4g}"))
     return [out.parent / path.name for path in written]
+
+
+def _ranked_mesh_stems(ranking: Path) -> set[str]:
+    """The stems of the meshes an earlier ranking at ``ranking`` (a TSV written by ``corr retrieve``) holds; none
+    where there is no readable one."""
+    import csv
+
+    try:
+        with open(ranking, encoding="utf-8", newline="") as fh:
+            rows = list(csv.reader(fh, delimiter="\t"))
+    except (OSError, UnicodeDecodeError, csv.Error):
+        return set()
+    if not rows or rows[0][:3] != ["rank", "energy", "mesh"]:
+        return set()
+    return {Path(row[2]).stem for row in rows[1:] if len(row) > 2}
 
 
 def cmd_methods(args) -> int:

@@ -783,7 +783,7 @@ def contour_benchmark(datasets, out, *, planes=DEFAULT_PLANES, params: dict | No
         ensure_output_folder(out / "pictures")
     rows = []
     with executor as pool:
-        futures = []
+        futures, picture_of = [], []
         for job in todo:
             picture = None
             if pictures:
@@ -791,16 +791,19 @@ def contour_benchmark(datasets, out, *, planes=DEFAULT_PLANES, params: dict | No
             futures.append(pool.submit(match_cut_query, str(job.source), str(job.target), job.plane, params,
                                        gt_rows=job.gt_rows, gt_map=job.gt_map, mirror_rows=job.mirror_rows,
                                        picture=picture))
+            picture_of.append(picture)
         for job in drawn:
             picture = None
             if pictures:
                 picture = str(out / "pictures" / f"{job.sketch.name}__{job.target.stem}.png")
             futures.append(pool.submit(match_sketch_query, job.sketch, str(job.target), str(job.labels), params,
                                        mirror_rows=job.mirror_rows, picture=picture))
+            picture_of.append(picture)
         for number, future in enumerate(futures, 1):
             rows.append(future.result())
             if callback is not None:
                 callback(number, len(futures), rows[-1])
+    drawn_now = {Path(picture).name for picture, row in zip(picture_of, rows) if picture and row["status"] == "ok"}
     sketch_rows = [r for r in rows if r["plane"] == "sketch"]
     rows = [r for r in rows if r["plane"] != "sketch"]
     summary = _summary(rows) if rows else {"all": {"queries": 0, "failed": 0}}
@@ -818,4 +821,15 @@ def contour_benchmark(datasets, out, *, planes=DEFAULT_PLANES, params: dict | No
             fh.write(_markdown({k: v for k, v in summary.items() if k != "sketches"}, rows))
         if sketch_rows:
             fh.write(("\n" if rows else "") + _sketch_markdown(summary["sketches"], sketch_rows))
+    remove_stale_pictures(out / "pictures", drawn_now)
     return summary
+
+
+def remove_stale_pictures(folder: Path, kept: set[str]) -> None:
+    """Remove the match pictures (``*__*.png``) in ``folder`` that this run did not draw (``kept``: file names):
+    an earlier run's pictures of other planes, of matches that failed this time, or all of them after a run
+    with ``--no-pictures``, would stand beside a table that no longer holds their rows."""
+    from corrlib.outputs import remove_replaced_files
+
+    if folder.is_dir():
+        remove_replaced_files(folder, "*__*.png", kept)

@@ -24,12 +24,10 @@ for invalid content) whose message names the file.
 
 from __future__ import annotations
 
-import contextlib
 import json
 import os
 import platform
 import re
-import tempfile
 import xml.etree.ElementTree as ET
 from pathlib import Path
 
@@ -50,174 +48,19 @@ from corrlib.formats import (  # noqa: F401  (the table of formats, re-exported)
     dialog_filter,
     suffixes,
 )
+from corrlib.outputs import (  # noqa: F401  (the safe writers, re-exported)
+    atomic_write,
+    check_output_file,
+    check_outputs_apart,
+    ensure_output_folder,
+    os_reason,
+    remove_created_empty_folders,
+    staged_output,
+)
 from corrlib.shapes import Contour2D, TriMesh, inspect_contour
 
 
-# ----------------------------------------------------------------------------- atomic writes
-
-
-def _os_reason(exc: OSError) -> str:
-    return (exc.strerror or str(exc)).lower()
-
-
-@contextlib.contextmanager
-def atomic_write(path, mode: str = "w"):
-    """Context manager yielding a file object; the file appears at ``path`` only on success.
-
-    Raises
-    ------
-    InputError
-        Naming ``path`` when it cannot be written (permissions, a full disk, a file where a folder should be).
-    """
-    path = Path(path)
-    _make_folder(path.parent, "output")
-    try:
-        fd, tmp = tempfile.mkstemp(dir=path.parent, prefix=f".{path.name}.", suffix=".tmp")
-    except OSError as exc:
-        raise InputError(f"{path}: cannot write the file ({_os_reason(exc)})") from None
-    umask = os.umask(0)
-    os.umask(umask)
-    os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600 files; exports get the usual permissions
-    try:
-        with os.fdopen(fd, mode) as fh:
-            yield fh
-        os.replace(tmp, path)
-    except BaseException as exc:
-        with contextlib.suppress(OSError):
-            os.unlink(tmp)
-        if isinstance(exc, OSError):
-            raise InputError(f"{path}: cannot write the file ({_os_reason(exc)})") from None
-        raise
-
-
-def check_output_file(path, what: str = "output") -> Path:
-    """Check, before any work, that a file can be written at ``path`` (its folder is created).
-
-    Raises
-    ------
-    InputError
-        Naming ``path``: empty, a folder, under a file, or in a folder that cannot be written.
-    """
-    if str(path).strip() == "" or Path(path).name in ("", ".", ".."):
-        raise InputError(f"the {what} path {str(path)!r} does not name a file")
-    if str(path).endswith(("/", os.sep)):  # Path() drops the separator that says "a folder"
-        raise InputError(f"{path}: the {what} path ends with a separator, so it names a folder; expected a file "
-                         f"name")
-    path = Path(path)
-    try:
-        is_folder = path.is_dir()
-    except OSError as exc:  # a folder on the way cannot be entered
-        raise InputError(f"{path}: cannot write {what} there ({_os_reason(exc)})") from None
-    if is_folder:
-        raise InputError(f"{path}: the {what} path is a folder, expected a file name")
-    ensure_output_folder(path.parent, what)
-    return path
-
-
-@contextlib.contextmanager
-def staged_output(folder, replaces: str | None = None):
-    """Write a set of files all-or-nothing into ``folder`` (a generator-based context manager).
-
-    Yields a hidden staging folder inside ``folder``; on success its files
-    move into ``folder`` (each move atomic; Ctrl-C and SIGTERM are held
-    until the last one has moved, so an interruption gets the whole set),
-    on any failure or interruption before that it is removed, so no partial
-    set of outputs is left behind. ``replaces``: a glob of the files the set
-    replaces as a whole (a sequence's frames): those in ``folder`` that the new
-    set does not have are removed once it is in place, so that a shorter
-    sequence does not leave an earlier one's last frames beside it.
-    """
-    folder = ensure_output_folder(folder)
-    try:
-        stage = Path(tempfile.mkdtemp(dir=folder, prefix=".partial-"))
-    except OSError as exc:
-        raise InputError(f"{folder}: cannot write output there ({_os_reason(exc)})") from None
-    import shutil
-
-    from corrlib.interrupts import signals_held
-
-    try:
-        yield stage
-        entries = sorted(stage.iterdir())
-        for entry in entries:  # a folder where a file goes would stop the moves half-way: none is moved
-            if (folder / entry.name).is_dir():
-                raise InputError(f"{folder / entry.name}: an output file goes there, but it is a folder")
-        with signals_held():  # an interrupt during the moves waits until the whole set is in place
-            for entry in entries:
-                os.replace(entry, folder / entry.name)
-    except BaseException as exc:
-        shutil.rmtree(stage, ignore_errors=True)
-        if isinstance(exc, OSError):
-            raise InputError(f"{folder}: cannot write the outputs ({_os_reason(exc)})") from None
-        if isinstance(exc, CorrError) and str(stage) in str(exc):  # name the file where it was to go
-            raise type(exc)(str(exc).replace(str(stage), str(folder))) from None
-        raise
-    shutil.rmtree(stage, ignore_errors=True)
-    if replaces:  # the new set is in place: what it replaces and does not have goes
-        names = {entry.name for entry in entries}
-        for stale in folder.glob(replaces):
-            if stale.name not in names and stale.is_file():
-                try:
-                    stale.unlink()
-                except OSError as exc:
-                    raise InputError(f"{stale}: the new set is written, but this file of an earlier one cannot be "
-                                     f"removed ({_os_reason(exc)})") from None
-
-
-def ensure_output_folder(path, what: str = "output") -> Path:
-    """Create ``path`` (with parents) and check that files can be written in it, before any work.
-
-    Raises
-    ------
-    InputError
-        Naming the folder: it is a file, lies under a file, or is not writable.
-    """
-    if str(path) == "":
-        raise InputError(f"the {what} folder is an empty path")
-    folder = _make_folder(Path(path), what)
-    try:  # a probe file: permissions, read-only file systems
-        fd, probe = tempfile.mkstemp(dir=folder, prefix=".write-check.")
-        os.close(fd)
-        os.unlink(probe)
-    except OSError as exc:
-        raise InputError(f"{folder}: cannot write {what} there ({_os_reason(exc)})") from None
-    return folder
-
-
-#: the output folders this process created (:func:`ensure_output_folder`), so that a command that fails can
-#: remove those it left empty (:func:`remove_created_empty_folders`)
-_CREATED_FOLDERS: set[Path] = set()
-
-
-def remove_created_empty_folders(remove: bool = True) -> None:
-    """Remove the output folders this process created that are still empty, deepest first: a command that
-    stops with an error leaves no empty folder behind (its outputs are written all-or-nothing,
-    :func:`staged_output`). Folders that hold anything, and folders that existed before, stay. Either way
-    the record starts afresh (``remove=False``: after a command that succeeded, its folders are the user's)."""
-    if remove:
-        for folder in sorted(_CREATED_FOLDERS, key=lambda p: len(p.parts), reverse=True):
-            with contextlib.suppress(OSError):  # not empty, or gone
-                folder.rmdir()
-    _CREATED_FOLDERS.clear()
-
-
-def _make_folder(folder: Path, what: str) -> Path:
-    """``mkdir -p`` with an :class:`InputError` naming the folder and, if so, the file in its way."""
-    try:
-        missing = [p for p in (folder, *folder.parents) if not p.exists()]
-        folder.mkdir(parents=True, exist_ok=True)
-        _CREATED_FOLDERS.update(p.absolute() for p in missing)
-    except OSError as exc:
-        blocking = next((p for p in [folder, *folder.parents] if p.exists() and not p.is_dir()), None)
-        if blocking == folder:
-            reason = "it is a file"
-        elif blocking is not None:
-            reason = f"{blocking} is a file, not a folder"
-        else:
-            reason = _os_reason(exc)
-        raise InputError(f"{folder}: cannot write {what} there ({reason})") from None
-    return folder
-
+# ----------------------------------------------------------------------------- outputs (corrlib.outputs)
 
 def _require_file(path) -> Path:
     path = Path(path)
@@ -261,14 +104,30 @@ def _read_off(path: Path) -> tuple[np.ndarray, np.ndarray]:
         raise FileFormatError(f"{path}: a vertex line does not hold 3 numbers") from None
     if coords.shape != (n_v, 3) and n_v:
         raise FileFormatError(f"{path}: a vertex line does not hold 3 numbers")
-    face_lines = lines[first + n_v:first + n_v + n_f]
+    extra = len(lines) - (first + n_v + n_f)
+    faces = _off_faces(path, lines[first + n_v:first + n_v + n_f], n_v, more_lines=extra > 0)
+    if extra:  # their faces would be dropped without a word
+        raise FileFormatError(f"{path}: the header announces {n_v} vertices and {n_f} faces but the file has {extra} "
+                              "more data lines after them")
+    return coords.reshape(n_v, 3), faces
+
+
+def _off_faces(path: Path, face_lines: list[list[str]], n_v: int, more_lines: bool = False) -> np.ndarray:
+    """(f, 3) int: an OFF file's face lines, polygons fan-triangulated (``more_lines``: the file has more data
+    lines than its header announces, so a face line that reads as a vertex is one)."""
     if all(len(ln) == 4 and ln[0] == "3" for ln in face_lines):  # the common all-triangle file
         try:
-            return coords.reshape(n_v, 3), np.array([ln[1:] for ln in face_lines], dtype=np.int64).reshape(-1, 3)
+            return np.array([ln[1:] for ln in face_lines], dtype=np.int64).reshape(-1, 3)
         except (ValueError, OverflowError):
             pass  # the loop below names the bad face
     faces = []
     for index, ln in enumerate(face_lines):
+        # x y z where a face goes (a count of 3 or more and as many indices): the vertex block runs on
+        spilled = (more_lines and len(ln) >= 3 and all(_is_number(t) for t in ln)
+                   and (not ln[0].isdigit() or int(ln[0]) < 3))
+        if spilled:
+            raise FileFormatError(f"{path}: face line {index} ({' '.join(ln)[:40]!r}) holds a vertex's "
+                                  f"coordinates: the header announces {n_v} vertices, fewer than the file has")
         try:
             k = int(ln[0])
             poly = [int(v) for v in ln[1:1 + k]]
@@ -282,7 +141,7 @@ def _read_off(path: Path) -> tuple[np.ndarray, np.ndarray]:
             raise FileFormatError(f"{path}: face {index} refers to vertex {max(poly, key=abs)}, but the file has "
                                   f"{n_v} vertices (0 to {n_v - 1})")
         faces.extend((poly[0], poly[j], poly[j + 1]) for j in range(1, k - 1))
-    return coords.reshape(n_v, 3), np.array(faces, dtype=np.int64).reshape(-1, 3)
+    return np.array(faces, dtype=np.int64).reshape(-1, 3)
 
 
 def _looks_like_face(tokens: list[str]) -> bool:
@@ -326,12 +185,33 @@ def read_mesh_arrays(path) -> tuple[np.ndarray, np.ndarray]:
     if suffix == ".off":
         vertices, faces = _read_off(path)  # our parser: fast, exact order, precise messages
     else:
+        if suffix == ".obj":
+            _check_obj_faces(path)
         vertices, faces = _read_trimesh(path, weld=suffix == ".stl")
     if vertices.size == 0:
         raise FileFormatError(f"{path}: the file contains no vertices")
     if faces.size == 0:
         raise FileFormatError(f"{path}: the file contains no faces (a point cloud, not a mesh)")
     return vertices, faces
+
+
+def _check_obj_faces(path: Path) -> None:
+    """Refuse an OBJ whose faces the reader would misread without a word: an index 0 (OBJ counts from 1, and
+    a reader takes 0 for the last vertex), or vertices and no face at all (a point cloud)."""
+    has_vertices = has_faces = False
+    for number, line in enumerate(read_text(path, "mesh").splitlines(), 1):
+        tokens = line.split("#", 1)[0].split()
+        if not tokens:
+            continue
+        has_vertices |= tokens[0] == "v"
+        if tokens[0] == "f":
+            has_faces = True
+            if any(token.split("/", 1)[0] == "0" for token in tokens[1:]):
+                raise FileFormatError(f"{path}: line {number} ({line.strip()[:40]!r}) refers to vertex 0, but OBJ "
+                                      "vertex indices start at 1 (a file written with 0-based indices: add 1 to "
+                                      "every face index)")
+    if has_vertices and not has_faces:
+        raise FileFormatError(f"{path}: the file contains vertices but no faces (a point cloud, not a mesh)")
 
 
 def _read_trimesh(path: Path, *, weld: bool) -> tuple[np.ndarray, np.ndarray]:
@@ -917,12 +797,13 @@ def load_shape(path) -> TriMesh | Contour2D:
 
 
 def read_text(path, what: str = "input") -> str:
-    """The text of a file (undecodable bytes replaced), every failure a :class:`FileFormatError` naming it."""
+    """The text of a file (undecodable bytes replaced, a leading byte-order mark dropped), every failure a
+    :class:`FileFormatError` naming it."""
     path = _require_file(path)
     try:
-        return path.read_bytes().decode("utf-8", errors="replace")
+        return path.read_bytes().decode("utf-8", errors="replace").removeprefix("\ufeff")
     except OSError as exc:
-        raise FileFormatError(f"{path}: cannot read the {what} file ({_os_reason(exc)})") from None
+        raise FileFormatError(f"{path}: cannot read the {what} file ({os_reason(exc)})") from None
 
 
 #: integer entries must stay exactly representable (float64) and within int64
@@ -947,21 +828,29 @@ def _integers(values: np.ndarray, path: Path, what: str, entry: str = "vertex in
     first = non_integer_entry(values)
     if first is not None:  # named by its position in the file: row and column where the values form a table
         where = f"data line {first[0] + 1}, column {first[1] + 1}" if values.ndim == 2 else f"entry {first[0]}"
-        raise FileFormatError(f"{path}: the {what} must hold integer {entry}; {where} is "
-                              f"{float(values[first])!r}")
+        value = float(values[first])
+        beyond = " (beyond 2^53, the largest an index can be)" if np.isfinite(value) and value == round(value) else ""
+        raise FileFormatError(f"{path}: the {what} must hold integer {entry}; {where} is {value!r}{beyond}")
     return values.astype(np.int64)
 
 
-def _index_file(path: Path, what: str) -> np.ndarray:
-    text = " ".join(line.split("#", 1)[0] for line in read_text(path, what).splitlines()).split()  # '#' comments
-    if not text:
+def _index_file(path: Path, what: str, entry: str = "vertex indices") -> np.ndarray:
+    """One integer per data line (``#`` comments and blank lines skipped); ``entry`` names what they are."""
+    rows = [line.split("#", 1)[0].split() for line in read_text(path, what).splitlines()]
+    rows = [row for row in rows if row]
+    if not rows:
         raise FileFormatError(f"{path}: the {what} file is empty")
+    wide = next((number for number, row in enumerate(rows, 1) if len(row) != 1), None)
+    if wide is not None:  # e.g. a two-column pairs file given as a map: its entries would be read as one list
+        raise FileFormatError(f"{path}: the {what} file must hold one integer per line; data line {wide} has "
+                              f"{len(rows[wide - 1])} values")
+    text = [row[0] for row in rows]
     try:
         values = np.array([float(t) for t in text])
     except ValueError:
         bad = next(t for t in text if not _is_number(t))
         raise FileFormatError(f"{path}: {what} file has a non-numeric entry {bad[:40]!r}") from None
-    return _integers(values, path, f"{what} file")
+    return _integers(values, path, f"{what} file", entry)
 
 
 def load_labels(path, n: int | None = None, what: str = "labels") -> np.ndarray:
@@ -979,7 +868,7 @@ def load_labels(path, n: int | None = None, what: str = "labels") -> np.ndarray:
     -------
     (r,) int
     """
-    values = _index_file(Path(path), what)
+    values = _index_file(Path(path), what, "labels")
     if n is not None and values.shape[0] != n:
         raise FileFormatError(f"{path}: the {what} file has {values.shape[0]} labels, expected {n}")
     return values

@@ -175,6 +175,34 @@ def test_a_rerun_with_other_settings_is_refused_and_failures_are_retried(wolf_da
     assert not Runner(load_dataset(wolf_dataset), [parse_method(FAST + "@nn")], out).pending()
 
 
+def test_a_damaged_record_is_run_again(wolf_dataset, tmp_path):
+    """A record cut short or edited into something else (a crash of the machine, a hand) stopped the rerun with
+    a JSONDecodeError or an AttributeError traceback; its pair is now run again and its record replaced."""
+    from corrlib.cli import main
+
+    out = tmp_path / "out"
+    args = ["bench", str(wolf_dataset), "--method", FAST + "@nn", "-o", str(out), "--jobs", "1", "-q"]
+    assert main(args) == 0
+    records = sorted((out / "records" / "nn").glob("*.json"))
+    records[0].write_text(records[0].read_text()[:50])
+    records[1].write_text("[1, 2]")
+    runner = Runner(load_dataset(wolf_dataset), [parse_method(FAST + "@nn")], out)
+    assert len(runner.pending()) == 2 and runner.records() == []
+    assert main(args) == 0
+    assert json.loads((out / "summary.json").read_text())["nn"]["pairs"] == 2
+    assert all(json.loads(r.read_text())["status"] == "ok" for r in records)
+
+
+def test_files_that_are_not_utf8_text_are_named(tmp_path, wolf_dataset):
+    """A pairs file or a methods file of other bytes gave a UnicodeDecodeError traceback."""
+    (wolf_dataset / "pairs.txt").write_bytes(b"\x00\xff\xfe junk\n")
+    with pytest.raises(FileFormatError, match="pairs.txt:1: unknown shape"):
+        load_dataset(wolf_dataset)
+    (tmp_path / "m.toml").write_bytes(b'\xff\xfe[[method]]\nname="descriptor-nn"\n')
+    with pytest.raises(FileFormatError, match="m.toml: cannot read the methods file"):
+        methods_from_toml(tmp_path / "m.toml")
+
+
 def test_labels_sharing_a_folder_and_bad_methods_files_are_refused(tmp_path, wolf_dataset):
     ds = load_dataset(wolf_dataset)
     with pytest.raises(ParameterError, match="share the results folder 'x_y'"):

@@ -287,7 +287,7 @@ def _png_header_only(path: Path, width: int, height: int) -> None:
 @pytest.mark.filterwarnings("error::RuntimeWarning")  # no raw overflow warnings before the message
 def test_bad_files_give_named_errors(tmp_path, capsys):
     t = tmp_path
-    (t / "labels.txt").write_text("a b c\n")
+    (t / "labels.txt").write_text("a\n")
     (t / "random.bin").write_bytes(np.random.default_rng(0).bytes(400))
     (t / "folder").mkdir()
     np.savez(t / "frac.npz", map_xy=np.arange(4344) + 0.7)

@@ -13,6 +13,7 @@ from corrlib.io import (
     atomic_write,
     enclosed_outline,
     load_contour,
+    load_labels,
     load_map,
     load_mesh,
     load_result,
@@ -63,6 +64,11 @@ def test_stl_loads(tmp_path):
     ("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1\n", "face 0 announces 3 vertices but lists 2"),
     ("OFF\n3 1 0\n0 0 0\n1 x 0\n0 1 0\n3 0 1 2\n", "vertex line"),
     ("OFF\n3\n", "vertex and face counts"),
+    # more faces than the header announces: they would be dropped without a word
+    ("OFF\n4 1 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 1 2\n3 0 2 3\n", "1 more data lines after them"),
+    # fewer vertices than the file has: the vertex block runs on into the faces
+    ("OFF\n3 2 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 1 2\n3 0 2 3\n", "holds a vertex's coordinates: the header "
+                                                                 "announces 3 vertices, fewer than the file has"),
 ])
 def test_malformed_mesh_files(tmp_path, content, match):
     p = tmp_path / "bad.off"
@@ -87,6 +93,24 @@ def test_mesh_file_errors(tmp_path):
     p.write_text("OFF\n3 1 0\n0 0 0\n1 0 0\n0 1 0\n3 0 1 5\n")
     with pytest.raises((MeshError, FileFormatError), match="range.off"):
         load_mesh(p)
+
+
+def test_obj_files_that_a_reader_would_misread(tmp_path):
+    """An OBJ written with 0-based face indices (a reader takes 0 for the last vertex) and an OBJ of vertices
+    alone are named as such."""
+    import trimesh
+
+    sphere = trimesh.creation.icosphere(1)
+    vertex_lines = [f"v {x} {y} {z}" for x, y, z in sphere.vertices]
+    (tmp_path / "zero.obj").write_text("\n".join(vertex_lines + [f"f {a} {b} {c}" for a, b, c in sphere.faces]))
+    with pytest.raises(FileFormatError, match="zero.obj: line .* refers to vertex 0, but OBJ vertex indices start"):
+        load_mesh(tmp_path / "zero.obj")
+    one_based = [f"f {a + 1} {b + 1} {c + 1}" for a, b, c in sphere.faces]
+    (tmp_path / "one.obj").write_text("\n".join(vertex_lines + one_based))
+    assert load_mesh(tmp_path / "one.obj").n_faces == len(sphere.faces)
+    (tmp_path / "points.obj").write_text("\n".join(vertex_lines))
+    with pytest.raises(FileFormatError, match="points.obj: the file contains vertices but no faces"):
+        load_mesh(tmp_path / "points.obj")
 
 
 def test_largest_component_option(tmp_path):
@@ -137,6 +161,9 @@ def test_contour_text_files(tmp_path):
         load_contour(tmp_path / "few.txt")
     save_contour(tmp_path / "out.txt", e)
     assert np.allclose(load_contour(tmp_path / "out.txt").points, e.points, atol=1e-8)
+    # a byte-order mark (Windows editors write one) is not a header line: every point is kept
+    (tmp_path / "bom.txt").write_text("".join(f"{x:.6f} {y:.6f}\n" for x, y in pts), encoding="utf-8-sig")
+    assert load_contour(tmp_path / "bom.txt").n_points == 50
 
 
 def test_svg_path_with_curves(tmp_path):
@@ -246,6 +273,16 @@ def test_vts_and_maps(tmp_path):
     (tmp_path / "f.txt").write_text("1.5\n2\n")
     with pytest.raises(FileFormatError, match="integer"):
         load_map(tmp_path / "f.txt")
+    # two columns (a landmarks file given as a map) were read as one list of twice the rows
+    np.savetxt(tmp_path / "pairs.txt", np.column_stack([np.arange(3), np.arange(3)]), fmt="%d")
+    with pytest.raises(FileFormatError, match="pairs.txt: the map file must hold one integer per line; data line 1 "
+                                              "has 2 values"):
+        load_map(tmp_path / "pairs.txt")
+    with pytest.raises(FileFormatError, match="one integer per line"):
+        load_vts(tmp_path / "pairs.txt")
+    (tmp_path / "labels.txt").write_text("4611686018427387904\n")
+    with pytest.raises(FileFormatError, match="must hold integer labels; entry 0 is .* \\(beyond 2\\^53"):
+        load_labels(tmp_path / "labels.txt")
     with pytest.raises(InputError, match="integer array"):
         save_map(tmp_path / "x.txt", np.array([0.5]))
 

@@ -87,7 +87,7 @@ def validate_params(params) -> None:
                 raise ParameterError(f"{f.name} must be finite, got {value!r}")
             if isinstance(f.default, int) and not isinstance(value, (int, np.integer)):
                 raise ParameterError(f"{f.name} must be an integer, got {value!r}")
-            if meta.get("integer") and float(value) != int(value):
+            if meta.get("integer") and not isinstance(value, (int, np.integer)) and float(value) != int(value):
                 raise ParameterError(f"{f.name} must be an integer, got {value!r}")
             low, high = meta.get("low"), meta.get("high")
             if low is not None and value < low:

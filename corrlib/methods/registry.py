@@ -188,6 +188,11 @@ def solve(method: str | MethodSpec, source, target, params=None, *, callback=Non
     MatchResult
         With ``timings["total"]`` and ``params`` filled in.
     """
+    if callback is not None and not callable(callback):
+        raise ParameterError(f"callback must be a function that takes a Progress report, got "
+                             f"{type(callback).__name__} {callback!r:.40}")
+    if token is not None and not isinstance(token, CancelToken):
+        raise ParameterError(f"token must be a corrlib.progress.CancelToken, got {type(token).__name__}")
     token = token or CancelToken()
     return run(solve_iter(method, source, target, params, token, initial=initial, **overrides),
                callback=callback, token=token)

@@ -278,7 +278,8 @@ def _manifold_findings(edges: _Edges) -> list[Finding]:
         return []
     a, b = edges.uniq[nm[0]]
     return [Finding("error", "non-manifold-edge", f"{nm.size} edges are shared by more than two faces "
-                    f"(e.g. edge {a}-{b})")]
+                    f"(e.g. edge {a}-{b}); the methods need a surface whose every edge borders one or two faces "
+                    "(repair it in a mesh editor, e.g. by splitting the edges or deleting the extra faces)")]
 
 
 def _duplicate_face_findings(f: np.ndarray, n: int) -> list[Finding]:
@@ -304,7 +305,9 @@ def _connectivity_findings(v: np.ndarray, f: np.ndarray) -> list[Finding]:
     if unused.size:
         findings.append(
             Finding("error", "unreferenced-vertex", f"{unused.size} vertices belong to no face "
-                    f"(e.g. vertex {_examples(unused)})")
+                    f"(e.g. vertex {_examples(unused)}); delete the loose vertices in a mesh editor, or keep the "
+                    "mesh's faces with corrlib.io.load_mesh(path, largest_component=True) (the indices of the "
+                    "vertices after them change, so renumber any ground truth)")
         )
     _, labels = _face_components(n, f)
     n_comp_used = np.unique(labels[used]).size

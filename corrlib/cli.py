@@ -111,11 +111,12 @@ def cmd_eval(args) -> int:
                               f"for another source?)")
     gt_target = load_vts(args.gt_target, target.n_vertices)
     gt_sym = load_vts(args.gt_target_sym, target.n_vertices) if args.gt_target_sym else None
-    for option, rows in (("--gt-target", gt_target), ("--gt-target-sym", gt_sym)):
+    for option, path, rows in (("--gt-target", args.gt_target, gt_target),
+                               ("--gt-target-sym", args.gt_target_sym, gt_sym)):
         if rows is not None and rows.shape != gt_source.shape:  # row i of each names one point of the truth
-            raise FileFormatError(f"{getattr(args, option[2:].replace('-', '_'))} ({option}) has {rows.size} rows, "
-                                  f"but {args.gt_source} (--gt-source) has {gt_source.size}; the ground-truth files "
-                                  "must have one row per corresponding point")
+            raise FileFormatError(f"{path} ({option}) has {rows.size} rows, but {args.gt_source} (--gt-source) has "
+                                  f"{gt_source.size}; the ground-truth files must have one row per corresponding "
+                                  "point")
     start = time.perf_counter()
     report = geodesic_errors(map_xy, target, gt_source, gt_target, gt_target_sym=gt_sym,
                              normalize=args.normalize, method=args.geodesics)
@@ -692,7 +693,7 @@ def cmd_match_contour(args) -> int:
 
 def cmd_retrieve(args) -> int:
     from corrlib.progress import run
-    from corrlib.retrieval import class_of, mean_average_precision, mesh_files, retrieve
+    from corrlib.retrieval import class_of, mean_average_precision, mesh_files, retrieve, write_ranking
 
     if args.top < 1:
         raise CorrError(f"--top must be at least 1, got {args.top}")
@@ -719,7 +720,7 @@ def cmd_retrieve(args) -> int:
         print(f"average precision for class {query_class!r}: "
               f"{mean_average_precision([(query_class, labels)]):.4f}")
     if args.output:
-        for path in _write_ranking(hits, Path(args.output), args.top if args.pictures else 0):
+        for path in write_ranking(hits, Path(args.output), args.top if args.pictures else 0):
             print(f"wrote {path}")
     failed = sum(1 for hit in hits if hit.error)
     if failed:  # as corr bench: exit 1 when a mesh could not be ranked, with every reason above
@@ -727,57 +728,6 @@ def cmd_retrieve(args) -> int:
               f"{' (none ranked)' if failed == len(hits) else ''}; see the reasons above", file=sys.stderr)
         return 1
     return 0
-
-
-def _write_ranking(hits, out: Path, pictures: int) -> list[Path]:
-    """The ranking as TSV at ``out`` and, for the first ``pictures`` ranks that were matched, the query and its
-    matched curve on the mesh (``STEM.RANK-MESH.png`` beside it), as one set: pictures that an earlier ranking
-    of these meshes wrote under the same stem go, with or without new ones (they would show other ranks)."""
-    import csv
-    import re
-
-    from corrlib.io import load_mesh, staged_output
-
-    picture = re.compile(re.escape(out.stem) + r"\.[0-9]+-(.+)\.png")
-    meshes = {hit.path.stem for hit in hits} | _ranked_mesh_stems(out)
-
-    def earlier_picture(name: str) -> bool:
-        match = picture.fullmatch(name)
-        return match is not None and match.group(1) in meshes
-
-    width = len(str(pictures))
-    with staged_output(out.parent, replaces=earlier_picture) as stage:
-        written = [stage / out.name]
-        with open(written[0], "w", encoding="utf-8", newline="") as fh:
-            table = csv.writer(fh, delimiter="\t", lineterminator="\n")  # quotes a name with a tab or line break
-            table.writerow(["rank", "energy", "mesh", "error"])
-            for rank, hit in enumerate(hits, 1):
-                table.writerow([rank, f"{hit.energy:.9g}", hit.path, hit.error])
-        for rank, hit in enumerate(hits[:pictures], 1):
-            if hit.error:
-                continue
-            from corrlib.plotting import save_contour_match
-
-            written.append(save_contour_match(stage / f"{out.stem}.{rank:0{width}d}-{hit.path.stem}.png",
-                                              hit.contour_points, load_mesh(hit.path), hit.path_vertices,
-                                              hit.path_contour_index,
-                                              title=f"rank {rank}: {hit.path.name}, energy {hit.energy:.4g}"))
-    return [out.parent / path.name for path in written]
-
-
-def _ranked_mesh_stems(ranking: Path) -> set[str]:
-    """The stems of the meshes an earlier ranking at ``ranking`` (a TSV written by ``corr retrieve``) holds; none
-    where there is no readable one."""
-    import csv
-
-    try:
-        with open(ranking, encoding="utf-8", newline="") as fh:
-            rows = list(csv.reader(fh, delimiter="\t"))
-    except (OSError, UnicodeDecodeError, csv.Error):
-        return set()
-    if not rows or rows[0][:3] != ["rank", "energy", "mesh"]:
-        return set()
-    return {Path(row[2]).stem for row in rows[1:] if len(row) > 2}
 
 
 def cmd_methods(args) -> int:

@@ -254,3 +254,54 @@ def mean_average_precision(rankings: list[tuple[str, list[str]]]) -> float:
     if not rankings:
         raise InputError("no rankings to average")
     return float(np.mean([average_precision(labels, cls) for cls, labels in rankings]))
+
+
+def write_ranking(hits, out: Path, pictures: int) -> list[Path]:
+    """Write a ranking (:func:`retrieve`'s hits) as TSV at ``out`` and, for the first ``pictures`` ranks that
+    were matched, the query and its matched curve on the mesh (``STEM.RANK-MESH.png`` beside it), as one set:
+    pictures that an earlier ranking of these meshes wrote under the same stem go, with or without new ones
+    (they would show other ranks). Returns the files written."""
+    import csv
+
+    from corrlib.io import staged_output
+
+    picture = re.compile(re.escape(out.stem) + r"\.[0-9]+-(.+)\.png")
+    meshes = {hit.path.stem for hit in hits} | _ranked_mesh_stems(out)
+
+    def earlier_picture(name: str) -> bool:
+        match = picture.fullmatch(name)
+        return match is not None and match.group(1) in meshes
+
+    width = len(str(pictures))
+    with staged_output(out.parent, replaces=earlier_picture) as stage:
+        written = [stage / out.name]
+        with open(written[0], "w", encoding="utf-8", newline="") as fh:
+            table = csv.writer(fh, delimiter="\t", lineterminator="\n")  # quotes a name with a tab or line break
+            table.writerow(["rank", "energy", "mesh", "error"])
+            for rank, hit in enumerate(hits, 1):
+                table.writerow([rank, f"{hit.energy:.9g}", hit.path, hit.error])
+        for rank, hit in enumerate(hits[:pictures], 1):
+            if hit.error:
+                continue
+            from corrlib.plotting import save_contour_match
+
+            written.append(save_contour_match(stage / f"{out.stem}.{rank:0{width}d}-{hit.path.stem}.png",
+                                              hit.contour_points, load_mesh(hit.path), hit.path_vertices,
+                                              hit.path_contour_index,
+                                              title=f"rank {rank}: {hit.path.name}, energy {hit.energy:.4g}"))
+    return [out.parent / path.name for path in written]
+
+
+def _ranked_mesh_stems(ranking: Path) -> set[str]:
+    """The stems of the meshes an earlier ranking at ``ranking`` (a TSV written by ``corr retrieve``) holds; none
+    where there is no readable one."""
+    import csv
+
+    try:
+        with open(ranking, encoding="utf-8", newline="") as fh:
+            rows = list(csv.reader(fh, delimiter="\t"))
+    except (OSError, UnicodeDecodeError, csv.Error):
+        return set()
+    if not rows or rows[0][:3] != ["rank", "energy", "mesh"]:
+        return set()
+    return {Path(row[2]).stem for row in rows[1:] if len(row) > 2}

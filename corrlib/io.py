@@ -16,7 +16,9 @@ here); :func:`load_shape` loads a mesh or a contour by its suffix.
   ``.json`` sidecar with parameters, versions and timings.
 
 Every writer is atomic: it writes a temporary file in the destination folder
-and renames it, so an interrupted export never leaves a truncated file.
+and renames it, so an interrupted export never leaves a truncated file
+(:mod:`corrlib.outputs`, whose writers and output checks are re-exported
+here).
 Every reader raises :class:`~corrlib.errors.FileFormatError` (or a
 :class:`~corrlib.errors.MeshError` / :class:`~corrlib.errors.ContourError`
 for invalid content) whose message names the file.

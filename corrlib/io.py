@@ -189,6 +189,8 @@ def read_mesh_arrays(path) -> tuple[np.ndarray, np.ndarray]:
     else:
         if suffix == ".obj":
             _check_obj_faces(path)
+        elif suffix == ".ply":
+            _check_ascii_ply_counts(path)
         vertices, faces = _read_trimesh(path, weld=suffix == ".stl")
     if vertices.size == 0:
         raise FileFormatError(f"{path}: the file contains no vertices")
@@ -214,6 +216,29 @@ def _check_obj_faces(path: Path) -> None:
                                       "every face index)")
     if has_vertices and not has_faces:
         raise FileFormatError(f"{path}: the file contains vertices but no faces (a point cloud, not a mesh)")
+
+
+def _check_ascii_ply_counts(path: Path) -> None:
+    """Refuse an ASCII PLY whose header announces another number of element lines than its body holds (a
+    reader would take face lines for vertices or drop faces without a word). Binary PLY is left to the
+    reader, which runs out of bytes."""
+    with open(path, "rb") as fh:
+        head = fh.read(4096)
+    if b"format ascii" not in head.split(b"end_header", 1)[0]:
+        return
+    text = read_text(path, "mesh")
+    header, _, body = text.partition("end_header")
+    announced = {}
+    for line in header.splitlines():
+        tokens = line.split()
+        if len(tokens) == 3 and tokens[0] == "element" and tokens[2].isdigit():
+            announced[tokens[1]] = int(tokens[2])
+    lines = sum(1 for line in body.splitlines() if line.strip())
+    total = sum(announced.values())
+    if lines != total:
+        counts = " and ".join(f"{n} {name} lines" for name, n in announced.items())
+        raise FileFormatError(f"{path}: the header announces {counts or 'no elements'} ({total} in all), but the "
+                              f"file has {lines} data lines")
 
 
 def _read_trimesh(path: Path, *, weld: bool) -> tuple[np.ndarray, np.ndarray]:

@@ -113,6 +113,23 @@ def test_obj_files_that_a_reader_would_misread(tmp_path):
         load_mesh(tmp_path / "points.obj")
 
 
+def test_an_ascii_ply_whose_header_miscounts_its_lines_is_refused(tmp_path):
+    """A header announcing more vertices than the file has made the reader take face lines for vertices ("43
+    vertices belong to no face"); fewer faces dropped the rest."""
+    import trimesh
+
+    sphere = trimesh.creation.icosphere(1)
+    save_mesh(tmp_path / "s.ply", sphere.vertices, sphere.faces)
+    text = (tmp_path / "s.ply").read_text()
+    assert load_mesh(tmp_path / "s.ply").n_faces == 80
+    for name, announced, match in (("more.ply", ("element vertex 42", "element vertex 100"), "180 in all"),
+                                   ("fewer.ply", ("element face 80", "element face 70"), "112 in all")):
+        (tmp_path / name).write_text(text.replace(*announced))
+        with pytest.raises(FileFormatError, match=f"{name}: the header announces .*\\({match}\\), but the file "
+                                                  "has 122 data lines"):
+            load_mesh(tmp_path / name)
+
+
 def test_largest_component_option(tmp_path):
     a = trimesh.creation.icosphere(subdivisions=2)
     b = trimesh.creation.box()

@@ -188,6 +188,7 @@ def inspect_mesh(vertices, faces) -> list[Finding]:
     findings += _duplicate_face_findings(f, n)
     findings += _connectivity_findings(v, f)
     findings += _edge_warnings(edges)
+    findings += _pinched_vertex_warnings(f, edges)
     return findings
 
 
@@ -414,6 +415,42 @@ def _edge_warnings(edges: _Edges) -> list[Finding]:
                     "Neumann boundary conditions are used")
         )
     return findings
+
+
+def _pinched_vertex_warnings(f: np.ndarray, edges: _Edges) -> list[Finding]:
+    """Vertices where separate fans of faces meet (a non-manifold vertex: two sheets, or two parts, touching at
+    one point). The faces round a vertex of a surface are one fan, linked through the edges at that vertex;
+    the corners of each face are joined across every edge of two faces, and a vertex whose corners fall into
+    several groups is pinched."""
+    from scipy.sparse import coo_matrix
+
+    n_faces = f.shape[0]
+    if edges.non_manifold.size or not n_faces:
+        return []  # refused already (an edge of three faces)
+    order = np.argsort(edges.inverse, kind="stable")
+    interior = np.repeat(edges.counts == 2, edges.counts)  # the half-edges in ``order``, grouped by edge
+    first, second = order[interior][0::2], order[interior][1::2]
+    links = []
+    for end in (0, 1):  # both ends of the shared edge: the vertex's corner in each of the two faces
+        vertex = edges.half[first, end]
+        corners = []
+        for half in (first, second):
+            face, start = half % n_faces, half // n_faces
+            position = np.where(f[face, start] == vertex, start, (start + 1) % 3)
+            corners.append(position * n_faces + face)
+        links.append(corners)
+    rows = np.concatenate([links[0][0], links[1][0]])
+    cols = np.concatenate([links[0][1], links[1][1]])
+    graph = coo_matrix((np.ones(rows.size), (rows, cols)), shape=(3 * n_faces, 3 * n_faces))
+    _, fan = connected_components(graph, directed=False)
+    corner_vertex = f.T.ravel()  # corner p * n_faces + face holds f[face, p]
+    fans = np.unique(corner_vertex * np.int64(fan.max() + 1) + fan) // (fan.max() + 1)  # one entry per fan
+    pinched = np.flatnonzero(np.bincount(fans) > 1)
+    if not pinched.size:
+        return []
+    return [Finding("warning", "pinched-vertex", f"{pinched.size} vertices join separate fans of faces (e.g. "
+                    f"vertex {_examples(pinched)}): the surface touches itself there, and distances and spectra "
+                    "pass through that point")]
 
 
 def _check_labels(labels, n: int, name: str, error):

@@ -86,6 +86,23 @@ def test_a_small_face_is_not_a_degenerate_one():
         TriMesh(flat, np.array([[0, 1, 2], [2, 1, 3], [0, 2, 3]]))
 
 
+def test_a_pinched_vertex_is_named():
+    """Two tetrahedra sharing one vertex (and a sphere through the same test) are one connected mesh whose every
+    edge borders two faces, so nothing was said; the vertex where they touch joins two fans of faces."""
+    import trimesh
+
+    warnings = lambda v, f: [fd for fd in inspect_mesh(v, f) if fd.code == "pinched-vertex"]  # noqa: E731
+    v = np.vstack([TETRA_V, TETRA_V[1:] - 2.0])  # the second one's apex is vertex 0 as well
+    f = np.vstack([TETRA_F, np.where(TETRA_F == 0, 0, TETRA_F + 3)])
+    found = warnings(v, f)
+    assert len(found) == 1 and found[0].level == "warning" and "1 vertices" in found[0].message
+    assert "vertex 0" in found[0].message
+    sphere = trimesh.creation.icosphere(2)
+    assert not warnings(sphere.vertices, sphere.faces) and not warnings(TETRA_V, TETRA_F)
+    cap = sphere.faces[sphere.vertices[sphere.faces].mean(axis=1)[:, 2] > 0.3]  # an open surface: one fan each
+    assert not warnings(sphere.vertices, cap)
+
+
 def test_components_error_and_largest_component():
     a = trimesh.creation.icosphere(subdivisions=2)
     v = np.vstack([TETRA_V + 10, a.vertices])

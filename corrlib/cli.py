@@ -770,7 +770,12 @@ def _command(sub, name: str, help: str, description: str | None = None, **defaul
     return p
 
 
-def _add_output(p: argparse.ArgumentParser, default: str, help: str = "output path without suffix", *,
+#: the ``-o`` help of the commands that write a match's set of files beside one stem
+STEM_HELP = ("output path without suffix; the files written there replace every file an earlier match wrote under "
+             f"that stem ({', '.join(MATCH_OUTPUT_SUFFIXES)})")
+
+
+def _add_output(p: argparse.ArgumentParser, default: str, help: str = STEM_HELP, *,
                 quiet: bool = True) -> None:
     p.add_argument("-o", "--output", default=default, help=help)
     if quiet:
@@ -857,7 +862,8 @@ def _add_retrieve_parser(sub) -> None:
     p.add_argument("--pictures", action="store_true",
                    help="also write, beside the ranking (-o), the query and its matched curve on each of the --top "
                         "meshes (STEM.RANK-MESH.png)")
-    _add_output(p, None, "write the full ranking as TSV")
+    _add_output(p, None, "write the full ranking as TSV (with --pictures, the pictures of an earlier ranking of "
+                         "these meshes under its name are replaced)")
 
 
 def _add_bench_parsers(sub) -> None:
@@ -938,7 +944,7 @@ def _add_morph_parser(sub) -> None:
     p.add_argument("--format", default="obj", choices=[s.lstrip(".") for s in suffixes("mesh", writable=True)],
                    help="mesh format of the frames")
     p.add_argument("--param", action="append", metavar="NAME=VALUE", help="method parameter (repeatable)")
-    _add_output(p, "frames", "output folder")
+    _add_output(p, "frames", "output folder (an earlier morph's frames and result files there are replaced)")
 
 
 def _add_tool_parsers(sub) -> None:

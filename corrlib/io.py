@@ -107,16 +107,14 @@ def _read_off(path: Path) -> tuple[np.ndarray, np.ndarray]:
     if coords.shape != (n_v, 3) and n_v:
         raise FileFormatError(f"{path}: a vertex line does not hold 3 numbers")
     extra = len(lines) - (first + n_v + n_f)
-    faces = _off_faces(path, lines[first + n_v:first + n_v + n_f], n_v, more_lines=extra > 0)
-    if extra:  # their faces would be dropped without a word
+    if extra:  # faces that would be dropped without a word, or vertices read as faces (too few announced)
         raise FileFormatError(f"{path}: the header announces {n_v} vertices and {n_f} faces but the file has {extra} "
                               "more data lines after them")
-    return coords.reshape(n_v, 3), faces
+    return coords.reshape(n_v, 3), _off_faces(path, lines[first + n_v:], n_v)
 
 
-def _off_faces(path: Path, face_lines: list[list[str]], n_v: int, more_lines: bool = False) -> np.ndarray:
-    """(f, 3) int: an OFF file's face lines, polygons fan-triangulated (``more_lines``: the file has more data
-    lines than its header announces, so a face line that reads as a vertex is one)."""
+def _off_faces(path: Path, face_lines: list[list[str]], n_v: int) -> np.ndarray:
+    """(f, 3) int: an OFF file's face lines, polygons fan-triangulated."""
     if all(len(ln) == 4 and ln[0] == "3" for ln in face_lines):  # the common all-triangle file
         try:
             return np.array([ln[1:] for ln in face_lines], dtype=np.int64).reshape(-1, 3)
@@ -124,12 +122,6 @@ def _off_faces(path: Path, face_lines: list[list[str]], n_v: int, more_lines: bo
             pass  # the loop below names the bad face
     faces = []
     for index, ln in enumerate(face_lines):
-        # x y z where a face goes (a count of 3 or more and as many indices): the vertex block runs on
-        spilled = (more_lines and len(ln) >= 3 and all(_is_number(t) for t in ln)
-                   and (not ln[0].isdigit() or int(ln[0]) < 3))
-        if spilled:
-            raise FileFormatError(f"{path}: face line {index} ({' '.join(ln)[:40]!r}) holds a vertex's "
-                                  f"coordinates: the header announces {n_v} vertices, fewer than the file has")
         try:
             k = int(ln[0])
             poly = [int(v) for v in ln[1:1 + k]]

@@ -67,8 +67,8 @@ def test_stl_loads(tmp_path):
     # more faces than the header announces: they would be dropped without a word
     ("OFF\n4 1 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 1 2\n3 0 2 3\n", "1 more data lines after them"),
     # fewer vertices than the file has: the vertex block runs on into the faces
-    ("OFF\n3 2 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 1 2\n3 0 2 3\n", "holds a vertex's coordinates: the header "
-                                                                 "announces 3 vertices, fewer than the file has"),
+    ("OFF\n3 2 0\n0 0 0\n1 0 0\n0 1 0\n0 0 1\n3 0 1 2\n3 0 2 3\n", "announces 3 vertices and 2 faces but the "
+                                                                 "file has 1 more data lines"),
 ])
 def test_malformed_mesh_files(tmp_path, content, match):
     p = tmp_path / "bad.off"

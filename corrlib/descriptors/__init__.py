@@ -45,8 +45,8 @@ def mesh_descriptors(mesh, kind: str = "wks", *, spectrum=None, n_scales: int = 
         evals_hash = cache.make_key(np.ascontiguousarray(spectrum.evals, dtype="<f8").tobytes().hex())
         key = cache.make_key("descriptor-v1", mesh.content_hash, kind, n_scales, evals_hash)
     if use_cache:
-        entry = cache.load("descriptors", key)
-        if entry is not None and entry["values"].shape[0] == mesh.n_vertices:
+        entry = cache.load("descriptors", key, {"values": cache.Array("f", (mesh.n_vertices, None))})
+        if entry is not None:
             return entry["values"]
     if kind == "shot":
         from corrlib.descriptors.shot import shot

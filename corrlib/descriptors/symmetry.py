@@ -331,8 +331,9 @@ def _reflection_key(mesh) -> str:
 
 
 def _cached_reflection(mesh) -> np.ndarray | None:
-    entry = cache.load("reflections", _reflection_key(mesh))
-    if entry is not None and entry.get("mirror", np.empty(0)).shape == (mesh.n_vertices,):
+    entry = cache.load("reflections", _reflection_key(mesh),
+                       {"mirror": cache.Array("i", (mesh.n_vertices,), below=mesh.n_vertices)})
+    if entry is not None:
         return entry["mirror"].astype(np.int64)
     return None
 

@@ -77,7 +77,9 @@ def remeshed(mesh: TriMesh, n_vertices: int) -> Remeshed:
         raise ValueError(f"n_vertices must be at least 4, got {n_vertices}")
     # on disk like the spectra: a retrieval remeshes each mesh of its collection for every query
     key = cache.make_key("remeshed-v5", mesh.content_hash, n_vertices, RELAXATION_STEPS, RELAXATION_DAMPING)
-    entry = cache.load("remeshed", key)
+    entry = cache.load("remeshed", key, {"points": cache.Array("f", ("points", 3)),
+                                         "faces": cache.Array("i", (None, 3), below="points"),
+                                         "to_original": cache.Array("i", ("points",), below=mesh.n_vertices)})
     if entry is None:
         points, faces, to_original = _remesh(mesh, n_vertices)
         cache.store("remeshed", key, {"points": points, "faces": faces, "to_original": to_original})

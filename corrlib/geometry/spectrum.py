@@ -382,8 +382,9 @@ def _spectrum_key(mesh, mass: str) -> str:
 
 def _cached_spectrum(mesh, k: int, key: str, stiffness, mass_mat) -> Spectrum | None:
     """The cached decomposition of ``mesh`` truncated to ``k`` eigenpairs, or ``None``."""
-    entry = cache.load("spectra", key)
-    if entry is not None and entry["evals"].shape[0] >= k and entry["evecs"].shape[0] == mesh.n_vertices:
+    entry = cache.load("spectra", key, {"evals": cache.Array("f", ("k",)),
+                                        "evecs": cache.Array("f", (mesh.n_vertices, "k"))})
+    if entry is not None and entry["evals"].shape[0] >= k:
         return Spectrum(entry["evals"][:k].copy(), entry["evecs"][:, :k].copy(), stiffness, mass_mat)
     return None
 

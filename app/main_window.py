@@ -496,7 +496,7 @@ class MainWindow(QMainWindow):
 
         from corrlib.resources import resource
 
-        provenance = resource("README.md").read_text()
+        provenance = resource("README.md").read_text(encoding="utf-8")
         QMessageBox.about(self, "About corr studio",
                           f"<b>corr studio</b> {corrlib.__version__}<br>"
                           f"Continuous non-rigid shape correspondence (Lähner's thesis methods).<br><br>"

@@ -10,6 +10,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import os
 import sys
 import time
 from pathlib import Path
@@ -17,6 +18,8 @@ from pathlib import Path
 from corrlib.errors import CorrError, FileFormatError
 
 EXIT_BAD_INPUT = 2
+#: the exit status of a command whose standard output was closed by its reader (128 + SIGPIPE, as the shell's)
+EXIT_BROKEN_PIPE = 141
 #: help of the retrieval commands' --n-contour (the value is corrlib.retrieval.RETRIEVAL_N_CONTOUR; not imported
 #: here, so that `corr --help` does not load the method)
 RETRIEVAL_N_CONTOUR_HELP = "contour resampling (default 100, the retrieval default of the studio and the CLI)"
@@ -372,6 +375,8 @@ def cmd_match(args) -> int:
     result = solve(spec, source, target, callback=_progress_printer(args.quiet), initial=initial, **overrides)
     if plotting is not None:
         plotting.join()
+    # the files first: a closed or full standard output must not cost the result
+    _write_match_outputs(result, source, target, Path(args.output), quiet=args.quiet, pictures=args.pictures)
     print(f"method {result.method}: energy {result.energy}, {result.timings.get('total', 0):.2f} s")
     if result.search is not None:
         print(f"path search: {result.search.describe()}")
@@ -380,7 +385,6 @@ def cmd_match(args) -> int:
     if result.energy_trace is not None:
         trace = result.energy_trace
         print(f"energy trace ({trace.size} assignments): " + ", ".join(f"{e:.5g}" for e in trace))
-    _write_match_outputs(result, source, target, Path(args.output), quiet=args.quiet, pictures=args.pictures)
     return 0
 
 
@@ -401,6 +405,7 @@ def cmd_refine(args) -> int:
                    **_parse_overrides(args.param))
     if plotting is not None:
         plotting.join()
+    _write_match_outputs(result, source, target, Path(args.output), quiet=args.quiet, pictures=args.pictures)
     print(f"method {result.method}: {result.timings.get('total', 0):.2f} s")
     _print_reversal_note(result)
     _print_collapse_note(result, source, target)
@@ -411,7 +416,6 @@ def cmd_refine(args) -> int:
         print(f"{int(kept.sum())} of {kept.size} rows kept their input partner ({int(kept.sum()) - isometric} moved "
               f"by less than the refinement's kernel width, {isometric} farther but the more isometric partner); "
               "the others were corrected")
-    _write_match_outputs(result, source, target, Path(args.output), quiet=args.quiet, pictures=args.pictures)
     return 0
 
 
@@ -447,6 +451,7 @@ def _refining_methods():
 
 def cmd_bench(args) -> int:
     from corrlib.bench import Runner, load_dataset, methods_from_toml, parse_method
+    from corrlib.io import ensure_output_folder, exclusive_folder
 
     dataset = load_dataset(args.dataset, args.pairs)
     methods = [parse_method(m) for m in args.method or []]
@@ -458,10 +463,16 @@ def cmd_bench(args) -> int:
         if not sep or not Path(folder).is_dir():
             raise CorrError(f"--maps {item!r}: expected LABEL=FOLDER with an existing folder")
         external[label] = folder
-    runner = Runner(dataset, methods, args.output, external=external, geodesics=args.geodesics)
+    out = ensure_output_folder(args.output, "-o")
+    with exclusive_folder(out, "corr bench"):  # a second run at once would mix its records with these
+        return _run_bench(Runner(dataset, methods, out, external=external, geodesics=args.geodesics), args)
+
+
+def _run_bench(runner, args) -> int:
+    """The pending jobs of a :class:`~corrlib.bench.Runner` (``corr bench``), with progress and the summary."""
     todo = runner.pending()
-    print(f"{len(dataset.pairs)} pairs x {len(methods) + len(external)} methods: {len(todo)} jobs to run "
-          f"({len(runner.jobs()) - len(todo)} already done)", file=sys.stderr)
+    print(f"{len(runner.dataset.pairs)} pairs x {len(runner.methods) + len(runner.external)} methods: "
+          f"{len(todo)} jobs to run ({len(runner.jobs()) - len(todo)} already done)", file=sys.stderr)
 
     failures = []
 
@@ -473,8 +484,8 @@ def cmd_bench(args) -> int:
             print(f"  [{done}/{total}] {label} {record['source']} -> {record['target']}: {what}", file=sys.stderr)
 
     summary = runner.run(jobs=args.jobs, scheduler=args.scheduler, callback=progress)
-    print((Path(args.output) / "summary.md").read_text())
-    _say_failures(failures, Path(args.output) / "errors.csv")
+    print((runner.out / "summary.md").read_text(encoding="utf-8"))
+    _say_failures(failures, runner.out / "errors.csv")
     return 0 if all(entry["failed"] == 0 for entry in summary.values()) else 1
 
 
@@ -501,7 +512,7 @@ def cmd_bench_retrieval(args) -> int:
 
     summary = retrieval_benchmark(args.queries, args.collection, args.output, params=params, jobs=args.jobs,
                                   scheduler=args.scheduler, callback=progress)
-    print((Path(args.output) / "retrieval_summary.md").read_text())
+    print((Path(args.output) / "retrieval_summary.md").read_text(encoding="utf-8"))
     _say_failures(failures, Path(args.output) / "retrieval.csv")
     return 0 if summary["failed"] == 0 and not summary["failed_meshes"] else 1
 
@@ -533,7 +544,7 @@ def cmd_bench_contour(args) -> int:
     summary = contour_benchmark(args.datasets, args.output, planes=planes, params=params, jobs=args.jobs,
                                 scheduler=args.scheduler, pictures=not args.no_pictures, callback=progress,
                                 sketches=args.sketches or ())
-    print((Path(args.output) / "contour_summary.md").read_text())
+    print((Path(args.output) / "contour_summary.md").read_text(encoding="utf-8"))
     _say_failures(failures, Path(args.output) / "contour_bench.csv")
     failed = summary["all"]["failed"] + summary.get("sketches", {}).get("failed", 0)
     return 0 if failed == 0 else 1
@@ -710,6 +721,7 @@ def cmd_retrieve(args) -> int:
     params = _contour3d_params(args, retrieval=True)
     hits = run(retrieve(contour, files, params, jobs=args.jobs, scheduler=args.scheduler),
                callback=_progress_printer(args.quiet))
+    written = write_ranking(hits, Path(args.output), args.top if args.pictures else 0) if args.output else []
     print(f"{'rank':>4}  {'energy':>12}  {'seconds':>7}  mesh")
     for rank, hit in enumerate(hits[: args.top], 1):
         extra = f"  ({hit.error})" if hit.error else ""
@@ -719,9 +731,8 @@ def cmd_retrieve(args) -> int:
     if query_class in labels:
         print(f"average precision for class {query_class!r}: "
               f"{mean_average_precision([(query_class, labels)]):.4f}")
-    if args.output:
-        for path in write_ranking(hits, Path(args.output), args.top if args.pictures else 0):
-            print(f"wrote {path}")
+    for path in written:
+        print(f"wrote {path}")
     failed = sum(1 for hit in hits if hit.error)
     if failed:  # as corr bench: exit 1 when a mesh could not be ranked, with every reason above
         print(f"error: {failed} of {len(hits)} meshes could not be matched"
@@ -972,25 +983,38 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 class Terminated(BaseException):
-    """SIGTERM, raised like KeyboardInterrupt so that every half-written output is cleaned up."""
+    """SIGTERM or SIGHUP, raised like KeyboardInterrupt so that every half-written output is cleaned up."""
+
+    def __init__(self, signum: int = 15):
+        super().__init__(signum)
+        self.signum = signum
 
 
-def _terminate_like_interrupt():
-    """Make SIGTERM raise :class:`Terminated` (main thread only); returns the handler to restore, or None."""
+def _terminate_like_interrupt() -> dict:
+    """Make SIGTERM and SIGHUP (the terminal or the ssh session closed) raise :class:`Terminated` (main thread
+    only); returns the handlers to restore."""
     import signal
     import threading
 
     def handler(signum, frame):
-        raise Terminated()
+        raise Terminated(signum)
 
-    if threading.current_thread() is threading.main_thread():
-        return signal.signal(signal.SIGTERM, handler)
-    return None
+    if threading.current_thread() is not threading.main_thread():
+        return {}
+    hangup = getattr(signal, "SIGHUP", None)  # not on Windows
+    return {signum: signal.signal(signum, handler) for signum in (signal.SIGTERM, hangup) if signum is not None}
 
 
 def main(argv: list[str] | None = None) -> int:
+    for stream in (sys.stdout, sys.stderr):  # a message never fails on a character the terminal cannot show
+        if hasattr(stream, "reconfigure"):
+            stream.reconfigure(errors="backslashreplace")
     parser = build_parser()
     args = parser.parse_args(argv)
+    threads = os.environ.get("NUMBA_NUM_THREADS", "").strip()
+    if threads.lstrip("-").isdigit() and int(threads) < 1:  # numba would raise while it is imported
+        print(f"error: NUMBA_NUM_THREADS={threads} must be a positive number of threads (or unset)", file=sys.stderr)
+        return EXIT_BAD_INPUT
     previous = _terminate_like_interrupt()
     code = 1  # until the command returns: an exception is a failure
     try:
@@ -1003,6 +1027,9 @@ def main(argv: list[str] | None = None) -> int:
     except CorrError as exc:
         print(f"error: {exc}", file=sys.stderr)
         return EXIT_BAD_INPUT
+    except BrokenPipeError:  # the reader of the standard output left (`corr … | head`): the files are written
+        os.dup2(os.open(os.devnull, os.O_WRONLY), sys.stdout.fileno())  # no second error at exit
+        return EXIT_BROKEN_PIPE
     except OSError as exc:  # the environment: permissions, a full disk, a vanished file
         where = f"{exc.filename}: " if exc.filename else ""
         print(f"error: {where}{(exc.strerror or str(exc)).lower()}", file=sys.stderr)
@@ -1013,14 +1040,15 @@ def main(argv: list[str] | None = None) -> int:
     except KeyboardInterrupt:
         print("interrupted", file=sys.stderr)
         return 130
-    except Terminated:
-        print("terminated", file=sys.stderr)
-        return 143
+    except Terminated as exc:
+        print("terminated" if exc.signum == 15 else "hung up", file=sys.stderr)
+        return 128 + exc.signum
     finally:
-        if previous is not None:
+        if previous:
             import signal
 
-            signal.signal(signal.SIGTERM, previous)
+            for signum, handler in previous.items():
+                signal.signal(signum, handler)
         if "corrlib.io" in sys.modules:  # a failed command leaves no empty output folder
             from corrlib.io import remove_created_empty_folders
 

@@ -23,13 +23,13 @@ import threading
 from collections.abc import Iterator
 from contextlib import contextmanager
 
-#: the signals held back: an interactive interrupt and a polite termination
-HELD_SIGNALS = (signal.SIGINT, signal.SIGTERM)
+#: the signals held back: an interactive interrupt, a polite termination and a closed terminal
+HELD_SIGNALS = tuple(getattr(signal, name) for name in ("SIGINT", "SIGTERM", "SIGHUP") if hasattr(signal, name))
 
 
 @contextmanager
 def signals_held() -> Iterator[None]:
-    """Hold SIGINT and SIGTERM until the block ends, then deliver the first one that came.
+    """Hold SIGINT, SIGTERM and SIGHUP until the block ends, then deliver the first one that came.
 
     Only the main thread receives signals, so elsewhere this does nothing.
     A held signal is delivered to the handler that was installed before the

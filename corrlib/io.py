@@ -55,6 +55,7 @@ from corrlib.outputs import (  # noqa: F401  (the safe writers, re-exported)
     check_output_file,
     check_outputs_apart,
     ensure_output_folder,
+    exclusive_folder,
     os_reason,
     remove_created_empty_folders,
     staged_output,
@@ -1067,7 +1068,7 @@ def load_result(stem) -> tuple[dict[str, np.ndarray], dict]:
     js = stem.with_name(stem.name + ".json")
     if js.exists():
         try:
-            meta = json.loads(js.read_text())
+            meta = json.loads(js.read_text(encoding="utf-8"))
         except (json.JSONDecodeError, UnicodeDecodeError) as exc:
             raise FileFormatError(f"{js}: invalid JSON: {exc}") from None
         if not isinstance(meta, dict):

@@ -40,8 +40,10 @@ def atomic_write(path, mode: str = "w"):
     umask = os.umask(0)
     os.umask(umask)
     os.chmod(tmp, 0o666 & ~umask)  # mkstemp makes 0600 files; exports get the usual permissions
+    # text as UTF-8 whatever the locale, and a file name that is not UTF-8 written back as its own bytes
+    text = {} if "b" in mode else {"encoding": "utf-8", "errors": "surrogateescape"}
     try:
-        with os.fdopen(fd, mode) as fh:
+        with os.fdopen(fd, mode, **text) as fh:
             yield fh
         os.replace(tmp, path)
     except BaseException as exc:
@@ -144,9 +146,11 @@ def staged_output(folder, replaces=None):
         for entry in entries:  # a folder where a file goes would stop the moves half-way: none is moved
             if (folder / entry.name).is_dir():
                 raise InputError(f"{folder / entry.name}: an output file goes there, but it is a folder")
-        with signals_held():  # an interrupt during the moves waits until the whole set is in place
+        with signals_held():  # an interrupt waits until the whole set is in place and what it replaces gone
             for entry in entries:
                 os.replace(entry, folder / entry.name)
+            if replaces:  # what the new set replaces and does not have goes
+                remove_replaced_files(folder, replaces, {entry.name for entry in entries})
     except BaseException as exc:
         shutil.rmtree(stage, ignore_errors=True)
         if isinstance(exc, OSError):
@@ -155,8 +159,37 @@ def staged_output(folder, replaces=None):
             raise type(exc)(str(exc).replace(str(stage), str(folder))) from None
         raise
     shutil.rmtree(stage, ignore_errors=True)
-    if replaces:  # the new set is in place: what it replaces and does not have goes
-        remove_replaced_files(folder, replaces, {entry.name for entry in entries})
+
+
+@contextlib.contextmanager
+def exclusive_folder(folder, command: str):
+    """Hold the output ``folder`` for this ``command`` alone while it runs (an advisory lock on the folder,
+    released when the block ends, also by a crash): two commands writing into one folder at once would mix
+    their results, and each would report the other's (a benchmark's records).
+
+    Raises
+    ------
+    InputError
+        Naming the folder, where another process holds it. Where the file system has no locks (some network
+        mounts, or a system without ``fcntl``) the folder is not guarded.
+    """
+    try:
+        import fcntl
+    except ImportError:
+        yield
+        return
+    fd = os.open(folder, os.O_RDONLY)
+    try:
+        try:
+            fcntl.flock(fd, fcntl.LOCK_EX | fcntl.LOCK_NB)
+        except BlockingIOError:
+            raise InputError(f"{folder}: another {command} is writing into this folder; wait until it has "
+                             "finished, or choose another output folder (-o)") from None
+        except OSError:
+            pass
+        yield
+    finally:
+        os.close(fd)
 
 
 def remove_replaced_files(folder: Path, replaces, kept: set[str]) -> None:

@@ -14,7 +14,7 @@ import os
 from concurrent.futures import ProcessPoolExecutor
 
 from corrlib.cores import set_core_share
-from corrlib.errors import Cancelled, CorrError, ParameterError
+from corrlib.errors import Cancelled, CorrError, InputError, ParameterError
 
 
 def _limit_threads(share: int):
@@ -36,9 +36,29 @@ def process_pool(jobs: int | None = None, share: int | None = None) -> ProcessPo
     entry point with ``if __name__ == "__main__":``.
     """
     jobs = jobs or os.cpu_count() or 1
+    _check_socket_folder()
     return ProcessPoolExecutor(max_workers=jobs, initializer=_limit_threads,
                                initargs=(share or (os.cpu_count() or 1) // jobs,),
                                mp_context=multiprocessing.get_context("forkserver"))
+
+
+#: the longest path of a Unix socket (Linux's ``sun_path``, without its final zero byte), and the length the fork
+#: server's socket adds to the temporary folder (``/pymp-XXXXXXXX/listener-XXXXXXXX``)
+UNIX_SOCKET_PATH_MAX, FORK_SERVER_SOCKET_NAME = 107, 32
+
+
+def _check_socket_folder() -> None:
+    """:class:`InputError` naming ``TMPDIR`` where the fork server's socket would not fit in a Unix socket path
+    (the pool failed later with "AF_UNIX path too long", naming neither)."""
+    import sys
+    import tempfile
+
+    folder = tempfile.gettempdir()
+    if sys.platform.startswith("linux") and \
+            len(os.fsencode(folder)) + FORK_SERVER_SOCKET_NAME > UNIX_SOCKET_PATH_MAX:
+        raise InputError(f"the temporary folder {folder} (TMPDIR) is too long a path for the worker processes' "
+                         f"socket (at most {UNIX_SOCKET_PATH_MAX - FORK_SERVER_SOCKET_NAME} bytes); set TMPDIR to a "
+                         "shorter path")
 
 
 def check_jobs(jobs) -> None:

@@ -10,35 +10,63 @@ from pathlib import Path
 import numpy as np
 
 
-def _pyplot():
-    """matplotlib.pyplot with the off-screen backend, imported with Ctrl-C and SIGTERM held back
+def _figure(**kwargs):
+    """A matplotlib ``Figure`` drawn off-screen by Agg, whatever backend the environment asks for (``MPLBACKEND``,
+    a notebook's): no pyplot, no global state. matplotlib is imported with Ctrl-C and SIGTERM held back
     (:mod:`corrlib.interrupts`: an interrupt inside a compiled module's initialisation would be lost, and
     matplotlib would go on without its 3D axes)."""
     from corrlib.interrupts import signals_held
 
     with signals_held():
-        import matplotlib
+        _import_matplotlib()
+        from matplotlib.backends.backend_agg import FigureCanvasAgg
+        from matplotlib.figure import Figure
+        import mpl_toolkits.mplot3d  # noqa: F401  (registers the 3D projection)
 
-        matplotlib.use("Agg", force=False)
-        import matplotlib.pyplot as plt
+    fig = Figure(**kwargs)
+    FigureCanvasAgg(fig)
+    return fig
 
-    return plt
+
+def _import_matplotlib() -> None:
+    """Import matplotlib; where ``MPLBACKEND`` names no backend (matplotlib refuses to import then), without it,
+    with a warning: these pictures never use the backend."""
+    import os
+    import sys
+
+    try:
+        import matplotlib  # noqa: F401
+    except ValueError:
+        value = os.environ.pop("MPLBACKEND", None)
+        if value is None:
+            raise
+        print(f"warning: MPLBACKEND={value!r} names no matplotlib backend; ignored (the pictures are drawn "
+              "off-screen)", file=sys.stderr)
+        for name in [name for name in sys.modules if name == "matplotlib" or name.startswith("matplotlib.")]:
+            del sys.modules[name]  # what the failed import left half-initialised
+        import matplotlib  # noqa: F401
 
 
 def preload() -> None:
-    """Import matplotlib with its off-screen backend (about half a second), e.g. in a thread before pictures."""
-    _pyplot()
+    """Import matplotlib and its off-screen canvas (about half a second), e.g. in a thread before pictures."""
+    _figure()
 
 
 def _save_figure(fig, path) -> Path:
-    """Write a figure as PNG atomically and close it."""
+    """Write a figure as PNG atomically."""
     from corrlib.io import atomic_write
 
+    from matplotlib.text import Text
+
+    for text in fig.findobj(Text):  # a file name that is not UTF-8 (its bytes as surrogates) shown by its bytes
+        value = text.get_text()
+        shown = value.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+        if shown != value:
+            text.set_text(shown)
     fig.tight_layout()
     path = Path(path)
     with atomic_write(path, "wb") as fh:
         fig.savefig(fh, format="png")
-    _pyplot().close(fig)
     return path
 
 
@@ -111,11 +139,10 @@ def save_colour_transfer(path, source, target, map_yx: np.ndarray, *, source_col
         Source vertex of every target vertex (-1 = unmatched, drawn grey).
     source_colors : (n_x, 3) float, optional
     """
-    plt = _pyplot()
     colors_x = coordinate_colors(source.vertices) if source_colors is None else np.asarray(source_colors)
     map_yx = np.asarray(map_yx)
     colors_y = np.where((map_yx >= 0)[:, None], colors_x[np.clip(map_yx, 0, None)], 0.6)
-    fig = plt.figure(figsize=(10, 5), dpi=100)
+    fig = _figure(figsize=(10, 5), dpi=100)
     ax1 = fig.add_subplot(1, 2, 1, projection="3d")
     ax2 = fig.add_subplot(1, 2, 2, projection="3d")
     draw_mesh(ax1, source.vertices, source.faces, colors_x, f"source: {source.name}")
@@ -128,8 +155,8 @@ def save_colour_transfer(path, source, target, map_yx: np.ndarray, *, source_col
 
 def save_error_curves(path, curves: dict, thresholds: np.ndarray, *, title: str = "Cumulative geodesic error") -> Path:
     """PNG of cumulative error curves: ``curves`` maps a label to an array like ``thresholds``."""
-    plt = _pyplot()
-    fig, ax = plt.subplots(figsize=(6, 4.5), dpi=100)
+    fig = _figure(figsize=(6, 4.5), dpi=100)
+    ax = fig.subplots()
     for label, curve in curves.items():
         ax.plot(thresholds, 100.0 * np.asarray(curve), label=label)
     ax.set_xlabel("geodesic error (normalised)")
@@ -171,8 +198,8 @@ def save_contour_match(path, contour_points: np.ndarray, mesh, path_vertices: np
 
 def save_energy_trace(path, energy: np.ndarray, tau: np.ndarray | None = None) -> Path:
     """PNG of an energy trace (one value per linear assignment), one colour per diffusion time."""
-    plt = _pyplot()
-    fig, ax = plt.subplots(figsize=(6, 4), dpi=100)
+    fig = _figure(figsize=(6, 4), dpi=100)
+    ax = fig.subplots()
     steps = np.arange(1, energy.size + 1)
     if tau is None:
         ax.plot(steps, energy, marker="o")
@@ -193,12 +220,11 @@ def save_torus_pictures(path, result) -> Path:
     and the 3D product torus with the path."""
     from corrlib.geometry.torus import arclength_angles, path_angles, torus_embedding
 
-    plt = _pyplot()
     matched = result.path
     a, b = matched.contour_points, matched.target_points
     u, v = arclength_angles(a), arclength_angles(b)
     uv = path_angles(matched.layers, matched.vertices, u, v)
-    fig = plt.figure(figsize=(15, 4.5), dpi=100)
+    fig = _figure(figsize=(15, 4.5), dpi=100)
     ax = fig.add_subplot(1, 3, 1)
     m = a.shape[0]
     from matplotlib import cm
@@ -248,14 +274,14 @@ def save_curve_comparison(path, contour_points: np.ndarray, mesh, path_vertices:
     gt_vertices : (m,) int or None
         Ground-truth vertex of every contour point.
     """
-    plt = _pyplot()
     from matplotlib import cm
 
     m = contour_points.shape[0]
     hue = cm.hsv(np.arange(m) / m)[:, :3]
     from matplotlib.collections import LineCollection
 
-    fig, axs = plt.subplots(1, 3, figsize=(15, 5), dpi=90)
+    fig = _figure(figsize=(15, 5), dpi=90)
+    axs = fig.subplots(1, 3)
     _draw_query(axs[0], contour_points, hue)
     axes = view_axes(mesh.vertices)
     v = (mesh.vertices - mesh.vertices.mean(axis=0)) @ axes.T

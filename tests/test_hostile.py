@@ -249,9 +249,11 @@ def test_full_disk_leaves_no_partial_result_set(tmp_path, kilobytes):
     assert not out.exists()  # not even hidden temporary files: the folder the command made is gone too
 
 
-@pytest.mark.parametrize("sig, status", [(signal.SIGINT, 130), (signal.SIGTERM, 143)])
+@pytest.mark.parametrize("sig, status", [(signal.SIGINT, 130), (signal.SIGTERM, 143), (signal.SIGHUP, 129)])
 def test_interrupted_morph_leaves_nothing(tmp_path, sig, status):
-    """Interrupted while writing 2,000 frames: the staging folder goes, nothing is half-written."""
+    """Interrupted while writing 2,000 frames: the staging folder goes, nothing is half-written. SIGHUP (the
+    terminal or the ssh session closed) left the spectrum worker, a pool's processes and their temporary
+    files behind; it is now a termination like SIGTERM."""
     out = tmp_path / "m"
     # as a user's Ctrl-C would find it: a test run started in the background (no job control) ignores SIGINT, and
     # its children inherit that
@@ -500,3 +502,83 @@ def test_counts_and_levels_of_contour_helpers_are_named(tmp_path):
     for resamples in (0, -1, 2.5):
         with pytest.raises(CorrError, match="resamples must be a whole number"):
             map_interval([0.5, 1.0], resamples=resamples)
+
+
+def test_a_closed_standard_output_keeps_the_written_results(tmp_path):
+    """``corr match … -o r | true``: the results were printed before the files were written, so the closed pipe
+    ended the command with "error: broken pipe" and no files. The files now come first, and the closed pipe
+    ends the command quietly with the shell's status for it."""
+    out = tmp_path / "r"
+    command = [sys.executable, "-m", "corrlib.cli", "match", WOLF0, WOLF1, *FAST, "-o", str(out)]
+    done = subprocess.run(["bash", "-c", "set -o pipefail; \"$@\" | true", "bash", *command], capture_output=True,
+                          text=True, timeout=300)
+    assert done.returncode == 141 and "error" not in done.stderr and "Traceback" not in done.stderr, done.stderr
+    assert (tmp_path / "r.map_xy.txt").exists() and (tmp_path / "r.npz").exists()
+
+
+def test_two_benchmarks_into_one_folder_at_once_are_refused(tmp_path, capsys):
+    """Two ``corr bench`` runs writing one folder at once each reported the other's records as its own; the
+    second is now refused while the first holds the folder."""
+    from corrlib.io import exclusive_folder
+
+    out = tmp_path / "bench"
+    out.mkdir()
+    with exclusive_folder(out, "corr bench"):
+        code = main(["bench", str(TOSCA), "--pairs", str(_wolf_pairs(tmp_path)), "--method", "descriptor-nn",
+                     "-o", str(out), "--jobs", "1", "-q"])
+    err = capsys.readouterr().err
+    assert code == 2 and "another corr bench is writing into this folder" in err and str(out) in err, err
+    assert list(out.iterdir()) == []
+
+
+def _wolf_pairs(folder: Path) -> Path:
+    pairs = folder / "pairs.txt"
+    pairs.write_text("wolf0 wolf1\n")
+    return pairs
+
+
+def test_a_benchmark_in_the_c_locale_with_a_file_name_that_is_not_utf8(tmp_path):
+    """``LC_ALL=C`` and a mesh named with a Latin-1 byte: the summary's "≤" and the name's byte made the
+    writers raise UnicodeEncodeError after every pair had run; files are now written as UTF-8, the name as its
+    own bytes."""
+    data = tmp_path / "data"
+    data.mkdir()
+    odd = os.fsencode(str(data)) + b"/\xe9wolf0.off"
+    with open(odd, "wb") as fh:
+        fh.write(Path(WOLF0).read_bytes())
+    (data / "wolf1.off").write_bytes(Path(WOLF1).read_bytes())
+    env = {**os.environ, "LC_ALL": "C", "LANG": "C", "PYTHONUTF8": "0", "PYTHONCOERCECLOCALE": "0"}
+    done = subprocess.run([sys.executable, "-m", "corrlib.cli", "bench", str(data), *FAST, "-o", str(tmp_path / "b"),
+                           "--jobs", "1", "-q"], capture_output=True, timeout=300, env=env)
+    assert done.returncode == 0 and b"Traceback" not in done.stderr, done.stderr.decode(errors="replace")
+    summary = (tmp_path / "b" / "summary.md").read_text(encoding="utf-8")
+    assert "≤0.05" in summary
+    assert b"\xe9wolf0" in (tmp_path / "b" / "errors.csv").read_bytes()
+    done = subprocess.run([sys.executable, "-m", "corrlib.cli", "match", odd, WOLF1, *FAST, "--pictures", "-o",
+                           str(tmp_path / "m")], capture_output=True, timeout=300, env=env)
+    assert done.returncode == 0 and (tmp_path / "m.png").exists(), done.stderr.decode(errors="replace")
+
+
+@pytest.mark.parametrize("length, fails", [(75, False), (76, True)])
+def test_a_temporary_folder_too_long_for_the_workers_socket_is_named(tmp_path, monkeypatch, length, fails):
+    """``TMPDIR`` of more than 75 bytes: the pool failed at its first job with "AF_UNIX path too long", naming
+    neither the folder nor the variable. 75 bytes still work (measured with the fork server)."""
+    import tempfile
+
+    from corrlib.errors import InputError
+    from corrlib.parallel import process_pool
+
+    folder = "/" + "t" * (length - 1)
+    monkeypatch.setattr(tempfile, "gettempdir", lambda: folder)
+    if fails:
+        with pytest.raises(InputError, match="TMPDIR"):
+            process_pool(1)
+    else:
+        process_pool(1).shutdown()
+
+
+def test_numba_threads_of_zero_are_named(monkeypatch, capsys):
+    """``NUMBA_NUM_THREADS=0`` gave numba's traceback while it was imported."""
+    monkeypatch.setenv("NUMBA_NUM_THREADS", "0")
+    assert main(["match", WOLF0, WOLF1, *FAST, "-o", "unused"]) == 2
+    assert "NUMBA_NUM_THREADS=0 must be a positive number" in capsys.readouterr().err

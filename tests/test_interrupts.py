@@ -106,10 +106,24 @@ def test_outside_the_main_thread_it_changes_nothing():
 def test_the_pictures_import_registers_the_3d_axes():
     from matplotlib import projections
 
-    from corrlib.plotting import _pyplot
+    from corrlib.plotting import preload
 
-    _pyplot()
+    preload()
     assert "3d" in projections.get_projection_names()
+
+
+def test_pictures_are_drawn_whatever_backend_the_environment_names(tmp_path):
+    """``MPLBACKEND=garbage`` (or a GUI backend on a machine without a display) gave a traceback after the
+    computation; the pictures are drawn by an Agg canvas of their own, without pyplot."""
+    import subprocess
+    import sys
+
+    code = ("import numpy as np; from corrlib.plotting import save_energy_trace; "
+            f"save_energy_trace({str(tmp_path / 'c.png')!r}, np.linspace(3, 1, 20))")
+    done = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, timeout=120,
+                          env={**__import__("os").environ, "MPLBACKEND": "garbage"})
+    assert done.returncode == 0 and "Traceback" not in done.stderr and "MPLBACKEND='garbage'" in done.stderr
+    assert (tmp_path / "c.png").read_bytes()[:8] == b"\x89PNG\r\n\x1a\n"
 
 
 def test_a_ctrl_c_while_the_mesh_reader_is_imported_is_not_lost(tmp_path, monkeypatch):
@@ -161,3 +175,32 @@ def test_an_interrupt_while_the_outputs_move_into_place_leaves_the_whole_set(tmp
             for name in ("a.txt", "b.txt", "c.txt", "d.txt"):
                 (stage / name).write_text(name)
     assert sorted(p.name for p in out.iterdir()) == ["a.txt", "b.txt", "c.txt", "d.txt"]
+
+
+def test_an_interrupt_during_the_moves_still_removes_what_the_set_replaces(tmp_path, monkeypatch):
+    """A morph of 5 frames over one of 11, interrupted between two moves: the held interrupt was delivered
+    before the earlier set's frames 5-10 were removed, which left them beside the new ones."""
+    import os
+
+    import corrlib.io as io
+
+    out = tmp_path / "out"
+    out.mkdir()
+    for i in range(11):
+        (out / f"frame_{i:03d}.off").write_text("earlier")
+    moves = []
+    move = os.replace
+
+    def replace(source, target):
+        moves.append(target)
+        if len(moves) == 2:
+            signal.raise_signal(signal.SIGINT)
+        move(source, target)
+
+    monkeypatch.setattr(io.os, "replace", replace)
+    with pytest.raises(KeyboardInterrupt):
+        with io.staged_output(out, replaces="frame_*.off") as stage:
+            for i in range(5):
+                (stage / f"frame_{i:03d}.off").write_text("new")
+    assert sorted(p.name for p in out.iterdir()) == [f"frame_{i:03d}.off" for i in range(5)]
+    assert all(p.read_text() == "new" for p in out.iterdir())

@@ -82,16 +82,23 @@ def _smooth_min(a, b, k=0.04):
     return b * (1 - h) + a * h - k * h * (1 - h)
 
 
-def rest_pose(spacing: float = 0.025, bones=BONES):
-    """(vertices (n, 3), faces (f, 3)) of the rest pose, about 4,900 vertices at the default spacing."""
+def rest_pose(spacing: float = 0.025, bones=BONES, joints=None):
+    """(vertices (n, 3), faces (f, 3)) of the rest pose, about 4,900 vertices at the default spacing.
+    ``joints``: another body's joint positions (:data:`GORILLA_JOINTS`), in a grid around its bones; None:
+    :data:`JOINTS`, in the fixed grid of the bundled people."""
     import trimesh
     from skimage.measure import marching_cubes
 
-    lo, hi = np.array([-0.85, -0.05, -0.3]), np.array([0.85, 1.9, 0.35])
+    if joints is None:
+        joints, lo, hi = JOINTS, np.array([-0.85, -0.05, -0.3]), np.array([0.85, 1.9, 0.35])
+    else:
+        ends = np.array([joints[j] for _, a, b, _, _ in bones for j in (a, b)])
+        margin = max(radius for _, _, _, radius, _ in bones) + 0.08
+        lo, hi = ends.min(axis=0) - margin, ends.max(axis=0) + margin
     grid = np.stack(np.meshgrid(*[np.arange(a, b, spacing) for a, b in zip(lo, hi)], indexing="ij"), -1)
     sdf = None
     for _, a, b, radius, _ in bones:
-        d = _segment_distance(grid, JOINTS[a], JOINTS[b]) - radius
+        d = _segment_distance(grid, joints[a], joints[b]) - radius
         sdf = d if sdf is None else _smooth_min(sdf, d)
     vertices, faces, _, _ = marching_cubes(sdf, 0.0, spacing=(spacing,) * 3)
     mesh = trimesh.Trimesh(vertices + lo, faces[:, ::-1], process=True)
@@ -99,15 +106,15 @@ def rest_pose(spacing: float = 0.025, bones=BONES):
     return np.asarray(mesh.vertices), np.asarray(mesh.faces)
 
 
-def posed(vertices: np.ndarray, rotations: dict, bones=BONES) -> np.ndarray:
+def posed(vertices: np.ndarray, rotations: dict, bones=BONES, joints=JOINTS) -> np.ndarray:
     """Linear blend skinning of rest-pose vertices ((n, 3) float) by joint rotations (forward kinematics)."""
     transforms = {}
     for name, a, _, _, parent in bones:
         rotation = rotations.get(name, np.eye(3))
         local = np.eye(4)
-        local[:3, :3], local[:3, 3] = rotation, JOINTS[a] - rotation @ JOINTS[a]
+        local[:3, :3], local[:3, 3] = rotation, joints[a] - rotation @ joints[a]
         transforms[name] = (transforms[parent] if parent else np.eye(4)) @ local
-    distance = np.stack([_segment_distance(vertices, JOINTS[a], JOINTS[b]) - r for _, a, b, r, _ in bones], axis=1)
+    distance = np.stack([_segment_distance(vertices, joints[a], joints[b]) - r for _, a, b, r, _ in bones], axis=1)
     weights = np.exp(-(distance - distance.min(axis=1, keepdims=True)) / 0.02)
     weights /= weights.sum(axis=1, keepdims=True)
     homogeneous = np.c_[vertices, np.ones(len(vertices))]
@@ -244,13 +251,102 @@ def write_kernel_battery(folder, noise: float = 0.0, seed: int = 0, subdivide: i
     return out
 
 
+#: a second body for non-isometric pairs: a heavy torso, long thick arms, short legs, the head low and forward
+#: (gorilla proportions; the joint names, bones and poses are the people's, so that the same pose means the same)
+GORILLA_JOINTS = {k: np.array(v, dtype=float) for k, v in {
+    "pelvis": (0, 0.80, 0), "chest": (0, 1.30, 0.02), "neck": (0, 1.40, 0.05), "head": (0, 1.52, 0.10),
+    "lsh": (0.28, 1.33, 0.02), "lel": (0.58, 1.03, 0.0), "lha": (0.88, 0.72, 0.0),
+    "rsh": (-0.28, 1.33, 0.02), "rel": (-0.58, 1.03, 0.0), "rha": (-0.88, 0.72, 0.0),
+    "lhip": (0.13, 0.77, 0), "lkn": (0.16, 0.45, 0), "lan": (0.16, 0.10, 0), "lto": (0.16, 0.04, 0.19),
+    "rhip": (-0.13, 0.77, 0), "rkn": (-0.16, 0.45, 0), "ran": (-0.16, 0.10, 0), "rto": (-0.16, 0.04, 0.19),
+    "nose0": (0, 1.50, 0.18), "nose1": (0, 1.48, 0.22), "chl": (0.09, 1.18, 0.10), "chr": (-0.09, 1.18, 0.10),
+    "bul": (0.08, 0.74, -0.08), "bur": (-0.08, 0.74, -0.08)}.items()}
+#: the gorilla's bone radii relative to the people's
+GORILLA_THICKNESS = {"torso": 1.45, "neck": 1.6, "head": 1.05, "lua": 1.5, "lfa": 1.5, "rua": 1.5, "rfa": 1.5,
+                     "lth": 1.25, "lsn": 1.2, "rth": 1.25, "rsn": 1.2, "lft": 1.2, "rft": 1.2, "shoulders": 1.5,
+                     "hips": 1.3, "nose": 1.0, "chestfront": 1.3, "buttocks": 1.2}
+
+
+def bone_coordinates(vertices: np.ndarray, joints: dict, bones, lengths: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """Where every vertex ((n, 3) float) lies on its body: the nearest bone ((n,) int, as :func:`part_labels`
+    finds it) and (n, 4) coordinates on it — the position along the bone from its start joint (0) to its end
+    joint (1), times ``lengths[bone]``, and the unit direction from the bone's axis in a frame of the bone
+    (its axis, and the forward direction, or up for a bone that points forward, made perpendicular to it)."""
+    distance = np.stack([_segment_distance(vertices, joints[a], joints[b]) - r for _, a, b, r, _ in bones], axis=1)
+    bone = distance.argmin(axis=1)
+    coordinates = np.zeros((len(vertices), 4))
+    for i, (_, a, b, _, _) in enumerate(bones):
+        on = bone == i
+        axis = joints[b] - joints[a]
+        length = np.linalg.norm(axis)
+        axis = axis / length
+        ahead = np.array([0.0, 0.0, 1.0]) if abs(axis[2]) < 0.9 else np.array([0.0, 1.0, 0.0])
+        first = ahead - (ahead @ axis) * axis
+        first /= np.linalg.norm(first)
+        frame = np.stack([axis, first, np.cross(axis, first)])
+        offset = vertices[on] - joints[a]
+        along = offset @ axis
+        radial = offset - np.outer(along, axis)
+        radial /= np.maximum(np.linalg.norm(radial, axis=1, keepdims=True), 1e-12)
+        coordinates[on, 0] = along / length * lengths[i]
+        coordinates[on, 1:] = radial @ frame.T
+    return bone, coordinates
+
+
+def body_correspondence(vertices_a, joints_a, bones_a, vertices_b, joints_b, bones_b) -> np.ndarray:
+    """(n_a,) int: for every rest-pose vertex of body A, the vertex of body B at the same place on the same bone
+    (:func:`bone_coordinates`; the two bodies share their bone names and order). The position along a bone
+    is scaled by A's bone length over its radius, so that a step along the bone weighs as much as a step of
+    the same length round it on A. An approximation of the natural correspondence of two bodies of
+    different proportions: exact on the bones' axes and caps, a few edges off where two bones blend."""
+    lengths = np.array([np.linalg.norm(joints_a[b] - joints_a[a]) / r for _, a, b, r, _ in bones_a])
+    bone_a, coordinates_a = bone_coordinates(vertices_a, joints_a, bones_a, lengths)
+    bone_b, coordinates_b = bone_coordinates(vertices_b, joints_b, bones_b, lengths)
+    partner = np.zeros(len(vertices_a), dtype=np.int64)
+    for i in np.unique(bone_a):
+        on_a, on_b = np.flatnonzero(bone_a == i), np.flatnonzero(bone_b == i)
+        partner[on_a] = on_b[cKDTree(coordinates_b[on_b]).query(coordinates_a[on_a])[1]]
+    return partner
+
+
+def write_nonisometric_battery(folder) -> Path:
+    """Non-isometric pairs with ground truth, as a ``corr bench`` dataset: the face people (``front=True``)
+    ``human0..3`` and a body of gorilla proportions (:data:`GORILLA_JOINTS`, meshed on its own) in the same
+    four poses, ``gorilla0..3``; ``pairs.txt``: every gorilla pose to every human pose and every human pose to
+    the gorilla's other poses (28 pairs). Ground truth rows are the human rest pose's vertices: the identity
+    on the people, :func:`body_correspondence` on the gorilla, and the mirrored rows in ``.sym.vts``."""
+    import trimesh
+
+    bones = BONES + FRONT_BONES
+    gorilla_bones = [(name, a, b, radius * GORILLA_THICKNESS[name], parent) for name, a, b, radius, parent in bones]
+    human_v, human_f = rest_pose(bones=bones)
+    gorilla_v, gorilla_f = rest_pose(bones=gorilla_bones, joints=GORILLA_JOINTS)
+    _, mirror = cKDTree(human_v).query(human_v * [-1.0, 1.0, 1.0])
+    partner = body_correspondence(human_v, JOINTS, bones, gorilla_v, GORILLA_JOINTS, gorilla_bones)
+    out = Path(folder)
+    (out / "corres").mkdir(parents=True, exist_ok=True)
+    rows = {"human": np.arange(len(human_v)), "gorilla": partner}
+    poses = {**POSES, "human3": RETRIEVAL_POSE}
+    bodies = {"human": (human_v, human_f, bones, JOINTS),
+              "gorilla": (gorilla_v, gorilla_f, gorilla_bones, GORILLA_JOINTS)}
+    for pose, rotations in sorted(poses.items()):
+        number = pose[len("human"):]
+        for body, (v, f, body_bones, joints) in bodies.items():
+            posed_v = posed(v, rotations, body_bones, joints)
+            trimesh.Trimesh(posed_v, f, process=False).export(out / f"{body}{number}.off")
+            np.savetxt(out / "corres" / f"{body}{number}.vts", rows[body] + 1, fmt="%d")
+            np.savetxt(out / "corres" / f"{body}{number}.sym.vts", rows[body][mirror] + 1, fmt="%d")
+    numbers = [pose[len("human"):] for pose in sorted(poses)]
+    pairs = [f"gorilla{a} human{b}\n" for a in numbers for b in numbers]
+    pairs += [f"human{a} gorilla{b}\n" for a in numbers for b in numbers if a != b]
+    (out / "pairs.txt").write_text("".join(pairs))
+    return out
+
+
 def _kernel_battery_main(argv: list[str]) -> None:
     """``--kernel-battery OUT [NOISE [SUBDIVISIONS]]``: named errors and exit status 2 for a bad argument or an
     output folder that is a file, not writable or not empty, before anything is written."""
     import argparse
-
-    from corrlib.errors import CorrError
-    from corrlib.io import ensure_output_folder
 
     parser = argparse.ArgumentParser(prog="python tests/_humanoid.py --kernel-battery",
                                      description="kernel matching's people pairs as two corr bench datasets")
@@ -269,7 +365,15 @@ def _kernel_battery_main(argv: list[str]) -> None:
         parser.error(f"noise must be a finite fraction >= 0 of the diagonal, got {args.noise}")
     if not 0 <= args.subdivisions <= 3:
         parser.error(f"subdivisions must be 0 to 3 (each multiplies the vertices by four), got {args.subdivisions}")
-    folders = [args.out / kind for kind in ("capsule", "face")]
+    _new_output_folders(parser, [args.out / kind for kind in ("capsule", "face")])
+    print(write_kernel_battery(args.out, noise=args.noise, subdivide=args.subdivisions, remesh=args.remesh))
+
+
+def _new_output_folders(parser, folders: list[Path]) -> None:
+    """Ends the command with a named error (exit status 2) where a folder is not empty or cannot be made."""
+    from corrlib.errors import CorrError
+    from corrlib.io import ensure_output_folder
+
     for folder in folders:
         if folder.is_dir() and any(folder.iterdir()):
             parser.error(f"{folder} is not empty; choose a new output folder")
@@ -278,15 +382,29 @@ def _kernel_battery_main(argv: list[str]) -> None:
             ensure_output_folder(folder)
         except CorrError as exc:
             parser.error(str(exc))
-    print(write_kernel_battery(args.out, noise=args.noise, subdivide=args.subdivisions, remesh=args.remesh))
+
+
+def _nonisometric_main(argv: list[str]) -> None:
+    """``--nonisometric OUT``: :func:`write_nonisometric_battery` into a new or empty folder."""
+    import argparse
+
+    parser = argparse.ArgumentParser(prog="python tests/_humanoid.py --nonisometric",
+                                     description="people and a body of gorilla proportions, a corr bench dataset")
+    parser.add_argument("out", type=Path, help="output folder (new or empty)")
+    args = parser.parse_args(argv)
+    _new_output_folders(parser, [args.out])
+    print(write_nonisometric_battery(args.out))
 
 
 if __name__ == "__main__":
     # python tests/_humanoid.py OUT: the ground-truth dataset; --people OUT: the bundled retrieval people;
-    # --kernel-battery OUT [NOISE [SUBDIVISIONS]] [--remesh N]: kernel matching's people pairs (write_kernel_battery)
+    # --kernel-battery OUT [NOISE [SUBDIVISIONS]] [--remesh N]: kernel matching's people pairs (write_kernel_battery);
+    # --nonisometric OUT: people and a gorilla (write_nonisometric_battery)
     if len(sys.argv) > 2 and sys.argv[1] == "--people":
         print(write_retrieval_people(sys.argv[2]))
     elif len(sys.argv) > 1 and sys.argv[1] == "--kernel-battery":
         _kernel_battery_main(sys.argv[2:])
+    elif len(sys.argv) > 1 and sys.argv[1] == "--nonisometric":
+        _nonisometric_main(sys.argv[2:])
     else:
         print(write_dataset(sys.argv[1] if len(sys.argv) > 1 else "humanoid"))

@@ -9,7 +9,7 @@ from pathlib import Path
 import numpy as np
 import pytest
 
-from _humanoid import write_kernel_battery
+from _humanoid import GORILLA_JOINTS, JOINTS, write_kernel_battery, write_nonisometric_battery
 from corrlib.bench import load_dataset
 from corrlib.io import load_mesh, load_vts
 from corrlib.resources import resource
@@ -34,6 +34,33 @@ def test_kernel_battery_rows_name_the_same_body_point_in_poses_and_mirror_images
         assert np.all(np.sign(mirrored[lateral, 0]) == -np.sign(points["human0"][lateral, 0]))
     bundled = load_mesh(resource("people/human3.off"))
     np.testing.assert_allclose(load_mesh(tmp_path / "capsule" / "human3.off").vertices, bundled.vertices, atol=1e-5)
+
+
+def test_nonisometric_battery_rows_name_the_same_body_point_on_the_gorilla(tmp_path):
+    """The people and the gorilla-proportioned body, meshed apart: a row names the same body point on both —
+    the hands, feet, head and nose of the rest poses (the joints' nearest vertices) land next to the
+    gorilla's own, within a few of its edges; the correspondence is continuous (neighbouring vertices of a
+    person land a few gorilla edges apart at most); the mirrored rows are the gorilla's mirror partners."""
+    write_nonisometric_battery(tmp_path)
+    dataset = load_dataset(tmp_path)
+    assert len(dataset.pairs) == 28 and len(dataset.shapes) == 8
+    assert ("gorilla2", "human2") in dataset.pairs and ("human2", "gorilla2") not in dataset.pairs
+    human, gorilla = load_mesh(tmp_path / "human0.off"), load_mesh(tmp_path / "gorilla0.off")
+    rows = {"human": load_vts(dataset.gt["human0"], human.n_vertices),
+            "gorilla": load_vts(dataset.gt["gorilla0"], gorilla.n_vertices),
+            "gorilla_sym": load_vts(dataset.gt_sym["gorilla0"], gorilla.n_vertices)}
+    np.testing.assert_array_equal(rows["human"], np.arange(human.n_vertices))
+    edge = np.linalg.norm(np.diff(gorilla.vertices[gorilla.faces[:, :2]], axis=1), axis=2).mean()
+    for joint in ("lha", "rha", "lto", "rto", "head", "nose1"):
+        at_human = np.argmin(np.linalg.norm(human.vertices - JOINTS[joint], axis=1))
+        at_gorilla = np.linalg.norm(gorilla.vertices - GORILLA_JOINTS[joint], axis=1).min()
+        lands = np.linalg.norm(gorilla.vertices[rows["gorilla"][at_human]] - GORILLA_JOINTS[joint])
+        assert lands < at_gorilla + 3 * edge, joint
+    edges = np.concatenate([human.faces[:, [0, 1]], human.faces[:, [1, 2]], human.faces[:, [2, 0]]])
+    apart = np.linalg.norm(np.diff(gorilla.vertices[rows["gorilla"][edges]], axis=1)[:, 0], axis=1) / edge
+    assert np.percentile(apart, 99) < 6 and apart.max() < 20
+    mirrored = gorilla.vertices[rows["gorilla"]] * [-1.0, 1.0, 1.0]
+    assert np.median(np.linalg.norm(gorilla.vertices[rows["gorilla_sym"]] - mirrored, axis=1)) < 1.5 * edge
 
 
 @pytest.mark.slow

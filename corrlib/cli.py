@@ -704,7 +704,8 @@ def cmd_match_contour(args) -> int:
 
 def cmd_retrieve(args) -> int:
     from corrlib.progress import run
-    from corrlib.retrieval import class_of, mean_average_precision, mesh_files, retrieve, write_ranking
+    from corrlib.retrieval import (check_picture_names, class_of, mean_average_precision, mesh_files, retrieve,
+                                   write_ranking)
 
     if args.top < 1:
         raise CorrError(f"--top must be at least 1, got {args.top}")
@@ -717,6 +718,8 @@ def cmd_retrieve(args) -> int:
         check_output_file(args.output, "-o")
         check_outputs_apart([("-o", args.output)], [("the query", args.query),
                                                      *[("a mesh of the folder", path) for path in files]])
+        if args.pictures:
+            check_picture_names(Path(args.output), files, args.top)
     contour = _query_contour(args.query)
     params = _contour3d_params(args, retrieval=True)
     hits = run(retrieve(contour, files, params, jobs=args.jobs, scheduler=args.scheduler),

@@ -54,6 +54,23 @@ def atomic_write(path, mode: str = "w"):
         raise
 
 
+#: what :func:`atomic_write` adds to a file's name while it writes it (``.NAME.XXXXXXXX.tmp``)
+TEMPORARY_NAME_EXTRA = len(".") + len(".XXXXXXXX.tmp")
+
+
+def longest_file_name(folder: Path) -> int:
+    """The longest file name, in bytes, that :func:`atomic_write` can write in ``folder`` (the file system's
+    limit less its temporary name's extra characters; 255 where the folder does not say)."""
+    probe = folder
+    while not probe.is_dir() and probe != probe.parent:  # the nearest existing folder: on the same file system
+        probe = probe.parent
+    try:
+        longest = os.pathconf(probe, "PC_NAME_MAX")
+    except (OSError, ValueError):
+        longest = 255
+    return longest - TEMPORARY_NAME_EXTRA
+
+
 def check_output_file(path, what: str = "output") -> Path:
     """Check, before any work, that a file can be written at ``path`` (its folder is created).
 
@@ -75,6 +92,10 @@ def check_output_file(path, what: str = "output") -> Path:
     if is_folder:
         raise InputError(f"{path}: the {what} path is a folder, expected a file name")
     ensure_output_folder(path.parent, what)
+    longest = longest_file_name(path.parent)
+    if len(os.fsencode(path.name)) > longest:
+        raise InputError(f"{path}: the {what} file name is {len(os.fsencode(path.name))} bytes long; its folder "
+                         f"takes names of at most {longest} bytes here")
     return path
 
 
@@ -251,10 +272,13 @@ def _make_folder(folder: Path, what: str) -> Path:
         _CREATED_FOLDERS.update(p.absolute() for p in missing)
     except OSError as exc:
         blocking = next((p for p in [folder, *folder.parents] if p.exists() and not p.is_dir()), None)
+        dangling = next((p for p in [folder, *folder.parents] if p.is_symlink() and not p.exists()), None)
         if blocking == folder:
             reason = "it is a file"
         elif blocking is not None:
             reason = f"{blocking} is a file, not a folder"
+        elif dangling is not None:
+            reason = f"{dangling} is a symbolic link to {os.readlink(dangling)}, which does not exist"
         else:
             reason = os_reason(exc)
         raise InputError(f"{folder}: cannot write {what} there ({reason})") from None

@@ -272,10 +272,9 @@ def write_ranking(hits, out: Path, pictures: int) -> list[Path]:
         match = picture.fullmatch(name)
         return match is not None and match.group(1) in meshes
 
-    width = len(str(pictures))
     with staged_output(out.parent, replaces=earlier_picture) as stage:
         written = [stage / out.name]
-        with open(written[0], "w", encoding="utf-8", newline="") as fh:
+        with open(written[0], "w", encoding="utf-8", errors="surrogateescape", newline="") as fh:
             table = csv.writer(fh, delimiter="\t", lineterminator="\n")  # quotes a name with a tab or line break
             table.writerow(["rank", "energy", "mesh", "error"])
             for rank, hit in enumerate(hits, 1):
@@ -285,11 +284,32 @@ def write_ranking(hits, out: Path, pictures: int) -> list[Path]:
                 continue
             from corrlib.plotting import save_contour_match
 
-            written.append(save_contour_match(stage / f"{out.stem}.{rank:0{width}d}-{hit.path.stem}.png",
+            written.append(save_contour_match(stage / picture_name(out, rank, pictures, hit.path),
                                               hit.contour_points, load_mesh(hit.path), hit.path_vertices,
                                               hit.path_contour_index,
                                               title=f"rank {rank}: {hit.path.name}, energy {hit.energy:.4g}"))
     return [out.parent / path.name for path in written]
+
+
+def picture_name(out: Path, rank: int, pictures: int, mesh: Path) -> str:
+    """``STEM.RANK-MESH.png``, the picture of rank ``rank`` (of ``pictures``, zero-padded to their width) of the
+    ranking ``out`` (:func:`write_ranking`)."""
+    return f"{out.stem}.{rank:0{len(str(pictures))}d}-{mesh.stem}.png"
+
+
+def check_picture_names(out: Path, meshes, pictures: int) -> None:
+    """Before a retrieval: an :class:`InputError` naming a mesh whose picture's name (:func:`picture_name`) the
+    ranking's folder cannot hold, instead of a failure after the whole retrieval."""
+    import os
+
+    from corrlib.outputs import longest_file_name
+
+    longest = longest_file_name(out.parent)
+    for mesh in meshes:
+        name = picture_name(out, pictures, pictures, Path(mesh))
+        if len(os.fsencode(name)) > longest:
+            raise InputError(f"{mesh}: the picture of this mesh, {name}, is a longer file name than {out.parent} "
+                             f"takes here ({longest} bytes); shorten the ranking's name (-o) or the mesh's")
 
 
 def _ranked_mesh_stems(ranking: Path) -> set[str]:

@@ -582,3 +582,20 @@ def test_numba_threads_of_zero_are_named(monkeypatch, capsys):
     monkeypatch.setenv("NUMBA_NUM_THREADS", "0")
     assert main(["match", WOLF0, WOLF1, *FAST, "-o", "unused"]) == 2
     assert "NUMBA_NUM_THREADS=0 must be a positive number" in capsys.readouterr().err
+
+
+def test_a_picture_name_too_long_for_the_folder_is_named_before_the_retrieval(tmp_path, capsys):
+    """``retrieve --pictures`` with a mesh named by 240 characters: its picture's name (the ranking's stem, the
+    rank and the mesh's stem) is too long; that was found after the whole retrieval, and the ranking was lost."""
+    from _data import SILHOUETTES
+
+    folder = tmp_path / "meshes"
+    folder.mkdir()
+    long_name = "w" * 240 + ".off"
+    (folder / long_name).write_bytes(Path(WOLF0).read_bytes())
+    started = time.perf_counter()
+    code = main(["retrieve", str(SILHOUETTES / "mpeg7" / "dog-1.gif"), str(folder), "--jobs", "1", "-q",
+                 "--pictures", "-o", str(tmp_path / "ranking.tsv")])
+    err = capsys.readouterr().err
+    assert code == 2 and long_name in err and "longer file name" in err, err
+    assert time.perf_counter() - started < 5 and not (tmp_path / "ranking.tsv").exists()

@@ -10,7 +10,7 @@ from scipy.spatial import ConvexHull
 
 from _data import SILHOUETTES
 from corrlib.cli import main
-from corrlib.errors import ParameterError
+from corrlib.errors import InputError, ParameterError
 from corrlib.io import save_mesh
 
 R = ["--jobs", "1", "--n-contour", "40", "--param", "mesh_vertices=0", "-q"]
@@ -170,3 +170,27 @@ def test_the_section_benchmark_keeps_only_the_pictures_of_its_rows(shapes, capsy
     assert main([str(a) for a in [*bench, "--planes", "silhouette", "--no-pictures"]]) == 0
     assert names(t / "out" / "pictures") == ["notes.png"]
     capsys.readouterr()
+
+
+def test_an_output_name_is_checked_against_the_folder_s_limit_with_its_temporary_name(tmp_path):
+    """A 250-byte file name passes the file system's 255 but not the temporary name it is written under first
+    (``.NAME.XXXXXXXX.tmp``): that failed after the work; it is refused before."""
+    from corrlib.outputs import atomic_write, check_output_file, longest_file_name
+
+    longest = longest_file_name(tmp_path)
+    fits = tmp_path / ("f" * longest)
+    check_output_file(fits)
+    with atomic_write(fits) as fh:
+        fh.write("written")
+    assert fits.read_text() == "written"
+    with pytest.raises(InputError, match=f"at most {longest} bytes"):
+        check_output_file(tmp_path / ("f" * (longest + 1)))
+
+
+def test_an_output_folder_at_a_dangling_link_names_the_link(tmp_path):
+    """``morph -o LINK`` where LINK points nowhere said only "(file exists)"."""
+    from corrlib.outputs import ensure_output_folder
+
+    (tmp_path / "link").symlink_to(tmp_path / "gone")
+    with pytest.raises(InputError, match="is a symbolic link to .*gone, which does not exist"):
+        ensure_output_folder(tmp_path / "link" / "frames")

@@ -60,7 +60,10 @@ def _save_figure(fig, path) -> Path:
 
     for text in fig.findobj(Text):  # a file name that is not UTF-8 (its bytes as surrogates) shown by its bytes
         value = text.get_text()
-        shown = value.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+        try:
+            shown = value.encode("utf-8", "surrogateescape").decode("utf-8", "backslashreplace")
+        except UnicodeEncodeError:  # a surrogate that stands for no byte
+            shown = value.encode("utf-8", "backslashreplace").decode("utf-8")
         if shown != value:
             text.set_text(shown)
     fig.tight_layout()

@@ -99,19 +99,14 @@ def map_errors(map_xy, target: TriMesh, gt_source, gt_target, gt_target_sym=None
     With ``gt_target_sym`` (the mirrored partners of the rows) the report also holds the mirror-accepted
     errors; ``per_vertex`` is always the direct error, so a left/right flip shows in a heat map.
     """
-    from corrlib.evaluation import geodesic_errors
+    from corrlib.evaluation import matched_errors
 
     map_xy = np.asarray(map_xy)
-    gt_source, gt_target = np.asarray(gt_source), np.asarray(gt_target)
-    predicted = map_xy[gt_source]
-    matched = predicted >= 0
+    gt_source = np.asarray(gt_source)
+    report, matched = matched_errors(map_xy, target, gt_source, gt_target, gt_target_sym=gt_target_sym,
+                                     method=ERROR_GEODESICS)
     per_vertex = np.full(map_xy.shape[0], np.nan)
-    report = None
-    if matched.any():
-        # the matched rows as a map of their own: row i of the sub-map is ground-truth row i
-        sym = None if gt_target_sym is None else np.asarray(gt_target_sym)[matched]
-        report = geodesic_errors(predicted[matched], target, np.arange(int(matched.sum())), gt_target[matched],
-                                 gt_target_sym=sym, method=ERROR_GEODESICS)
+    if report is not None:
         per_vertex[gt_source[matched]] = report.errors
     return MapErrors(report, per_vertex, int(np.count_nonzero(~matched)), int(gt_source.size))
 

@@ -256,7 +256,7 @@ class Job:
 
 def run_job(job: Job) -> dict:
     """Run one job (in a worker): the record, the map and the per-point errors. Never raises."""
-    from corrlib.evaluation import geodesic_errors
+    from corrlib.evaluation import matched_errors
     from corrlib.io import load_map, load_mesh, load_vts
 
     record = {"source": job.source, "target": job.target, "status": "ok", "error": ""}
@@ -266,7 +266,8 @@ def run_job(job: Job) -> dict:
         source, target = load_mesh(job.source_path), load_mesh(job.target_path)
         load_time = time.perf_counter() - start
         if job.external_map is not None:
-            map_xy = load_map(job.external_map, n_target=target.n_vertices, n_source=source.n_vertices)
+            map_xy = load_map(job.external_map, n_target=target.n_vertices, n_source=source.n_vertices,
+                              allow_unmatched=True)
             runtime = 0.0
         else:
             from corrlib.methods import solve
@@ -286,9 +287,11 @@ def run_job(job: Job) -> dict:
             gx = load_vts(job.gt[0], source.n_vertices)
             gy = load_vts(job.gt[1], target.n_vertices)
             sym = load_vts(job.gt[2], target.n_vertices) if job.gt[2] else None
-        report = geodesic_errors(map_xy, target, gx, gy, gt_target_sym=sym, method=job.geodesics)
+        report, matched = matched_errors(map_xy, target, gx, gy, gt_target_sym=sym, method=job.geodesics)
+        if report is None:
+            raise InputError(f"the map leaves all {matched.size} ground-truth rows unmatched")
         errors, errors_sym = report.errors, report.errors_sym
-        record.update(report.summary())
+        record.update(report.summary(), unmatched=float(np.mean(~matched)))
         evaluation = time.perf_counter() - start
         record.update(runtime=runtime, load_time=load_time, evaluation_time=evaluation,
                       overhead=load_time + evaluation,
@@ -487,7 +490,8 @@ class Runner:
 
         records = self.records()
         columns = ["method", "source", "target", "status", "mean", "median", "within_0.025", "within_0.05",
-                   "within_0.1", "mean_sym", "within_0.05_sym", "runtime", "overhead", "peak_memory_mb", "error"]
+                   "within_0.1", "mean_sym", "within_0.05_sym", "unmatched", "runtime", "overhead", "peak_memory_mb",
+                   "error"]
         with atomic_write(self.out / "errors.csv") as fh:
             fh.write(",".join(columns) + "\n")
             for rec in records:

@@ -96,7 +96,7 @@ def cmd_info(args) -> int:
 def cmd_eval(args) -> int:
     import numpy as np
 
-    from corrlib.evaluation import cumulative_curve, geodesic_errors
+    from corrlib.evaluation import cumulative_curve, matched_errors
     from corrlib.io import check_output_file, check_outputs_apart, load_map, load_mesh, load_vts
 
     outputs = [(option, value) for option, value in (("--errors", args.errors), ("--plot", args.plot)) if value]
@@ -106,7 +106,7 @@ def cmd_eval(args) -> int:
                                   ("--gt-target", args.gt_target), ("--target", args.target),
                                   ("--gt-target-sym", args.gt_target_sym)])
     target = load_mesh(args.target)
-    map_xy = load_map(args.map, n_target=target.n_vertices)
+    map_xy = load_map(args.map, n_target=target.n_vertices, allow_unmatched=True)
     gt_source = load_vts(args.gt_source)
     if gt_source.max() >= map_xy.shape[0]:
         raise FileFormatError(f"{args.map}: the map has {map_xy.shape[0]} entries, but the ground truth "
@@ -121,11 +121,15 @@ def cmd_eval(args) -> int:
                                   f"{gt_source.size}; the ground-truth files must have one row per corresponding "
                                   "point")
     start = time.perf_counter()
-    report = geodesic_errors(map_xy, target, gt_source, gt_target, gt_target_sym=gt_sym,
-                             normalize=args.normalize, method=args.geodesics)
+    report, matched = matched_errors(map_xy, target, gt_source, gt_target, gt_target_sym=gt_sym,
+                                     normalize=args.normalize, method=args.geodesics)
+    if report is None:
+        raise FileFormatError(f"{args.map}: every ground-truth row's source vertex is unmatched (-1)")
     elapsed = time.perf_counter() - start
     summary = report.summary()
     summary["rows"] = int(report.errors.size)
+    if not matched.all():  # a partial map: its errors where it matches, and how much of the truth it leaves out
+        summary["unmatched_rows"] = int(np.count_nonzero(~matched))
     summary["seconds"] = elapsed
     if args.json:
         print(json.dumps(summary, indent=2))

@@ -146,6 +146,48 @@ def geodesic_errors(map_xy, target, gt_source, gt_target, *, gt_target_sym=None,
     return ErrorReport(errors=errors, errors_sym=errors_sym, normalization=norm)
 
 
+def matched_errors(map_xy, target, gt_source, gt_target, *, gt_target_sym=None,
+                   **options) -> tuple[ErrorReport | None, np.ndarray]:
+    """:func:`geodesic_errors` of a map that may leave source vertices unmatched (-1, partial matching).
+
+    The ground-truth rows whose source vertex is matched are measured as a map of their own; the others are
+    counted, not scored (a partial map is judged by both: its errors where it matches, and how much of the
+    truth it leaves out).
+
+    Parameters
+    ----------
+    map_xy : (n_x,) int
+        Target vertex of each source vertex, -1 where unmatched.
+    target, gt_source, gt_target, gt_target_sym, **options
+        As for :func:`geodesic_errors`.
+
+    Returns
+    -------
+    report : ErrorReport or None
+        The matched rows' errors, in the order of the ground truth; None if no row is matched.
+    matched : (r,) bool
+        Which ground-truth rows were matched.
+    """
+    map_xy = np.asarray(map_xy)
+    if map_xy.ndim == 1 and np.issubdtype(map_xy.dtype, np.integer) and map_xy.size and map_xy.min() < -1:
+        raise InputError(f"map_xy has indices below -1 (-1: unmatched), e.g. {int(map_xy.min())}")
+    gt_source = _check_indices("gt_source", gt_source, map_xy.shape[0] if map_xy.ndim == 1 else 0)
+    predicted = _check_indices("map_xy", np.maximum(map_xy, 0), target.n_vertices)[gt_source]
+    matched = map_xy[gt_source] >= 0
+    if not matched.any():
+        return None, matched
+    gt_target = np.asarray(gt_target)
+    if gt_target.shape != gt_source.shape:
+        raise InputError(f"ground truth rows differ: {gt_source.size} source vs {gt_target.size} target")
+    sym = None if gt_target_sym is None else np.asarray(gt_target_sym)
+    if sym is not None and sym.shape != gt_source.shape:
+        raise InputError("mirrored ground truth has a different number of rows")
+    # the matched rows as a map of their own: row i of the sub-map is matched ground-truth row i
+    report = geodesic_errors(predicted[matched], target, np.arange(int(matched.sum())), gt_target[matched],
+                             gt_target_sym=None if sym is None else sym[matched], **options)
+    return report, matched
+
+
 def evaluate(result, target, gt_source, gt_target, **options) -> ErrorReport:
     """Princeton-protocol errors of a method's result (or of a bare map) on the target.
 

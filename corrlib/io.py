@@ -942,8 +942,12 @@ def load_vts(path, n_vertices: int | None = None) -> np.ndarray:
     return idx
 
 
-def load_map(path, n_target: int | None = None, n_source: int | None = None) -> np.ndarray:
+def load_map(path, n_target: int | None = None, n_source: int | None = None, *,
+             allow_unmatched: bool = False) -> np.ndarray:
     """Point-to-point map file: one 0-based target index per source vertex.
+
+    ``allow_unmatched``: -1 marks a source vertex left unmatched (a partial match writes it); without it such
+    a map is refused by name, where a complete map is needed.
 
     Returns
     -------
@@ -966,8 +970,11 @@ def load_map(path, n_target: int | None = None, n_source: int | None = None) -> 
         mp = _integers(raw, path, "'map_xy' array", "target indices")
     else:
         mp = _index_file(path, "map")
-    if mp.min() < 0:
-        raise FileFormatError(f"{path}: map indices are 0-based; found a negative index")
+    if mp.min() < -1:
+        raise FileFormatError(f"{path}: map indices are 0-based (-1: unmatched); found {int(mp.min())}")
+    if mp.min() == -1 and not allow_unmatched:
+        raise FileFormatError(f"{path}: {int(np.count_nonzero(mp < 0))} source vertices are unmatched (-1, a "
+                              "partial match); a complete map is needed here")
     if n_target is not None and mp.max() >= n_target:
         raise FileFormatError(f"{path}: map index {mp.max()} is out of range for a target with "
                               f"{n_target} vertices (is the file 1-based?)")

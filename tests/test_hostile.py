@@ -1,6 +1,8 @@
 """Careless and hostile input to `corr`: a named error and exit status 2, never a traceback, a hang, a
 silently wrong answer or a half-written result set (issue 20)."""
 
+import csv
+import json
 import os
 import re
 import resource
@@ -599,3 +601,37 @@ def test_a_picture_name_too_long_for_the_folder_is_named_before_the_retrieval(tm
     err = capsys.readouterr().err
     assert code == 2 and long_name in err and "longer file name" in err, err
     assert time.perf_counter() - started < 5 and not (tmp_path / "ranking.tsv").exists()
+
+
+def test_a_partial_match_can_be_evaluated_and_benchmarked(tmp_path, capsys):
+    """``partial=true`` writes -1 for unmatched vertices; ``corr eval``, ``corr bench`` (every pair failed
+    with "map_xy has indices outside [0, n]") and ``--maps`` refused the tool's own output. The matched rows
+    are now scored and the unmatched ones counted; a command that needs a complete map says so."""
+    import numpy as np
+
+    from corrlib.io import load_vts
+
+    from corrlib.io import load_mesh
+
+    gt_source, gt_target = load_vts(TOSCA / "wolf0.vts"), load_vts(TOSCA / "wolf1.vts")
+    partial = np.full(load_mesh(WOLF0).n_vertices, 0)
+    partial[gt_source] = gt_target  # the ground truth itself, with its first 100 rows' sources unmatched
+    partial[gt_source[:100]] = -1
+    unmatched = int(np.count_nonzero(partial[gt_source] < 0))
+    np.savetxt(tmp_path / "partial.txt", partial, fmt="%d")
+    assert main(["eval", str(tmp_path / "partial.txt"), "--gt-source", str(TOSCA / "wolf0.vts"), "--gt-target",
+                 str(TOSCA / "wolf1.vts"), "--target", WOLF1, "--json"]) == 0
+    summary = json.loads(capsys.readouterr().out)
+    assert summary["unmatched_rows"] == unmatched >= 100 and summary["rows"] == gt_source.size - unmatched
+    assert summary["mean"] < 1e-9
+    maps = tmp_path / "maps"
+    maps.mkdir()
+    (maps / "wolf0__wolf1.txt").write_text((tmp_path / "partial.txt").read_text())
+    assert main(["bench", str(TOSCA), "--pairs", str(_wolf_pairs(tmp_path)), "--maps", f"part={maps}",
+                 "-o", str(tmp_path / "b"), "--jobs", "1", "-q"]) == 0
+    rows = list(csv.DictReader(open(tmp_path / "b" / "errors.csv")))
+    assert rows[0]["status"] == "ok" and abs(float(rows[0]["unmatched"]) - unmatched / gt_source.size) < 1e-9
+    capsys.readouterr()
+    assert main(["refine", WOLF0, WOLF1, "--init", str(tmp_path / "partial.txt"), "-o", str(tmp_path / "r")]) == 2
+    assert f"{np.count_nonzero(partial < 0)} source vertices are unmatched (-1, a partial match); a complete map " \
+           "is needed" in capsys.readouterr().err

@@ -330,6 +330,24 @@ def test_the_window_fits_a_laptop_screen(qtbot, tmp_path):
     win.close()
 
 
+def test_a_long_result_line_does_not_widen_the_window(qtbot, tmp_path):
+    """A partial match's result line ("…; 490 source vertices unmatched (grey, left out of the error)") made the
+    pair view's minimum width exceed a 1280-pixel screen; the line wraps."""
+    from types import SimpleNamespace
+
+    import numpy as np
+
+    win = make_window(qtbot, tmp_path / "s.ini")
+    win.resize(1280, 720)
+    win.show()
+    result = SimpleNamespace(method="kernel-matching", timings={"total": 6.75})
+    win.pair_view.set_result(result, np.full(4344, 0.001), n_unmatched=490)
+    qtbot.wait(200)
+    assert "490 source vertices unmatched" in win.pair_view.info.text()
+    assert win.minimumSizeHint().width() <= 1280 and win.width() <= 1282, (win.minimumSizeHint(), win.width())
+    win.close()
+
+
 def test_try_retrieval_opens_the_bundled_collection(qtbot, window, tmp_path):
     """File > Try retrieval: the Retrieval tab with 10 bundled meshes of 4 classes and a drawn person as the query; the
     collection is made of links into the bundled resources (made again when a link has gone)."""

@@ -54,6 +54,7 @@ class PairView(QWidget, FramedView):
                              "error: geodesic error (ground truth needed)")
         self.mode.currentTextChanged.connect(self.redraw)
         self.info = QLabel("Load a source and a target mesh, then run a method.")
+        self.info.setWordWrap(True)  # a long result line (unmatched vertices) wraps instead of widening the window
         top = QHBoxLayout()
         top.addWidget(QLabel("Show"))
         top.addWidget(self.mode)

@@ -172,19 +172,15 @@ def matched_errors(map_xy, target, gt_source, gt_target, *, gt_target_sym=None,
     if map_xy.ndim == 1 and np.issubdtype(map_xy.dtype, np.integer) and map_xy.size and map_xy.min() < -1:
         raise InputError(f"map_xy has indices below -1 (-1: unmatched), e.g. {int(map_xy.min())}")
     gt_source = _check_indices("gt_source", gt_source, map_xy.shape[0] if map_xy.ndim == 1 else 0)
-    predicted = _check_indices("map_xy", np.maximum(map_xy, 0), target.n_vertices)[gt_source]
     matched = map_xy[gt_source] >= 0
     if not matched.any():
         return None, matched
-    gt_target = np.asarray(gt_target)
-    if gt_target.shape != gt_source.shape:
-        raise InputError(f"ground truth rows differ: {gt_source.size} source vs {gt_target.size} target")
-    sym = None if gt_target_sym is None else np.asarray(gt_target_sym)
-    if sym is not None and sym.shape != gt_source.shape:
-        raise InputError("mirrored ground truth has a different number of rows")
-    # the matched rows as a map of their own: row i of the sub-map is matched ground-truth row i
-    report = geodesic_errors(predicted[matched], target, np.arange(int(matched.sum())), gt_target[matched],
-                             gt_target_sym=None if sym is None else sym[matched], **options)
+    rows = [np.asarray(gt_target), None if gt_target_sym is None else np.asarray(gt_target_sym)]
+    if any(r is not None and r.shape != gt_source.shape for r in rows):  # before rows are picked by the mask
+        raise InputError(f"the ground-truth files differ in their number of rows ({gt_source.size} source rows)")
+    # only matched rows are read, so the -1 entries stand in as 0 for the index checks
+    report = geodesic_errors(np.maximum(map_xy, 0), target, gt_source[matched], rows[0][matched],
+                             gt_target_sym=None if rows[1] is None else rows[1][matched], **options)
     return report, matched
 
 

@@ -54,8 +54,9 @@ def atomic_write(path, mode: str = "w"):
         raise
 
 
-#: what :func:`atomic_write` adds to a file's name while it writes it (``.NAME.XXXXXXXX.tmp``)
-TEMPORARY_NAME_EXTRA = len(".") + len(".XXXXXXXX.tmp")
+#: what :func:`atomic_write` adds to a file's name while it writes it: a leading dot, then a dot, the 8 random
+#: characters of ``tempfile.mkstemp`` and ``.tmp`` after it
+TEMPORARY_NAME_EXTRA = 1 + 1 + 8 + len(".tmp")
 
 
 def longest_file_name(folder: Path) -> int:

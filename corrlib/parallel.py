@@ -43,7 +43,7 @@ def process_pool(jobs: int | None = None, share: int | None = None) -> ProcessPo
 
 
 #: the longest path of a Unix socket (Linux's ``sun_path``, without its final zero byte), and the length the fork
-#: server's socket adds to the temporary folder (``/pymp-XXXXXXXX/listener-XXXXXXXX``)
+#: server's socket adds to the temporary folder (``/pymp-`` and ``/listener-``, each with 8 random characters)
 UNIX_SOCKET_PATH_MAX, FORK_SERVER_SOCKET_NAME = 107, 32
 
 

@@ -174,7 +174,7 @@ def test_the_section_benchmark_keeps_only_the_pictures_of_its_rows(shapes, capsy
 
 def test_an_output_name_is_checked_against_the_folder_s_limit_with_its_temporary_name(tmp_path):
     """A 250-byte file name passes the file system's 255 but not the temporary name it is written under first
-    (``.NAME.XXXXXXXX.tmp``): that failed after the work; it is refused before."""
+    (a dot, the name, a dot, 8 random characters, ``.tmp``): that failed after the work; it is refused before."""
     from corrlib.outputs import atomic_write, check_output_file, longest_file_name
 
     longest = longest_file_name(tmp_path)

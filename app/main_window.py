@@ -382,7 +382,8 @@ class MainWindow(QMainWindow):
 
         view_menu = self.menuBar().addMenu("&View")
         for text, view, shortcut in (("Front", "front", "Ctrl+1"), ("Side", "side", "Ctrl+2"),
-                                     ("Top", "top", "Ctrl+3"), ("Reset camera", "front", "Ctrl+0")):
+                                     ("Top", "top", "Ctrl+3"), ("As drawn (2D-to-3D match)", "drawn", "Ctrl+4"),
+                                     ("Reset camera", "reset", "Ctrl+0")):
             view_menu.addAction(self._action(text, lambda _=False, v=view: self.show_view(v), shortcut))
         up_menu = view_menu.addMenu("Up axis")
         self.up_actions = QActionGroup(self)
@@ -413,12 +414,12 @@ class MainWindow(QMainWindow):
         return view if view in self.framed_views() else None
 
     def show_view(self, view: str) -> None:
-        """Camera preset (front, side, top) in the current tab."""
+        """Camera preset (front, side, top, drawn) in the current tab; ``"reset"``: the tab's default view."""
         target = self.current_framed_view()
         if target is None:
             self.statusBar().showMessage("this tab has no 3D camera")
             return
-        target.show_view(view)
+        target.show_view(target.default_view if view == "reset" else view)
 
     def set_up_axis(self, up: str) -> None:
         """The up axis of every 3D view (``"auto"`` or ``"+x"`` … ``"-z"``)."""

@@ -135,6 +135,58 @@ def view_frame(vertices: np.ndarray, up: str = "auto") -> ViewFrame:
     return ViewFrame(long_axis, up_vector, toward)
 
 
+def upright_frames(frame: ViewFrame) -> dict[str, ViewFrame]:
+    """The frames whose front views are the shape's upright views: the ``front`` preset and the ``back``, the
+    ``side`` preset and the ``other side``, and the ``top`` preset (a view from below is no view a shape is
+    drawn from). Each is a proper rotation (right × up = toward)."""
+    right, up, toward = frame.right, frame.up, frame.toward
+    return {"front": frame, "back": ViewFrame(-right, up, -toward), "side": ViewFrame(-toward, up, right),
+            "other side": ViewFrame(toward, up, -right), "top": ViewFrame(right, -toward, up)}
+
+
+def outline_fit(curve: np.ndarray, outline: np.ndarray, frame: ViewFrame) -> float:
+    """How well a curve seen from the front of ``frame`` looks like the 2D outline matched to it, in [0, 1].
+
+    The curve's orthographic projection onto the screen (right, up) is fitted to the outline by a similarity
+    without reflection; in complex numbers ``a ≈ z b`` (outline ``a``, projection ``b``, both centred) the
+    least-squares ``z = bᴴa / bᴴb`` leaves the relative residual ``1 − |bᴴa|² / (|a|² |b|²)`` (Umeyama 1991).
+    Returns one minus that residual: 1 for a projection that is the outline turned and scaled, 0 for one
+    uncorrelated with it (or a curve that projects to a point).
+
+    Parameters
+    ----------
+    curve : (p, 3) float
+        Points of the curve.
+    outline : (p, 2) float
+        The outline's point matched to each (x right, y up).
+    frame : ViewFrame
+    """
+    curve = np.asarray(curve, dtype=np.float64)
+    outline = np.asarray(outline, dtype=np.float64)
+    if curve.ndim != 2 or curve.shape[1] != 3 or outline.shape != (curve.shape[0], 2):
+        raise ParameterError(f"curve must be (p, 3) and outline (p, 2) with the same p, got {curve.shape} and "
+                             f"{outline.shape}")
+    a = outline[:, 0] + 1j * outline[:, 1]
+    centred = curve - curve.mean(axis=0)
+    b = centred @ frame.right + 1j * (centred @ frame.up)
+    a, b = a - a.mean(), b - b.mean()
+    norms = float(np.vdot(a, a).real) * float(np.vdot(b, b).real)
+    return 0.0 if norms <= 0.0 else float(abs(np.vdot(b, a)) ** 2 / norms)
+
+
+def outline_frame(curve: np.ndarray, outline: np.ndarray, frame: ViewFrame) -> ViewFrame:
+    """Of the shape's upright views (:func:`upright_frames`), the one from which a curve matched to a 2D outline
+    looks most like it (:func:`outline_fit`).
+
+    A curve matched to a silhouette lies along the shape's outline as seen from where the silhouette was drawn,
+    so from that view the whole curve is in sight, on the shape's border; from another it can run behind the
+    shape. Mirror views (front and back, the two sides) differ in the sign of the fit's turn, which a
+    similarity without reflection tells apart.
+    """
+    frames = upright_frames(frame)
+    return max(frames.values(), key=lambda candidate: outline_fit(curve, outline, candidate))
+
+
 @dataclass
 class Camera:
     """A camera as plain data (position, focal point, view up, view angle in degrees), saved as JSON.

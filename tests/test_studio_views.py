@@ -107,6 +107,31 @@ def test_up_axis_and_camera_presets(qtbot, window):
     assert np.allclose(view.displayed.displays[0].rotation[1], [0, 0, 1])
 
 
+def test_a_matched_curve_is_seen_as_the_outline_was_drawn(qtbot, window):
+    """A ring round the wolf's body matched to the outline a drawing from above shows: the product view looks
+    down at the wolf (the curve in sight along its border), the View menu's presets move the camera, and Reset
+    camera returns to the view as drawn. A curve at one vertex has no such view: the front preset."""
+    from app.views.camera import ShapeDisplay
+    from corrlib.io import load_mesh
+
+    wolf = load_mesh(TOSCA / "wolf0.off")
+    points = ShapeDisplay.of(wolf.vertices).points(wolf.vertices)
+    ring = np.flatnonzero(np.abs(points[:, 1] - np.median(points[:, 1])) < 0.01)
+    ring = ring[np.argsort(np.arctan2(points[ring, 2], points[ring, 0]))]
+    outline = points[ring][:, [0, 2]] * np.array([1.0, -1.0])  # (right, up) of the view from above
+    view = window.product_view
+    window.tabs.setCurrentWidget(view)
+    view.show_contour_match(outline, wolf, ring, np.arange(ring.size), 1.0)
+    assert np.allclose(camera_direction(view.camera()), [0, 1, 0], atol=1e-9)  # from above
+    window.show_view("front")
+    assert np.allclose(camera_direction(view.camera()), [0, 0, 1], atol=1e-9)
+    window.show_view("reset")
+    assert np.allclose(camera_direction(view.camera()), [0, 1, 0], atol=1e-9)
+    view.show_contour_match(outline, wolf, np.zeros(ring.size, dtype=int), np.arange(ring.size), 1.0)
+    assert view.drawn_frame is None and view.default_view == "front"
+    assert np.allclose(camera_direction(view.camera()), [0, 0, 1], atol=1e-9)
+
+
 def test_camera_save_and_load(qtbot, window, tmp_path):
     with qtbot.waitSignal(window.result_ready, timeout=180_000):
         load_demo(qtbot, window)
@@ -174,7 +199,7 @@ def test_point_inspection_across_compare_views(qtbot, window):
     target_vertex = 500
     view._on_pick(tgt_points[target_vertex], Picker(view.plotter.renderers[1]))
     assert view.inspected == int(row["result"].map_yx[target_vertex])
-    assert view._hover_text(view.plotter.renderers[0], src_points[42]) == f"vertex 42 of the source (wolf0.off)"
+    assert view._hover_text(view.plotter.renderers[0], src_points[42]) == "vertex 42 of the source (wolf0.off)"
     assert "of the target" in view._hover_text(view.plotter.renderers[1], tgt_points[42])
     # the heat maps show the source: the marker sits on the vertex and the caption gives its error
     view.color_mode.setCurrentText("error heat map")
@@ -262,6 +287,65 @@ def test_thumbnails_are_rendered_upright_by_vtk():
     upper = shape[top:top + band].mean()
     lower = shape[bottom - band:bottom + 1].mean()
     assert lower < upper  # legs below, the back above
+
+
+def test_each_thumbnail_is_drawn_with_its_own_camera():
+    """The renderer is reused for every thumbnail of a gallery: a thumbnail must be what a fresh renderer draws
+    for the same mesh, not the new mesh seen with the previous thumbnail's camera."""
+    from io import BytesIO
+
+    from PIL import Image
+
+    from app.views.retrieval import ThumbnailRenderer
+    from corrlib.io import load_mesh
+
+    wolf, cat = load_mesh(TOSCA / "wolf0.off"), load_mesh(TOSCA / "cat1.off")
+
+    def pixels(renderer, mesh):
+        return np.asarray(Image.open(BytesIO(renderer.png(mesh, None))))[..., :3].astype(int)
+
+    reused, fresh = ThumbnailRenderer(size=120), ThumbnailRenderer(size=120)
+    try:
+        pixels(reused, wolf)
+        after_the_wolf = pixels(reused, cat)
+        alone = pixels(fresh, cat)
+    finally:
+        reused.close()
+        fresh.close()
+    assert np.abs(after_the_wolf - alone).max() <= 2
+
+
+def test_a_thumbnail_shows_the_mesh_from_the_view_the_outline_was_drawn_from():
+    """A top-view outline's curve on the wolf: the thumbnail is the view from above (the wolf long and narrow,
+    its legs hidden under the body), not the front preset's side view; without the outline, the side view."""
+    from io import BytesIO
+
+    from PIL import Image
+
+    from app.views.camera import ShapeDisplay
+    from app.views.retrieval import ThumbnailRenderer
+    from corrlib.io import load_mesh
+
+    wolf = load_mesh(TOSCA / "wolf0.off")
+    points = ShapeDisplay.of(wolf.vertices).points(wolf.vertices)
+    waist = np.abs(points[:, 1] - np.median(points[:, 1])) < 0.01  # a ring round the body, seen from above
+    ring = np.flatnonzero(waist)
+    ring = ring[np.argsort(np.arctan2(points[ring, 2], points[ring, 0]))]
+    outline = points[ring][:, [0, 2]] * np.array([1.0, -1.0])  # the ring as a drawing from above shows it
+
+    def extent(image):
+        shape = np.any(image < 240, axis=2)
+        rows, cols = np.flatnonzero(shape.any(axis=1)), np.flatnonzero(shape.any(axis=0))
+        return np.ptp(cols) + 1, np.ptp(rows) + 1
+
+    renderer = ThumbnailRenderer(size=200)
+    try:
+        top = np.asarray(Image.open(BytesIO(renderer.png(wolf, ring, outline=outline))))[..., :3]
+        side = np.asarray(Image.open(BytesIO(renderer.png(wolf, ring))))[..., :3]
+    finally:
+        renderer.close()
+    (top_w, top_h), (side_w, side_h) = extent(top), extent(side)
+    assert top_w / top_h > 1.4 * side_w / side_h  # from above the wolf is narrower than from the side
 
 
 def test_a_closed_plotter_leaves_no_python_callback_on_its_widget(qtbot):

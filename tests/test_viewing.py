@@ -9,7 +9,8 @@ from corrlib.errors import FileFormatError, InputError, ParameterError
 from corrlib.io import load_mesh
 from corrlib.plotting import view_axes
 from corrlib.resources import resource
-from corrlib.viewing import Camera, axis_vector, detect_up, fitted_camera, support_shares, view_frame
+from corrlib.viewing import (Camera, ViewFrame, axis_vector, detect_up, fitted_camera, outline_fit, outline_frame,
+                             support_shares, upright_frames, view_frame)
 from tests._data import SUMNER, TOSCA
 
 #: the up axis of every bundled shape, by its dataset's convention
@@ -101,3 +102,53 @@ def test_camera_files_round_trip_and_bad_files_are_named(tmp_path):
         Camera.load(tmp_path / "absent.json")
     with pytest.raises(InputError):
         camera.save(tmp_path)  # a folder, not a file
+
+
+#: an L-shaped closed curve in a plane (no symmetry: its mirror image is no turn of it)
+L_SHAPE = np.array([[0, 0], [3, 0], [3, 1], [1, 1], [1, 4], [0, 4]], dtype=np.float64)
+
+
+def _seen_from(frame: ViewFrame, curve: np.ndarray, turn: float = 0.0, scale: float = 1.0) -> np.ndarray:
+    """(p, 2): the outline a drawing of ``curve`` seen from the front of ``frame`` would give, turned and scaled."""
+    screen = np.column_stack([curve @ frame.right, curve @ frame.up])
+    rotation = np.array([[np.cos(turn), -np.sin(turn)], [np.sin(turn), np.cos(turn)]])
+    return scale * screen @ rotation.T + 5.0
+
+
+def test_upright_frames_are_rotations_that_keep_the_shape_upright():
+    frame = view_frame(load_mesh(TOSCA / "wolf0.off").vertices)
+    for name, candidate in upright_frames(frame).items():
+        assert np.allclose(candidate.matrix @ candidate.matrix.T, np.eye(3)), name
+        assert np.isclose(np.linalg.det(candidate.matrix), 1.0), name
+        if name != "top":
+            assert np.allclose(candidate.up, frame.up), name  # the shape's up is the screen's up
+    assert np.allclose(upright_frames(frame)["top"].toward, frame.up)  # seen from above, never from below
+
+
+@pytest.mark.parametrize("view", ["front", "back", "side", "other side", "top"])
+def test_the_view_a_curve_was_drawn_from_is_found(view):
+    """An L drawn in the plane of one upright view, seen from that view (turned by 30° and scaled, as a
+    sketch is drawn), fits it exactly and that view is chosen; its mirror image, seen from the opposite view,
+    does not fit the same view (a similarity has no reflection)."""
+    frame = view_frame(load_mesh(TOSCA / "wolf0.off").vertices)
+    frames = upright_frames(frame)
+    chosen = frames[view]
+    curve = np.column_stack([L_SHAPE, np.full(len(L_SHAPE), 0.3)]) @ chosen.matrix  # in chosen's screen plane
+    outline = _seen_from(chosen, curve, turn=np.radians(30), scale=2.5)
+    assert outline_fit(curve, outline, chosen) == pytest.approx(1.0)
+    assert np.allclose(outline_frame(curve, outline, frame).matrix, chosen.matrix)
+    mirrored = outline * np.array([-1.0, 1.0])
+    assert outline_fit(curve, mirrored, chosen) < 0.5
+    if view != "top":
+        opposite = {"front": "back", "back": "front", "side": "other side", "other side": "side"}[view]
+        assert np.allclose(outline_frame(curve, mirrored, frame).matrix, frames[opposite].matrix)
+
+
+def test_outline_fit_of_a_curve_seen_edge_on_and_bad_shapes():
+    frame = view_frame(load_mesh(TOSCA / "wolf0.off").vertices)
+    curve = np.column_stack([L_SHAPE, np.zeros(len(L_SHAPE))]) @ frame.matrix  # in the front plane
+    seen_edge_on = upright_frames(frame)["top"]
+    assert outline_fit(curve, _seen_from(frame, curve), seen_edge_on) < 0.9
+    assert outline_fit(np.zeros((6, 3)), _seen_from(frame, curve), frame) == 0.0  # a curve at one point
+    with pytest.raises(ParameterError, match="the same p"):
+        outline_fit(curve, L_SHAPE[:5], frame)

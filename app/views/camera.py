@@ -111,8 +111,10 @@ def current_camera(plotter, renderer=None) -> Camera:
                   float(cam.view_angle))
 
 
-def show_preset(plotter, display_points: list[np.ndarray], view: str = "front", renderers=None) -> Camera:
-    """Put the camera at the preset ``view``, fitted to the union of ``display_points``.
+def show_preset(plotter, display_points: list[np.ndarray], view: str = "front", renderers=None,
+                frame: ViewFrame = DISPLAY_FRAME) -> Camera:
+    """Put the camera at the preset ``view`` of ``frame`` (default: the display frame's), fitted to the union of
+    ``display_points``.
 
     Parameters
     ----------
@@ -120,10 +122,13 @@ def show_preset(plotter, display_points: list[np.ndarray], view: str = "front", 
         The points shown, in display frames (every renderer shows one of them).
     renderers : list of vtkRenderer, optional
         The renderers to set (default: all of ``plotter``'s).
+    frame : ViewFrame
+        In display coordinates, e.g. the view a matched outline was drawn from
+        (:func:`corrlib.viewing.outline_frame`).
     """
     points = np.vstack([np.asarray(p, dtype=np.float64) for p in display_points])
     first = plotter.renderers[0] if renderers is None else renderers[0]
-    camera = fitted_camera(points, DISPLAY_FRAME, view, aspect=viewport_aspect(plotter, first))
+    camera = fitted_camera(points, frame, view, aspect=viewport_aspect(plotter, first))
     apply_camera(plotter, camera, renderers)
     return camera
 
@@ -136,7 +141,7 @@ class FramedView:
     """
 
     up: str = "auto"
-    view: str = "front"
+    view: str = "front"  # a preset of corrlib.viewing.VIEWS, or "drawn" (see preset_frame)
 
     def view_plotter(self):
         """The view's plotter, or None before it shows anything."""
@@ -150,13 +155,23 @@ class FramedView:
         """The renderers the presets move (None: all of the plotter's)."""
         return None
 
+    @property
+    def default_view(self) -> str:
+        """The view that Reset camera returns to."""
+        return "front"
+
+    def preset_frame(self) -> tuple[ViewFrame, str]:
+        """The frame and the preset of it that :attr:`view` names. ``"drawn"`` (as a matched outline shows the
+        shape) is the front view in views that show no outline."""
+        return DISPLAY_FRAME, "front" if self.view == "drawn" else self.view
+
     def set_up_axis(self, up: str) -> None:
         """Draw again with another up-axis setting (``"auto"`` or ``"+x"`` … ``"-z"``)."""
         self.up = up
         self.redraw()
 
     def show_view(self, view: str) -> None:
-        """Fit the camera to the preset ``view`` (front, side, top)."""
+        """Fit the camera to the preset ``view`` (front, side, top, or drawn: see :meth:`preset_frame`)."""
         self.view = view
         self.fit_preset()
         plotter = self.view_plotter()
@@ -170,7 +185,8 @@ class FramedView:
         if plotter is None or not points:
             return
         renderers = self.framed_renderers()
-        self._preset_camera = show_preset(plotter, points, self.view, renderers)
+        frame, view = self.preset_frame()
+        self._preset_camera = show_preset(plotter, points, view, renderers, frame)
         if getattr(self, "_refit_filter", None) is None or self._refit_filter.plotter is not plotter:
             self._refit_filter = _RefitOnResize(plotter, self._on_resized)
 

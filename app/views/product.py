@@ -39,6 +39,7 @@ class ProductView(QWidget, FramedView):
         self._pair = None
         self._match = None  # the arguments of the last show_contour_match (redrawn on a new up axis)
         self.mesh_points: np.ndarray | None = None  # the matched mesh in its display frame
+        self.drawn_frame = None  # the upright view the matched curve looks most like the query from (ViewFrame)
 
     def view_plotter(self):
         return self._plotter.get() if self.mesh_points is not None else None
@@ -51,7 +52,19 @@ class ProductView(QWidget, FramedView):
 
     def redraw(self) -> None:
         if self._match is not None:
-            self.show_contour_match(*self._match)
+            self._draw_contour_match(*self._match)
+
+    @property
+    def default_view(self) -> str:
+        return "drawn" if self.drawn_frame is not None else "front"
+
+    def preset_frame(self):
+        """``"drawn"``: the mesh seen from the upright view (front, back, a side or the top) from which the matched
+        curve looks most like the query (:func:`corrlib.viewing.outline_frame`), where the whole curve is in
+        sight; a preset view can show the curve behind the shape."""
+        if self.view == "drawn" and self.drawn_frame is not None:
+            return self.drawn_frame, "front"
+        return super().preset_frame()
 
     @property
     def plotter(self):
@@ -59,6 +72,15 @@ class ProductView(QWidget, FramedView):
 
     def show_contour_match(self, contour_points: np.ndarray, mesh, path_vertices: np.ndarray,
                            path_contour_index: np.ndarray, energy: float) -> None:
+        """A new 2D-to-3D match, the mesh seen as drawn (:meth:`preset_frame`)."""
+        self.view = "drawn"
+        self._draw_contour_match(contour_points, mesh, path_vertices, path_contour_index, energy)
+
+    def _draw_contour_match(self, contour_points: np.ndarray, mesh, path_vertices: np.ndarray,
+                            path_contour_index: np.ndarray, energy: float) -> None:
+        from app.views.camera import DISPLAY_FRAME
+        from corrlib.viewing import outline_frame
+
         self._match = (contour_points, mesh, path_vertices, path_contour_index, energy)
         p = self.plotter
         p.clear_actors()
@@ -80,6 +102,10 @@ class ProductView(QWidget, FramedView):
             p.add_points(self.mesh_points[np.unique(path_vertices)], color="red", point_size=12,
                          render_points_as_spheres=True)
         p.add_text(f"{mesh.name}: matched curve (energy {energy:.4g})", font_size=LABEL_FONT_SIZE)
+        self.drawn_frame = None
+        if np.unique(path_vertices).size > 2:
+            self.drawn_frame = outline_frame(self.mesh_points[path_vertices], contour_points[path_contour_index],
+                                             DISPLAY_FRAME)
         self.fit_preset()
         p.subplot(0, 0)
         self._contour_display = np.asarray(line.points)
@@ -113,7 +139,7 @@ class ProductView(QWidget, FramedView):
         """Two contours: the product torus (3D) and the flat square, with the correspondence curve."""
         names = list(result.path.product_functions)
         self._pair = result
-        self._match, self.mesh_points = None, None  # no mesh: the presets do not apply to the torus
+        self._match, self.mesh_points, self.drawn_frame = None, None, None  # no mesh: no presets on the torus
         self.function.blockSignals(True)
         self.function.clear()
         self.function.addItems(names)

@@ -30,8 +30,8 @@ class ThumbnailRenderer:
 
     One off-screen plotter is reused for every thumbnail: the mesh in its
     display frame (:class:`app.views.camera.ShapeDisplay`, the up-axis
-    setting of the 3D views) seen from the front preset, and the matched
-    curve as a crimson tube.
+    setting of the 3D views) seen as the query shows it, and the matched
+    curve as a crimson tube (see :meth:`png`).
     """
 
     def __init__(self, size: int = THUMBNAIL_PX):
@@ -46,21 +46,31 @@ class ThumbnailRenderer:
             self._plotter.set_background("white")
         return self._plotter
 
-    def png(self, mesh, path_vertices: np.ndarray | None, up: str = "auto") -> bytes:
-        """PNG bytes of the thumbnail of ``mesh`` with its matched curve."""
+    def png(self, mesh, path_vertices: np.ndarray | None, up: str = "auto", outline: np.ndarray | None = None) -> bytes:
+        """PNG bytes of the thumbnail of ``mesh`` with its matched curve (``path_vertices``, (p,) int).
+
+        ``outline`` ((p, 2) float, the query's point matched to each curve vertex): the mesh is seen from the
+        upright view (front, back, either side or top) from which the curve looks most like the outline
+        (:func:`corrlib.viewing.outline_frame`); without it, from the front preset.
+        """
         from PIL import Image
 
-        from app.views.camera import ShapeDisplay, show_preset
+        from app.views.camera import DISPLAY_FRAME, ShapeDisplay, apply_camera, show_preset
         from app.views.scene import polydata, polyline
+        from corrlib.viewing import fitted_camera, outline_frame
 
         plotter = self._get()
         plotter.clear_actors()
         points = ShapeDisplay.of(mesh.vertices, up).points(mesh.vertices)
         plotter.add_mesh(polydata(points, mesh.faces), color=[THUMBNAIL_GREY] * 3, smooth_shading=True)
-        if path_vertices is not None and len(path_vertices) > 1:
-            plotter.add_mesh(polyline(points[path_vertices], closed=False).tube(radius=CURVE_TUBE_RADIUS),
-                             color="crimson")
-        show_preset(plotter, [points], "front")
+        curve = None if path_vertices is None or len(path_vertices) < 2 else points[path_vertices]
+        if curve is not None:
+            plotter.add_mesh(polyline(curve, closed=True).tube(radius=CURVE_TUBE_RADIUS), color="crimson")
+        if curve is not None and outline is not None and len(np.unique(path_vertices)) > 2:
+            apply_camera(plotter, fitted_camera(points, outline_frame(curve, outline, DISPLAY_FRAME)))
+        else:
+            show_preset(plotter, [points], "front")
+        plotter.render()  # the screenshot reads the last frame drawn, which add_mesh drew with the last camera
         image = plotter.screenshot(return_img=True)
         buf = io.BytesIO()
         Image.fromarray(image).save(buf, format="PNG")
@@ -70,6 +80,13 @@ class ThumbnailRenderer:
         if self._plotter is not None:
             self._plotter.close()
             self._plotter = None
+
+
+def matched_outline(hit) -> np.ndarray | None:
+    """(p, 2) float: the query's point matched to each vertex of a hit's curve; None for a failed hit."""
+    if hit.error or hit.contour_points is None or hit.path_contour_index is None:
+        return None
+    return np.asarray(hit.contour_points)[np.asarray(hit.path_contour_index)]
 
 
 def retrieval_job(query, folder: str, params=None):
@@ -156,7 +173,7 @@ class RetrievalView(QWidget):
         self.hits = hits
         self.gallery.clear()
         for rank, (hit, mesh) in enumerate(zip(hits, meshes), 1):
-            png = b"" if mesh is None else self.thumbnails.png(mesh, hit.path_vertices, self.up)
+            png = b"" if mesh is None else self.thumbnails.png(mesh, hit.path_vertices, self.up, matched_outline(hit))
             text = f"{rank}. {hit.path.name}\n" + (f"E = {hit.energy:.4g}" if not hit.error else "failed")
             item = QListWidgetItem(text)
             if png:

@@ -577,10 +577,13 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
     Parameters
     ----------
     queries : path
-        Folder of silhouette images or contour files; the class of a query
-        is its file name without a trailing number (``horse-3.png`` -> ``horse``).
+        Folder of silhouette images or contour files, with its subfolders; the
+        class of a query is the subfolder it is in (``queries/horse/3.png``) or,
+        directly in the folder, its file name without a trailing number
+        (``horse-3.png`` -> ``horse``; :func:`~corrlib.retrieval.class_of`).
     collection : path
-        Folder of meshes, classes named the same way (``horse0.off``).
+        Folder of meshes, with its subfolders, classes named the same way
+        (``horse/0.off`` or ``horse0.off``).
     out : path
         Writes ``retrieval.csv`` (query, class, AP, rank of the first relevant
         mesh, class margin (:func:`~corrlib.retrieval.class_margin`), top hits),
@@ -600,34 +603,34 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
     """
     from corrlib.io import atomic_write, load_contour
     from corrlib.progress import run
-    from corrlib.retrieval import average_precision, class_margin, class_of, map_interval, mesh_files, retrieve
+    from corrlib.retrieval import (average_precision, class_margin, class_of, collection_name, files_under,
+                                   map_interval, mesh_files, retrieve)
 
-    query_paths = sorted(p for p in Path(queries).iterdir() if p.suffix.lower() in CONTOUR_SUFFIXES)
-    if not query_paths:
-        raise FileFormatError(f"{queries}: no query silhouettes or contour files")
+    query_paths = files_under(queries, CONTOUR_SUFFIXES, "query silhouettes or contour files")
     meshes = mesh_files(collection)
     out = Path(out)
     out.mkdir(parents=True, exist_ok=True)
     rows, ranking, failed_meshes = [], [], set()
     for number, q in enumerate(query_paths, 1):
-        row = {"query": q.name, "class": class_of(q), "ap": float("nan"), "first_relevant": "",
+        name = collection_name(q, queries)
+        row = {"query": name, "class": class_of(q, queries), "ap": float("nan"), "first_relevant": "",
                "margin": float("nan"), "top": "", "error": ""}
         try:
-            hits = run(retrieve(load_contour(q), meshes, params, jobs=jobs, scheduler=scheduler))
-            ranking += [{"query": q.name, "rank": rank, "mesh": h.path.name, "class": h.label, "energy": h.energy,
+            hits = run(retrieve(load_contour(q), meshes, params, jobs=jobs, scheduler=scheduler, root=collection))
+            ranking += [{"query": name, "rank": rank, "mesh": h.name, "class": h.label, "energy": h.energy,
                          "seconds": h.seconds, "error": h.error} for rank, h in enumerate(hits, 1)]
             labels = [h.label for h in hits]
             broken = [h for h in hits if h.error]
             if len(broken) == len(hits):
-                raise InputError(f"no mesh of the collection could be matched (first: {broken[0].path.name}: "
+                raise InputError(f"no mesh of the collection could be matched (first: {broken[0].name}: "
                                  f"{broken[0].error})")
-            failed_meshes.update(h.path.name for h in broken)
+            failed_meshes.update(h.name for h in broken)
             if row["class"] not in labels:  # no relevant mesh: the AP is undefined, not 0
                 raise InputError(f"no mesh of class {row['class']!r} in the collection")
             row["ap"] = average_precision(labels, row["class"])
             row["first_relevant"] = labels.index(row["class"]) + 1
             row["margin"] = class_margin(labels, [h.energy for h in hits], row["class"])
-            row["top"] = " ".join(h.path.name for h in hits[:5])
+            row["top"] = " ".join(h.name for h in hits[:5])
         except Exception as exc:  # a failing query is recorded, the others go on
             row["error"] = f"{type(exc).__name__}: {exc}"
         rows.append(row)

@@ -723,16 +723,16 @@ def cmd_retrieve(args) -> int:
         check_outputs_apart([("-o", args.output)], [("the query", args.query),
                                                      *[("a mesh of the folder", path) for path in files]])
         if args.pictures:
-            check_picture_names(Path(args.output), files, args.top)
+            check_picture_names(Path(args.output), files, args.top, args.folder)
     contour = _query_contour(args.query)
     params = _contour3d_params(args, retrieval=True)
-    hits = run(retrieve(contour, files, params, jobs=args.jobs, scheduler=args.scheduler),
+    hits = run(retrieve(contour, files, params, jobs=args.jobs, scheduler=args.scheduler, root=args.folder),
                callback=_progress_printer(args.quiet))
     written = write_ranking(hits, Path(args.output), args.top if args.pictures else 0) if args.output else []
     print(f"{'rank':>4}  {'energy':>12}  {'seconds':>7}  mesh")
     for rank, hit in enumerate(hits[: args.top], 1):
         extra = f"  ({hit.error})" if hit.error else ""
-        print(f"{rank:>4}  {hit.energy:>12.6g}  {hit.seconds:>7.2f}  {hit.path.name}{extra}")
+        print(f"{rank:>4}  {hit.energy:>12.6g}  {hit.seconds:>7.2f}  {hit.name}{extra}")
     query_class = class_of(args.query)
     labels = [h.label for h in hits]
     if query_class in labels:
@@ -869,7 +869,8 @@ def _add_retrieve_parser(sub) -> None:
     p = _command(sub, "retrieve", "rank the meshes of a folder against a query contour",
                  "Rank the meshes of a folder by matching energy to a query contour.", func=cmd_retrieve)
     p.add_argument("query")
-    p.add_argument("folder")
+    p.add_argument("folder", help="the collection: meshes in it and its subfolders; a subfolder per class "
+                                  "(cat/0.off) or class names in the file names (cat0.off)")
     p.add_argument("--top", type=int, default=10, help="how many ranks to print")
     _add_scale_out(p)
     p.add_argument("--eps", type=float, default=0.0,

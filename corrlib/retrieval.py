@@ -7,8 +7,12 @@ are comparable across meshes because both shapes are scale-normalised, see
 :mod:`corrlib.methods.contour3d`). Mesh spectra are cached on disk by file
 content, so a collection is decomposed once.
 
-Class labels are read from file names: the name without suffix, without its
-trailing digits and separators (``cat0`` and ``cat-12`` are class ``cat``).
+A collection is a folder of meshes, searched with its subfolders. Class labels
+come from the layout: a mesh in a subfolder belongs to the class named by the
+subfolder (``collection/cat/0.off`` is class ``cat``, as class-per-folder
+benchmarks are laid out); a mesh directly in the folder to the class its name
+gives without suffix, trailing digits and separators (``cat0`` and ``cat-12``
+are class ``cat``).
 """
 
 from __future__ import annotations
@@ -45,10 +49,42 @@ def retrieval_params(**overrides) -> Contour3DParams:
     return make_params(Contour3DParams, **{"n_contour": RETRIEVAL_N_CONTOUR, "view": "outline", **overrides})
 
 
-def class_of(path) -> str:
-    """Class label from a file name: ``cat0.off`` / ``cat-12.off`` -> ``cat``."""
+def class_of(path, root=None) -> str:
+    """Class label of a file of a collection rooted at ``root`` (see the module): the subfolder of ``root`` it is
+    in (``root/cat/0.off`` -> ``cat``), or from its name (``cat0.off`` / ``cat-12.off`` -> ``cat``) for a file
+    directly in ``root`` or without one."""
+    parts = Path(collection_name(path, root)).parts
+    if len(parts) > 1:
+        return parts[0]
     stem = Path(path).stem
     return re.sub(r"[\s_\-.]*\d+$", "", stem) or stem
+
+
+def collection_name(path, root=None) -> str:
+    """The name of a file within a collection rooted at ``root``: its path relative to ``root`` (``cat/0.off``),
+    or its file name without a root or outside it."""
+    path = Path(path)
+    if root is not None:
+        try:
+            return path.relative_to(root).as_posix()
+        except ValueError:
+            pass
+    return path.name
+
+
+def files_under(folder, suffixes, what: str) -> list[Path]:
+    """Files of ``folder`` and its subfolders (hidden ones left out, links to folders not followed) whose suffix
+    is one of ``suffixes``, sorted by their names within it; an :class:`InputError` naming ``what`` it lacks."""
+    folder = Path(folder)
+    if not folder.is_dir():
+        raise InputError(f"{folder}: not a folder")
+    found = []
+    for here, folders, names in os.walk(folder):
+        folders[:] = [name for name in folders if not name.startswith(".")]
+        found += [Path(here) / name for name in names if Path(name).suffix.lower() in suffixes]
+    if not found:
+        raise InputError(f"{folder}: no {what} ({', '.join(sorted(suffixes))}) in it or its subfolders")
+    return sorted(found, key=lambda path: collection_name(path, folder))
 
 
 @dataclass
@@ -68,6 +104,8 @@ class RetrievalHit:
     contour_points : (m, 2) float or None
         The resampled query contour that ``path_contour_index`` indexes (the same for every mesh remeshed to
         the budget; a coarser mesh may have been matched with fewer points).
+    root : Path or None
+        The collection's folder, which names the mesh and its class (:attr:`name`, :attr:`label`).
     """
 
     path: Path
@@ -77,10 +115,17 @@ class RetrievalHit:
     path_contour_index: np.ndarray | None = None
     seconds: float = 0.0
     contour_points: np.ndarray | None = None
+    root: Path | None = None
+
+    @property
+    def name(self) -> str:
+        """The mesh's name within the collection (:func:`collection_name`)."""
+        return collection_name(self.path, self.root)
 
     @property
     def label(self) -> str:
-        return class_of(self.path)
+        """The mesh's class (:func:`class_of`)."""
+        return class_of(self.path, self.root)
 
 
 def _match_one(query: PreparedQuery, path: str, params: Contour3DParams) -> RetrievalHit:
@@ -99,18 +144,12 @@ def _match_one(query: PreparedQuery, path: str, params: Contour3DParams) -> Retr
 
 
 def mesh_files(folder) -> list[Path]:
-    """Mesh files (OFF/OBJ/PLY/STL) directly in ``folder``, sorted by name."""
-    folder = Path(folder)
-    if not folder.is_dir():
-        raise InputError(f"{folder}: not a folder")
-    files = sorted(p for p in folder.iterdir() if p.suffix.lower() in MESH_SUFFIXES)
-    if not files:
-        raise InputError(f"{folder}: no mesh files ({', '.join(sorted(MESH_SUFFIXES))})")
-    return files
+    """The mesh files (OFF/OBJ/PLY/STL) of a collection: in ``folder`` and its subfolders (:func:`files_under`)."""
+    return files_under(folder, MESH_SUFFIXES, "mesh files")
 
 
 def retrieve(query_contour, meshes: Iterable, params: Contour3DParams | None = None, *, jobs: int | None = None,
-             token: CancelToken | None = None, scheduler: str | None = None):
+             token: CancelToken | None = None, scheduler: str | None = None, root=None):
     """Rank meshes by matching energy to a query contour (solver generator).
 
     Parameters
@@ -127,6 +166,8 @@ def retrieve(query_contour, meshes: Iterable, params: Contour3DParams | None = N
     scheduler : str, optional
         Address of a Dask scheduler: the meshes are matched on that cluster
         (:func:`corrlib.parallel.job_executor`) instead of local processes.
+    root : path, optional
+        The collection's folder (:func:`mesh_files`): the hits' names and classes are read within it.
 
     Yields
     ------
@@ -158,7 +199,8 @@ def retrieve(query_contour, meshes: Iterable, params: Contour3DParams | None = N
         for path in paths:
             token.raise_if_cancelled()
             hits.append(_match_one(query, path, params))
-            yield Progress("matching", len(hits) / len(paths), f"{Path(path).name}: {hits[-1].energy:.6g}")
+            hits[-1].root = root
+            yield Progress("matching", len(hits) / len(paths), f"{hits[-1].name}: {hits[-1].energy:.6g}")
     else:
         with job_executor(min(jobs, len(paths)), scheduler) as pool:
             pending = {pool.submit(_match_one, query, path, params) for path in paths}
@@ -168,12 +210,12 @@ def retrieve(query_contour, meshes: Iterable, params: Contour3DParams | None = N
                     token.raise_if_cancelled()
                     for fut in done:
                         hits.append(fut.result())
-                        yield Progress("matching", len(hits) / len(paths),
-                                       f"{hits[-1].path.name}: {hits[-1].energy:.6g}")
+                        hits[-1].root = root
+                        yield Progress("matching", len(hits) / len(paths), f"{hits[-1].name}: {hits[-1].energy:.6g}")
             finally:
                 for fut in pending:
                     fut.cancel()
-    hits.sort(key=lambda h: (h.energy, h.path.name))
+    hits.sort(key=lambda h: (h.energy, h.name))
     return hits
 
 
@@ -266,7 +308,7 @@ def write_ranking(hits, out: Path, pictures: int) -> list[Path]:
     from corrlib.io import staged_output
 
     picture = re.compile(re.escape(out.stem) + r"\.[0-9]+-(.+)\.png")
-    meshes = {hit.path.stem for hit in hits} | _ranked_mesh_stems(out)
+    meshes = {picture_key(hit.name) for hit in hits} | _ranked_mesh_keys(out)
 
     def earlier_picture(name: str) -> bool:
         match = picture.fullmatch(name)
@@ -276,45 +318,53 @@ def write_ranking(hits, out: Path, pictures: int) -> list[Path]:
         written = [stage / out.name]
         with open(written[0], "w", encoding="utf-8", errors="surrogateescape", newline="") as fh:
             table = csv.writer(fh, delimiter="\t", lineterminator="\n")  # quotes a name with a tab or line break
-            table.writerow(["rank", "energy", "mesh", "error"])
+            table.writerow(["rank", "energy", "mesh", "error", "name"])
             for rank, hit in enumerate(hits, 1):
-                table.writerow([rank, f"{hit.energy:.9g}", hit.path, hit.error])
+                table.writerow([rank, f"{hit.energy:.9g}", hit.path, hit.error, hit.name])
         for rank, hit in enumerate(hits[:pictures], 1):
             if hit.error:
                 continue
             from corrlib.plotting import save_contour_match
 
-            written.append(save_contour_match(stage / picture_name(out, rank, pictures, hit.path),
+            written.append(save_contour_match(stage / picture_name(out, rank, pictures, hit.name),
                                               hit.contour_points, load_mesh(hit.path), hit.path_vertices,
                                               hit.path_contour_index,
-                                              title=f"rank {rank}: {hit.path.name}, energy {hit.energy:.4g}"))
+                                              title=f"rank {rank}: {hit.name}, energy {hit.energy:.4g}"))
     return [out.parent / path.name for path in written]
 
 
-def picture_name(out: Path, rank: int, pictures: int, mesh: Path) -> str:
+def picture_key(name: str) -> str:
+    """The part of a picture's file name that names a mesh of the collection (its :func:`collection_name`):
+    the name without suffix, its folders joined by ``-`` (``cat/0.off`` -> ``cat-0``)."""
+    return "-".join(Path(name).with_suffix("").parts)
+
+
+def picture_name(out: Path, rank: int, pictures: int, mesh: str) -> str:
     """``STEM.RANK-MESH.png``, the picture of rank ``rank`` (of ``pictures``, zero-padded to their width) of the
-    ranking ``out`` (:func:`write_ranking`)."""
-    return f"{out.stem}.{rank:0{len(str(pictures))}d}-{mesh.stem}.png"
+    ranking ``out`` (:func:`write_ranking`) for the mesh named ``mesh`` in the collection (:func:`picture_key`)."""
+    return f"{out.stem}.{rank:0{len(str(pictures))}d}-{picture_key(mesh)}.png"
 
 
-def check_picture_names(out: Path, meshes, pictures: int) -> None:
-    """Before a retrieval: an :class:`InputError` naming a mesh whose picture's name (:func:`picture_name`) the
-    ranking's folder cannot hold, instead of a failure after the whole retrieval."""
+def check_picture_names(out: Path, meshes, pictures: int, root=None) -> None:
+    """Before a retrieval: an :class:`InputError` naming a mesh (a path, in the collection ``root``) whose
+    picture's name (:func:`picture_name`) the ranking's folder cannot hold, instead of a failure after the
+    whole retrieval."""
     import os
 
     from corrlib.outputs import longest_file_name
 
     longest = longest_file_name(out.parent)
     for mesh in meshes:
-        name = picture_name(out, pictures, pictures, Path(mesh))
+        name = picture_name(out, pictures, pictures, collection_name(mesh, root))
         if len(os.fsencode(name)) > longest:
             raise InputError(f"{mesh}: the picture of this mesh, {name}, is a longer file name than {out.parent} "
                              f"takes here ({longest} bytes); shorten the ranking's name (-o) or the mesh's")
 
 
-def _ranked_mesh_stems(ranking: Path) -> set[str]:
-    """The stems of the meshes an earlier ranking at ``ranking`` (a TSV written by ``corr retrieve``) holds; none
-    where there is no readable one."""
+def _ranked_mesh_keys(ranking: Path) -> set[str]:
+    """The :func:`picture_key` of the meshes an earlier ranking at ``ranking`` (a TSV written by ``corr
+    retrieve``; by their names in the collection, or their file names in a ranking without that column)
+    holds; none where there is no readable one."""
     import csv
 
     try:
@@ -324,4 +374,5 @@ def _ranked_mesh_stems(ranking: Path) -> set[str]:
         return set()
     if not rows or rows[0][:3] != ["rank", "energy", "mesh"]:
         return set()
-    return {Path(row[2]).stem for row in rows[1:] if len(row) > 2}
+    named = len(rows[0]) > 4 and rows[0][4] == "name"
+    return {picture_key(row[4] if named and len(row) > 4 else Path(row[2]).name) for row in rows[1:] if len(row) > 2}

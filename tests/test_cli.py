@@ -131,6 +131,31 @@ def test_match_contour_and_retrieve(tmp_path, capsys):
     assert sorted(p.name for p in tmp_path.glob("rank.*.png")) == [f"rank.1-{ranked[0]}.png"]
 
 
+def test_retrieve_from_a_collection_with_a_folder_per_class(tmp_path, capsys):
+    """Meshes of one file name in two class folders: each ranked under its name in the collection, each with a
+    picture of its own, and the query's class found among the folders."""
+    collection = tmp_path / "collection"
+    for name, source in (("wolf/0.off", "wolf0.off"), ("wolf/1.off", "wolf1.off"), ("cat/0.off", "cat0.off")):
+        (collection / name).parent.mkdir(parents=True, exist_ok=True)
+        (collection / name).write_bytes((TOSCA / source).read_bytes())
+    query = tmp_path / "wolf-7.gif"
+    query.write_bytes((SILHOUETTES / "mpeg7" / "dog-1.gif").read_bytes())
+    assert main(["retrieve", str(query), str(collection), "--jobs", "1", "--n-contour", "50",
+                 "-o", str(tmp_path / "rank.tsv"), "-q", "--pictures", "--top", "3"]) == 0
+    text = capsys.readouterr().out
+    assert "average precision for class 'wolf'" in text and "cat/0.off" in text
+    rows = [line.split("\t") for line in (tmp_path / "rank.tsv").read_text().strip().split("\n")]
+    assert rows[0] == ["rank", "energy", "mesh", "error", "name"]
+    names = [row[4] for row in rows[1:]]
+    assert sorted(names) == ["cat/0.off", "wolf/0.off", "wolf/1.off"]
+    pictures = sorted(p.name for p in tmp_path.glob("rank.*.png"))
+    assert pictures == sorted(f"rank.{rank}-{name[:-4].replace('/', '-')}.png" for rank, name in enumerate(names, 1))
+    # a second ranking under the same name replaces these pictures, found through the names column
+    assert main(["retrieve", str(query), str(collection), "--jobs", "1", "--n-contour", "50",
+                 "-o", str(tmp_path / "rank.tsv"), "-q", "--pictures", "--top", "1"]) == 0
+    assert len(list(tmp_path.glob("rank.*.png"))) == 1
+
+
 def test_match_contour_bad_input(tmp_path, capsys):
     t = np.linspace(0, 1.2 * np.pi, 30)
     np.savetxt(tmp_path / "open.txt", np.column_stack([np.cos(t), np.sin(t)]))

@@ -708,6 +708,25 @@ def test_average_precision_by_hand():
     assert average_precision(["b", "b"], "a") == 0.0
 
 
+def test_a_collection_is_read_with_its_subfolders_and_a_subfolder_names_the_class(tmp_path):
+    """``collection/cat/0.off`` is class ``cat`` (class-per-folder benchmarks), ``collection/wolf3.off`` class
+    ``wolf``; hidden folders and links to folders are left out; the names are relative to the collection."""
+    from corrlib.retrieval import collection_name, mesh_files
+
+    for name in ("cat/0.off", "cat/1.OBJ", "dog/deep/a.ply", "wolf3.off", ".trash/x.off", "cat/notes.txt"):
+        (tmp_path / name).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / name).write_text("")
+    (tmp_path / "again").symlink_to(tmp_path / "cat", target_is_directory=True)
+    files = mesh_files(tmp_path)
+    assert [collection_name(f, tmp_path) for f in files] == ["cat/0.off", "cat/1.OBJ", "dog/deep/a.ply", "wolf3.off"]
+    assert [class_of(f, tmp_path) for f in files] == ["cat", "cat", "dog", "wolf"]
+    assert class_of(tmp_path / "cat" / "0.off") == "0"  # without the collection's folder: the file name alone
+    assert collection_name(TOSCA / "cat0.off", tmp_path) == "cat0.off"  # outside the collection
+    (tmp_path / "empty").mkdir()
+    with pytest.raises(InputError, match="no mesh files .* in it or its subfolders"):
+        mesh_files(tmp_path / "empty")
+
+
 def test_map_interval_against_the_exact_bootstrap_distribution():
     """The percentile bootstrap of a mean over two queries has an exact distribution: with APs 0 and 1 the
     resampled mean is Binomial(q, 1/2) / q."""

@@ -98,7 +98,7 @@ def retrieval_job(query, folder: str, params=None):
 
     def factory(token):
         files = mesh_files(folder)
-        hits = yield from retrieve(query, files, params, token=token)
+        hits = yield from retrieve(query, files, params, token=token, root=folder)
         meshes = []
         for hit in hits:
             token.raise_if_cancelled()
@@ -174,7 +174,7 @@ class RetrievalView(QWidget):
         self.gallery.clear()
         for rank, (hit, mesh) in enumerate(zip(hits, meshes), 1):
             png = b"" if mesh is None else self.thumbnails.png(mesh, hit.path_vertices, self.up, matched_outline(hit))
-            text = f"{rank}. {hit.path.name}\n" + (f"E = {hit.energy:.4g}" if not hit.error else "failed")
+            text = f"{rank}. {hit.name}\n" + (f"E = {hit.energy:.4g}" if not hit.error else "failed")
             item = QListWidgetItem(text)
             if png:
                 pix = QPixmap()

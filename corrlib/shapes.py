@@ -192,6 +192,11 @@ def inspect_mesh(vertices, faces) -> list[Finding]:
     return findings
 
 
+#: the advice of the findings that ``corr repair`` (:mod:`corrlib.repair`) removes
+REPAIR_ADVICE = ("`corr repair FILE -o FIXED.off` writes the mesh repaired (welded, degenerate and repeated faces "
+                 "and loose parts dropped, each said) and the input vertex of each of its vertices, so that ground "
+                 "truth can follow; or repair it in a mesh editor")
+
 #: coordinates are usable while squared lengths (a contour) stay finite and non-zero in float64 (about 1e±308)
 COORDINATE_LIMITS = (1e-150, 1e150)
 #: a mesh's squared triangle areas are fourth powers of its coordinates (the Laplacian's cotangents divide by them)
@@ -238,13 +243,13 @@ def _face_findings(v: np.ndarray, f: np.ndarray) -> list[Finding]:
     if repeated.size:
         findings.append(
             Finding("error", "degenerate-face", f"{repeated.size} faces repeat a vertex index "
-                    f"(e.g. face {_examples(repeated)})")
+                    f"(e.g. face {_examples(repeated)}); {REPAIR_ADVICE}")
         )
     zero = np.setdiff1d(np.flatnonzero(degenerate_faces(v, f)), repeated)
     if zero.size:
         findings.append(
             Finding("error", "zero-area-face", f"{zero.size} faces have zero area: their vertices are collinear "
-                    f"or coincide to the precision of the coordinates (e.g. face {_examples(zero)})")
+                    f"or coincide to the precision of the coordinates (e.g. face {_examples(zero)}); {REPAIR_ADVICE}")
         )
     return findings
 
@@ -291,7 +296,7 @@ def _duplicate_face_findings(f: np.ndarray, n: int) -> list[Finding]:
     else:
         dup_faces = np.unique(sorted_faces, axis=0).shape[0]
     if dup_faces < f.shape[0]:
-        return [Finding("error", "duplicate-face", f"{f.shape[0] - dup_faces} faces are duplicates")]
+        return [Finding("error", "duplicate-face", f"{f.shape[0] - dup_faces} faces are duplicates; {REPAIR_ADVICE}")]
     return []
 
 
@@ -306,9 +311,7 @@ def _connectivity_findings(v: np.ndarray, f: np.ndarray) -> list[Finding]:
     if unused.size:
         findings.append(
             Finding("error", "unreferenced-vertex", f"{unused.size} vertices belong to no face "
-                    f"(e.g. vertex {_examples(unused)}); delete the loose vertices in a mesh editor, or keep the "
-                    "mesh's faces with corrlib.io.load_mesh(path, largest_component=True) (the indices of the "
-                    "vertices after them change, so renumber any ground truth)")
+                    f"(e.g. vertex {_examples(unused)}); {REPAIR_ADVICE}")
         )
     _, labels = _face_components(n, f)
     n_comp_used = np.unique(labels[used]).size
@@ -322,11 +325,9 @@ def _connectivity_findings(v: np.ndarray, f: np.ndarray) -> list[Finding]:
         if n_welded < n_comp_used:  # the parts share positions but not vertices
             advice = (f"{n - (position.max() + 1)} vertices repeat the position of another, so faces that "
                       f"meet there are not joined (welded, {n_welded} component{'s' if n_welded > 1 else ''} would "
-                      "remain); weld coincident vertices in a mesh editor (merge by distance), or save the mesh "
-                      "as .stl, which is welded when it is loaded")
+                      f"remain); {REPAIR_ADVICE}")
         else:
-            advice = ("delete the other parts in a mesh editor, or keep the largest with "
-                      "corrlib.io.load_mesh(path, largest_component=True)")
+            advice = f"to keep the largest part, {REPAIR_ADVICE}"
         findings.append(
             Finding("error", "components", f"the mesh has {n_comp_used} connected components (vertex counts "
                     f"{counts}); {advice}")

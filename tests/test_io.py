@@ -136,7 +136,7 @@ def test_largest_component_option(tmp_path):
     b.apply_translation([5, 0, 0])
     both = trimesh.util.concatenate([a, b])
     save_mesh(tmp_path / "two.off", both.vertices, both.faces)
-    with pytest.raises(MeshError, match="connected components.*keep the largest"):
+    with pytest.raises(MeshError, match="connected components.*keep the largest part, `corr repair"):
         load_mesh(tmp_path / "two.off")
     assert load_mesh(tmp_path / "two.off", largest_component=True).n_vertices == len(a.vertices)
 

@@ -1,0 +1,144 @@
+"""The repairs a mesh file may need before the methods accept it (``corr repair``), each one said.
+
+The loader refuses what the methods cannot use (:func:`corrlib.shapes.inspect_mesh`) and names it. Some of it
+has one obvious repair, the one mesh editors offer (MeshLab's "merge close vertices", "remove duplicate faces",
+"remove isolated pieces", "remove unreferenced vertices"):
+
+1. vertices at one position welded into one (a triangle soup, or parts exported with their seams split);
+2. faces dropped that repeat a vertex (welding can make them), that are flat to the coordinates' precision
+   (:func:`~corrlib.shapes.degenerate_faces`), or that repeat another face's three vertices;
+3. the largest connected component kept (a scan's loose fragments, a second body);
+4. vertices dropped that no face uses;
+5. the faces' windings made to agree (:func:`~corrlib.shapes.consistently_oriented`).
+
+What has no safe repair (NaN coordinates, indices out of range, edges of three faces) is refused, naming it.
+Every kept vertex keeps its index in the input (:attr:`Repaired.source_index`), so that ground truth and maps
+given on the input can be carried to the repaired mesh.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+import scipy.sparse as sp
+from scipy.sparse.csgraph import connected_components
+
+from corrlib.errors import MeshError
+from corrlib.shapes import consistently_oriented, degenerate_faces, inspect_mesh
+
+#: findings that no repair here removes: the input is refused with them
+UNREPAIRABLE = frozenset({"vertices-type", "faces-type", "vertices-shape", "faces-shape", "empty", "non-finite",
+                          "coordinate-scale", "index-range"})
+
+
+@dataclass
+class Repaired:
+    """A repaired mesh.
+
+    Attributes
+    ----------
+    vertices : (m, 3) float
+    faces : (g, 3) int
+    source_index : (m,) int
+        The input vertex each vertex is (the first of those welded into it).
+    notes : list of str
+        What was done, one repair per entry; empty when the input needed nothing.
+    """
+
+    vertices: np.ndarray
+    faces: np.ndarray
+    source_index: np.ndarray
+    notes: list[str] = field(default_factory=list)
+
+
+def repaired(vertices, faces, *, name: str = "mesh") -> Repaired:
+    """The mesh with the repairs of the module applied in their order; a :class:`~corrlib.errors.MeshError`
+    naming ``name`` and the problem where one is left that has no repair here.
+
+    Parameters
+    ----------
+    vertices : (n, 3) array_like of float
+    faces : (f, 3) array_like of int
+    name : str
+        Shown in error messages (the file name).
+    """
+    refused = [fd for fd in inspect_mesh(vertices, faces) if fd.level == "error" and fd.code in UNREPAIRABLE]
+    if refused:
+        raise MeshError(f"{name}: {refused[0].message} (no repair for this)")
+    v, f = np.asarray(vertices, dtype=np.float64), np.asarray(faces, dtype=np.int64)
+    notes: list[str] = []
+    v, f, source = _welded(v, f, notes)
+    f = _without_bad_faces(v, f, notes)
+    if f.shape[0] == 0:
+        raise MeshError(f"{name}: no face is left after dropping the degenerate ones")
+    f = _largest_component(v.shape[0], f, notes)
+    v, f, source = _without_unused_vertices(v, f, source, notes)
+    f, turned = consistently_oriented(f, v.shape[0])
+    if turned:
+        notes.append(f"turned {_count(turned, 'face', 'faces')} to agree with their neighbours' winding")
+    left = [fd for fd in inspect_mesh(v, f) if fd.level == "error"]
+    if left:
+        raise MeshError(f"{name}: after the repairs ({'; '.join(notes) or 'none needed'}), {left[0].message}")
+    return Repaired(v, f, source, notes)
+
+
+def _welded(v: np.ndarray, f: np.ndarray, notes: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Vertices at exactly one position merged, in the order of their first occurrence."""
+    _, first, position = np.unique(v, axis=0, return_index=True, return_inverse=True)
+    position = position.ravel()
+    if first.size == v.shape[0]:
+        return v, f, np.arange(v.shape[0])
+    order = np.argsort(first)  # the merged vertices in input order
+    rank = np.empty_like(order)
+    rank[order] = np.arange(order.size)
+    notes.append(f"welded {_count(v.shape[0] - first.size, 'vertex', 'vertices')} into others at the same position")
+    return v[first[order]], rank[position[f]], first[order]
+
+
+def _without_bad_faces(v: np.ndarray, f: np.ndarray, notes: list[str]) -> np.ndarray:
+    """Faces that repeat a vertex, are flat to the coordinates' precision, or repeat another face, dropped."""
+    repeats = (f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 0] == f[:, 2])
+    flat = ~repeats & degenerate_faces(v, f)
+    keep = ~(repeats | flat)
+    _, first = np.unique(np.sort(f, axis=1)[keep], axis=0, return_index=True)
+    duplicates = int(keep.sum()) - first.size
+    kept = np.flatnonzero(keep)[np.sort(first)]
+    for count, one, many in ((int(repeats.sum()), "repeats a vertex", "repeat a vertex"),
+                             (int(flat.sum()), "has zero area", "have zero area"),
+                             (duplicates, "repeats another face", "repeat another face")):
+        if count:
+            notes.append(f"dropped {_count(count, 'face that ' + one, 'faces that ' + many)}")
+    return f[kept]
+
+
+def _largest_component(n: int, f: np.ndarray, notes: list[str]) -> np.ndarray:
+    """The faces of the connected component with the most vertices."""
+    edges = np.concatenate([f[:, [0, 1]], f[:, [1, 2]]])
+    graph = sp.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
+    count, labels = connected_components(graph, directed=False)
+    used = np.zeros(n, dtype=bool)
+    used[f.ravel()] = True
+    sizes = np.bincount(labels[used], minlength=count)
+    if np.count_nonzero(sizes) <= 1:
+        return f
+    largest = int(np.argmax(sizes))
+    notes.append(f"kept the largest of {np.count_nonzero(sizes)} connected components ({sizes[largest]} of "
+                 f"{int(used.sum())} vertices in faces)")
+    return f[labels[f[:, 0]] == largest]
+
+
+def _without_unused_vertices(v: np.ndarray, f: np.ndarray, source: np.ndarray,
+                             notes: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The vertices that faces use, renumbered in their order."""
+    used = np.zeros(v.shape[0], dtype=bool)
+    used[f.ravel()] = True
+    if used.all():
+        return v, f, source
+    notes.append(f"dropped {_count(int((~used).sum()), 'vertex', 'vertices')} that no face uses")
+    index = np.cumsum(used) - 1
+    return v[used], index[f], source[used]
+
+
+def _count(n: int, one: str, many: str) -> str:
+    return f"{n} {one if n == 1 else many}"

@@ -167,8 +167,7 @@ def outline_fit(curve: np.ndarray, outline: np.ndarray, frame: ViewFrame) -> flo
         raise ParameterError(f"curve must be (p, 3) and outline (p, 2) with the same p, got {curve.shape} and "
                              f"{outline.shape}")
     a = outline[:, 0] + 1j * outline[:, 1]
-    centred = curve - curve.mean(axis=0)
-    b = centred @ frame.right + 1j * (centred @ frame.up)
+    b = curve @ frame.right + 1j * (curve @ frame.up)
     a, b = a - a.mean(), b - b.mean()
     norms = float(np.vdot(a, a).real) * float(np.vdot(b, b).real)
     return 0.0 if norms <= 0.0 else float(abs(np.vdot(b, a)) ** 2 / norms)

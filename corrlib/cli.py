@@ -838,7 +838,7 @@ REPAIR_INDEX_SUFFIX = ".source_vertices.txt"
 
 
 def _add_repair_parser(sub) -> None:
-    p = _command(sub, "repair", "weld, drop degenerate faces and loose parts: a mesh the methods accept",
+    p = _command(sub, "repair", "weld, drop bad faces and loose parts of a mesh",
                  "Write a mesh with the repairs a file may need before the methods accept it: vertices at one "
                  "position welded; faces dropped that repeat a vertex, have zero area or repeat another face; the "
                  "largest connected component kept; unused vertices dropped; face windings made to agree. Each "

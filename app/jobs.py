@@ -8,6 +8,7 @@ the GUI-thread slots turn them into widgets and VTK objects without computing an
 from __future__ import annotations
 
 from dataclasses import dataclass
+from pathlib import Path
 
 import numpy as np
 
@@ -42,6 +43,24 @@ class LoadedShape:
     path: str
     shape: TriMesh | Contour2D
     description: str
+
+
+def repair_job(path: str, out: str):
+    """Job factory: repair the mesh ``path`` into ``out`` (:func:`corrlib.repair.repair_file`, with the file of
+    its input vertices beside it) and load the result; returns a :class:`LoadedShape` whose description says
+    what was repaired."""
+
+    def factory(_token):
+        from corrlib.repair import repair_file
+
+        yield Progress("repairing", -1.0, str(path))
+        repaired = repair_file(path, out, what="the repaired mesh")
+        yield Progress("loading", -1.0, str(out))
+        shape = read_shape(out)
+        notes = "; ".join(repaired.notes) or "no repair was needed"
+        return LoadedShape(str(out), shape, f"{describe(shape)}\n  repaired from {Path(path).name}: {notes}")
+
+    return factory
 
 
 def read_shape(path: str) -> TriMesh | Contour2D:

@@ -31,7 +31,7 @@ from PySide6.QtWidgets import (
 
 import corrlib
 from app.gui_gc import STUDIO_THREAD_PREFIX, collect_on_gui_thread
-from app.jobs import LoadedShape, MethodOutcome, describe, load_job, method_job
+from app.jobs import LoadedShape, MethodOutcome, describe, load_job, method_job, repair_job
 from app.param_form import ParamForm
 from app.sketch import SketchPanel
 from app.views.compare import CompareView
@@ -43,7 +43,7 @@ from app.worker import SHUTDOWN_TIMEOUT_S, JobRunner, progress_text
 from corrlib.errors import CorrError
 from corrlib.io import CONTOUR_SUFFIXES, dialog_filter
 from corrlib.methods import all_methods, methods_for
-from corrlib.shapes import Contour2D, TriMesh
+from corrlib.shapes import REPAIR_ADVICE, Contour2D, TriMesh
 
 MESH_FILTER = dialog_filter("mesh", all_files=False)  # file-dialog filters: from corrlib.io.FORMATS
 CONTOUR_FILTER = dialog_filter("contour", all_files=False)
@@ -186,9 +186,9 @@ class MainWindow(QMainWindow):
         self.runner.cancelled.connect(self._on_cancelled)
         self._compare_queue: list[str] = []
         self._compare_current = ""  # the compared method running (named in its failure)
-        # files waiting to be loaded (one load job at a time, in request order): (path, which, then)
-        self._load_queue: list[tuple[str, str, Callable[[], None] | None]] = []
-        self._loading: tuple[str, str, Callable[[], None] | None] | None = None
+        # files waiting to be loaded (one load job at a time, in request order): (path, which, then, job factory)
+        self._load_queue: list[tuple[str, str, Callable[[], None] | None, object]] = []
+        self._loading: tuple[str, str, Callable[[], None] | None, object] | None = None
 
         self.tabs = QTabWidget()
         self.pair_view = PairView()
@@ -318,6 +318,7 @@ class MainWindow(QMainWindow):
         for text, slot, shortcut in (("Open source…", lambda: self.open_dialog("source"), QKeySequence.Open),
                                      ("Open target…", lambda: self.open_dialog("target"), None),
                                      ("Open contour / silhouette…", self.open_contour_dialog, None),
+                                     ("Repair and open a mesh…", self.repair_dialog, None),
                                      ("Load ground truth (.vts pair)…", self.open_gt_dialog, None),
                                      ("Texture image…", self.open_texture_dialog, None),
                                      ("Demo pair", self.load_demo, None),
@@ -512,6 +513,22 @@ class MainWindow(QMainWindow):
         if path:
             self.load_file(path, which)
 
+    def repair_dialog(self) -> None:
+        """A mesh the loader refuses (loose parts, repeated or flat faces, split seams): repaired into a new file
+        beside it, then opened as the source, or as the target where a source is open."""
+        path, _ = QFileDialog.getOpenFileName(self, "Mesh to repair", "", MESH_FILTER)
+        if not path:
+            return
+        suggested = str(Path(path).with_name(Path(path).stem + ".repaired.off"))
+        out, _ = QFileDialog.getSaveFileName(self, "Save the repaired mesh as", suggested, MESH_FILTER)
+        if out:
+            self.repair_and_load(path, out, "target" if self.source is not None else "source")
+
+    def repair_and_load(self, path: str, out: str, which: str = "source") -> None:
+        """Repair the mesh ``path`` into ``out`` (:func:`app.jobs.repair_job`) and use it as ``which``; queued
+        with the other loads, a failure shown as an error."""
+        self.load_file(out, which, job=repair_job(path, out))
+
     def open_contour_dialog(self) -> None:
         path, _ = QFileDialog.getOpenFileName(self, "Open contour or silhouette", "", CONTOUR_FILTER)
         if path:
@@ -568,13 +585,14 @@ class MainWindow(QMainWindow):
         except CorrError as exc:
             self.job_panel.write(f"ground truth beside the meshes not used: {exc}")
 
-    def load_file(self, path: str, which: str = "source", then: Callable[[], None] | None = None) -> None:
+    def load_file(self, path: str, which: str = "source", then: Callable[[], None] | None = None, job=None) -> None:
         """Load a mesh or contour as source/target in the worker (queued: files load one after another).
 
         Bad files produce a message, never a crash. ``then`` is called on the GUI
         thread once this file is loaded and set (not if loading fails or is cancelled).
+        ``job``: the job factory that produces the :class:`~app.jobs.LoadedShape` (default: :func:`load_job`).
         """
-        self._load_queue.append((str(path), which, then))
+        self._load_queue.append((str(path), which, then, job))
         if self._loading is None:
             self._next_load()
 
@@ -587,13 +605,13 @@ class MainWindow(QMainWindow):
         if self._loading is None:
             self.loading_finished.emit()
             return
-        path, which, _then = self._loading
+        path, which, _then, job = self._loading
         self._cancel_method_jobs()  # the pair is changing: a running method's result would not fit it
         self.job_panel.started(f"loading {which}: {Path(path).name}")
-        self.runner.start(LOAD_KEY, load_job(path))
+        self.runner.start(LOAD_KEY, load_job(path) if job is None else job)
 
     def _on_loaded(self, loaded: LoadedShape) -> None:
-        _path, which, then = self._loading
+        _path, which, then, _job = self._loading
         self.job_panel.stopped(f"loaded {loaded.shape.name}")
         if isinstance(loaded.shape, Contour2D):
             self.sketch.show_contour(loaded.shape)
@@ -693,7 +711,7 @@ class MainWindow(QMainWindow):
 
     def _free_slot(self) -> str:
         """"source" while there is no source (loaded or being loaded), else "target"."""
-        pending = [which for _path, which, _then in ([self._loading] if self._loading else []) + self._load_queue]
+        pending = [entry[1] for entry in ([self._loading] if self._loading else []) + self._load_queue]
         return "source" if self.source is None and "source" not in pending else "target"
 
     # ------------------------------------------------------------------ methods and jobs
@@ -784,6 +802,8 @@ class MainWindow(QMainWindow):
             return
         if key != LOAD_KEY:
             self._compare_queue.clear()
+        elif REPAIR_ADVICE in message:  # the studio's way to the same repair
+            message += "\n\nIn the studio: File ▸ Repair and open a mesh…"
         self.show_error(message)
         if key == LOAD_KEY:
             self._next_load()

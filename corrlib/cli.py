@@ -91,27 +91,13 @@ def cmd_info(args) -> int:
 
 
 def cmd_repair(args) -> int:
-    from corrlib.io import check_output_file, check_outputs_apart, read_mesh_arrays, save_map, save_mesh, staged_output
-    from corrlib.repair import repaired
+    from corrlib.repair import index_file, repair_file
 
-    out = check_output_file(args.output, "-o")
-    index_file = out.with_name(out.stem + REPAIR_INDEX_SUFFIX)
-    check_output_file(index_file, "-o")
-    check_outputs_apart([("-o", out), ("-o", index_file)], [("the mesh", args.mesh)])
-    from corrlib.formats import suffixes
-
-    if out.suffix.lower() not in suffixes("mesh", writable=True):
-        raise CorrError(f"{out}: -o must name a mesh file ({', '.join(suffixes('mesh', writable=True))}), got "
-                        f"{out.suffix or 'no suffix'}")
-    vertices, faces = read_mesh_arrays(args.mesh)
-    result = repaired(vertices, faces, name=Path(args.mesh).name)
-    with staged_output(out.parent) as stage:
-        save_mesh(stage / out.name, result.vertices, result.faces)
-        save_map(stage / index_file.name, result.source_index)
+    result = repair_file(args.mesh, args.output)
     for note in result.notes or ["no repair was needed"]:
         print(f"{Path(args.mesh).name}: {note}")
-    print(f"wrote {out} ({len(result.vertices)} vertices, {len(result.faces)} faces) and {index_file} (the input "
-          "vertex of each vertex, one per line)")
+    print(f"wrote {args.output} ({len(result.vertices)} vertices, {len(result.faces)} faces) and "
+          f"{index_file(args.output)} (the input vertex of each vertex, one per line)")
     return 0
 
 
@@ -833,16 +819,12 @@ def _add_info_parser(sub) -> None:
     p.add_argument("--json", action="store_true", help="print JSON")
 
 
-#: beside ``corr repair``'s output ``OUT.off``: ``OUT.source_vertices.txt``, the input vertex of each vertex
-REPAIR_INDEX_SUFFIX = ".source_vertices.txt"
-
-
 def _add_repair_parser(sub) -> None:
     p = _command(sub, "repair", "weld, drop bad faces and loose parts of a mesh",
                  "Write a mesh with the repairs a file may need before the methods accept it: vertices at one "
                  "position welded; faces dropped that repeat a vertex, have zero area or repeat another face; the "
                  "largest connected component kept; unused vertices dropped; face windings made to agree. Each "
-                 "repair done is said. Beside the mesh, OUT" + REPAIR_INDEX_SUFFIX + " gives the input vertex of "
+                 "repair done is said. Beside the mesh, OUT.source_vertices.txt gives the input vertex of "
                  "each vertex (to carry ground truth). Refused, with the reason, where a problem has no such "
                  "repair (NaN coordinates, edges of three faces).", func=cmd_repair)
     p.add_argument("mesh")

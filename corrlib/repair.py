@@ -19,12 +19,13 @@ given on the input can be carried to the repaired mesh.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import numpy as np
 import scipy.sparse as sp
 from scipy.sparse.csgraph import connected_components
 
-from corrlib.errors import MeshError
+from corrlib.errors import InputError, MeshError
 from corrlib.shapes import consistently_oriented, degenerate_faces, inspect_mesh
 
 #: findings that no repair here removes: the input is refused with them
@@ -81,6 +82,48 @@ def repaired(vertices, faces, *, name: str = "mesh") -> Repaired:
     if left:
         raise MeshError(f"{name}: after the repairs ({'; '.join(notes) or 'none needed'}), {left[0].message}")
     return Repaired(v, f, source, notes)
+
+
+#: beside a repaired mesh ``OUT.off``: ``OUT.source_vertices.txt``, the input vertex of each of its vertices
+INDEX_SUFFIX = ".source_vertices.txt"
+
+
+def index_file(out) -> Path:
+    """The file beside the repaired mesh ``out`` that gives the input vertex of each of its vertices."""
+    out = Path(out)
+    return out.with_name(out.stem + INDEX_SUFFIX)
+
+
+def check_repair_outputs(mesh, out, what: str = "-o") -> Path:
+    """Before any work: ``out`` (and its :func:`index_file`) can be written, is a mesh format that can be written,
+    and is not the input ``mesh``; returns ``out`` as a Path. :class:`~corrlib.errors.InputError` naming it
+    (as ``what``: the option or field that gave it)."""
+    from corrlib.formats import suffixes
+    from corrlib.io import check_output_file, check_outputs_apart
+
+    out = check_output_file(out, what)
+    check_output_file(index_file(out), what)
+    check_outputs_apart([(what, out), (what, index_file(out))], [("the mesh", mesh)])
+    writable = suffixes("mesh", writable=True)
+    if out.suffix.lower() not in writable:
+        raise InputError(f"{out}: {what} must name a mesh file ({', '.join(writable)}), got "
+                         f"{out.suffix or 'no suffix'}")
+    return out
+
+
+def repair_file(mesh, out, what: str = "-o") -> Repaired:
+    """``corr repair``: read ``mesh``, repair it (:func:`repaired`) and write it at ``out`` with its
+    :func:`index_file`, both or neither; the outputs are checked first (:func:`check_repair_outputs`, ``what``
+    names ``out`` in its messages)."""
+    from corrlib.io import read_mesh_arrays, save_map, save_mesh, staged_output
+
+    out = check_repair_outputs(mesh, out, what)
+    vertices, faces = read_mesh_arrays(mesh)
+    result = repaired(vertices, faces, name=Path(mesh).name)
+    with staged_output(out.parent) as stage:
+        save_mesh(stage / out.name, result.vertices, result.faces)
+        save_map(stage / index_file(out).name, result.source_index)
+    return result
 
 
 def _welded(v: np.ndarray, f: np.ndarray, notes: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:

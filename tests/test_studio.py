@@ -238,6 +238,35 @@ def test_ground_truth_beside_the_meshes_is_loaded_with_them(qtbot, window, tmp_p
     assert "3 rows" in blocker.args[0] and "correspond one to one" in blocker.args[0] and window.gt is None
 
 
+def test_a_mesh_with_loose_parts_is_repaired_into_a_new_file_and_opened(qtbot, window, tmp_path):
+    """The loader refuses a mesh with a loose part and says where the studio repairs it; the repair writes the
+    mesh and its input vertices beside it, opens it, and the Shapes dock says what was repaired."""
+    from corrlib.io import load_mesh, save_mesh
+
+    wolf = load_mesh(TOSCA / "wolf0.off")
+    tetrahedron = np.array([[0, 0, 0], [1, 0, 0], [0, 1, 0], [0, 0, 1]], float) * 5 + wolf.vertices.max(axis=0) + 50
+    n = wolf.n_vertices
+    save_mesh(tmp_path / "scan.ply", np.vstack([wolf.vertices, tetrahedron]),
+              np.vstack([wolf.faces, [[n, n + 2, n + 1], [n, n + 1, n + 3], [n, n + 3, n + 2], [n + 1, n + 2, n + 3]]]))
+    with qtbot.waitSignal(window.error_shown, timeout=30_000) as blocker:
+        window.load_file(str(tmp_path / "scan.ply"), "source")
+    assert "2 connected components" in blocker.args[0] and "File ▸ Repair and open a mesh…" in blocker.args[0]
+    wait_loaded(qtbot, window)
+    assert window.source is None
+    window.repair_and_load(str(tmp_path / "scan.ply"), str(tmp_path / "scan.repaired.off"), "source")
+    wait_loaded(qtbot, window)
+    assert window.source is not None and window.source.n_vertices == n
+    assert "repaired from scan.ply: kept the largest of 2 connected components" in window.source_info.text()
+    index = np.loadtxt(tmp_path / "scan.repaired.source_vertices.txt", dtype=int)
+    assert np.array_equal(index, np.arange(n))
+    # a repair that cannot be done is an error, and the window goes on
+    with qtbot.waitSignal(window.error_shown, timeout=30_000) as blocker:
+        window.repair_and_load(str(tmp_path / "scan.ply"), str(tmp_path / "scan.stl"), "target")
+    assert "scan.stl: the repaired mesh must name a mesh file" in blocker.args[0]
+    wait_loaded(qtbot, window)
+    assert window.target is None and window.source.n_vertices == n
+
+
 def test_cancel_during_a_run(qtbot, window):
     load_demo(qtbot, window)
     set_params(window, "kernel-matching", n_eigs=500, n_seeds=3000)

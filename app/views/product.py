@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QVBoxLayout, QWidget
 
-from app.views.camera import FramedView, ShapeDisplay, viewport_aspect
+from app.views.camera import DISPLAY_FRAME, FramedView, ShapeDisplay, viewport_aspect
 from app.views.scene import LABEL_FONT_SIZE, PLAIN_COLOR, LazyPlotter, hue_colors, polydata, polyline
+from corrlib.viewing import outline_frame
 
 CURVE_WIDTH = 4  # line width of the query contour
 CONTOUR_MARGIN = 1.05  # the query contour fills its viewport up to this margin
@@ -78,9 +79,6 @@ class ProductView(QWidget, FramedView):
 
     def _draw_contour_match(self, contour_points: np.ndarray, mesh, path_vertices: np.ndarray,
                             path_contour_index: np.ndarray, energy: float) -> None:
-        from app.views.camera import DISPLAY_FRAME
-        from corrlib.viewing import outline_frame
-
         self._match = (contour_points, mesh, path_vertices, path_contour_index, energy)
         p = self.plotter
         p.clear_actors()

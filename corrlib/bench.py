@@ -45,7 +45,7 @@ from pathlib import Path
 import numpy as np
 
 from corrlib.errors import CorrError, FileFormatError, InputError, ParameterError
-from corrlib.io import read_text, suffixes
+from corrlib.io import lost_working_folder, read_text, suffixes
 from corrlib.parallel import job_executor
 from corrlib.progress import peak_rss_mb
 
@@ -75,7 +75,7 @@ def load_dataset(folder, pairs_file=None, *, require_pairs: bool = True) -> Data
     """
     root = Path(folder)
     if not root.is_dir():
-        raise FileFormatError(f"{root}: not a folder")
+        raise FileFormatError(f"{root}: not a folder{lost_working_folder(root)}")
     shapes = {p.stem: p for p in sorted(root.iterdir()) if p.suffix.lower() in MESH_SUFFIXES}
     if not shapes:
         raise FileFormatError(f"{root}: no meshes ({', '.join(MESH_SUFFIXES)})")

@@ -70,9 +70,11 @@ def _info_contour(path: Path) -> dict:
 def cmd_info(args) -> int:
     from corrlib.io import shape_kind
 
+    from corrlib.io import lost_working_folder
+
     path = Path(args.file)
     if not path.exists():
-        raise FileFormatError(f"{path}: file not found")
+        raise FileFormatError(f"{path}: file not found{lost_working_folder(path)}")
     info, error = _info_mesh(path) if shape_kind(path) == "mesh" else (_info_contour(path), None)
     if args.json:
         print(json.dumps(info, indent=2))

@@ -78,6 +78,7 @@ from scipy.spatial import cKDTree
 
 from corrlib.errors import CorrError, InputError, ParameterError
 from corrlib.geometry.sections import SilhouetteProjection
+from corrlib.outputs import lost_working_folder
 from corrlib.shapes import Contour2D, TriMesh
 
 PLANES = ("main", "symmetry", "cross")
@@ -430,7 +431,7 @@ def sketch_queries(folder) -> list[SketchQuery]:
     folder = Path(folder)
     if not folder.is_dir():
         raise InputError(f"{folder}: not a folder (expected sketches: NAME{SKETCH_CONTOUR_SUFFIX}, NAME.off, "
-                         f"NAME{PART_LABELS_SUFFIX})")
+                         f"NAME{PART_LABELS_SUFFIX}){lost_working_folder(folder)}")
     found = []
     for contour in sorted(folder.glob(f"*{SKETCH_CONTOUR_SUFFIX}")):
         name = contour.name[:-len(SKETCH_CONTOUR_SUFFIX)]

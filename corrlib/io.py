@@ -56,6 +56,7 @@ from corrlib.outputs import (  # noqa: F401  (the safe writers, re-exported)
     check_outputs_apart,
     ensure_output_folder,
     exclusive_folder,
+    lost_working_folder,
     os_reason,
     remove_created_empty_folders,
     staged_output,
@@ -68,7 +69,7 @@ from corrlib.shapes import Contour2D, TriMesh, inspect_contour
 def _require_file(path) -> Path:
     path = Path(path)
     if not path.exists():
-        raise FileFormatError(f"{path}: file not found")
+        raise FileFormatError(f"{path}: file not found{lost_working_folder(path)}")
     if not path.is_file():
         raise FileFormatError(f"{path}: not a file")
     return path

@@ -86,6 +86,9 @@ def check_output_file(path, what: str = "output") -> Path:
         raise InputError(f"{path}: the {what} path ends with a separator, so it names a folder; expected a file "
                          f"name")
     path = Path(path)
+    lost = lost_working_folder(path)
+    if lost:
+        raise InputError(f"{path}: cannot write {what} there{lost}")
     try:
         is_folder = path.is_dir()
     except OSError as exc:  # a folder on the way cannot be entered
@@ -228,16 +231,34 @@ def remove_replaced_files(folder: Path, replaces, kept: set[str]) -> None:
                                  f"be removed ({os_reason(exc)})") from None
 
 
+def lost_working_folder(path) -> str:
+    """``": why"``, to append to a message that a relative ``path`` cannot be found or written, where the reason is
+    that the working folder itself is gone (deleted while a shell was in it: every relative path then names
+    nothing); "" otherwise."""
+    if Path(path).is_absolute():
+        return ""
+    try:
+        os.getcwd()
+    except FileNotFoundError:
+        return (": it is relative to the working folder, which no longer exists (deleted while in use); change "
+                "to an existing folder or give an absolute path")
+    return ""
+
+
 def ensure_output_folder(path, what: str = "output") -> Path:
     """Create ``path`` (with parents) and check that files can be written in it, before any work.
 
     Raises
     ------
     InputError
-        Naming the folder: it is a file, lies under a file, or is not writable.
+        Naming the folder: it is a file, lies under a file, is not writable, or is relative to a working
+        folder that no longer exists.
     """
     if str(path) == "":
         raise InputError(f"the {what} folder is an empty path")
+    lost = lost_working_folder(path)
+    if lost:
+        raise InputError(f"{path}: cannot write {what} there{lost}")
     folder = _make_folder(Path(path), what)
     try:  # a probe file: permissions, read-only file systems
         fd, probe = tempfile.mkstemp(dir=folder, prefix=".write-check.")

@@ -27,7 +27,7 @@ from pathlib import Path
 import numpy as np
 
 from corrlib.errors import CorrError, InputError, ParameterError
-from corrlib.io import MESH_SUFFIXES, load_mesh
+from corrlib.io import MESH_SUFFIXES, load_mesh, lost_working_folder
 from corrlib.parallel import check_jobs, job_executor
 from corrlib.methods.contour3d import Contour3DParams, PreparedQuery, match_prepared, prepare_query
 from corrlib.progress import CancelToken, Progress, run
@@ -77,7 +77,7 @@ def files_under(folder, suffixes, what: str) -> list[Path]:
     is one of ``suffixes``, sorted by their names within it; an :class:`InputError` naming ``what`` it lacks."""
     folder = Path(folder)
     if not folder.is_dir():
-        raise InputError(f"{folder}: not a folder")
+        raise InputError(f"{folder}: not a folder{lost_working_folder(folder)}")
     found = []
     for here, folders, names in os.walk(folder):
         folders[:] = [name for name in folders if not name.startswith(".")]

@@ -635,3 +635,24 @@ def test_a_partial_match_can_be_evaluated_and_benchmarked(tmp_path, capsys):
     assert main(["refine", WOLF0, WOLF1, "--init", str(tmp_path / "partial.txt"), "-o", str(tmp_path / "r")]) == 2
     assert f"{np.count_nonzero(partial < 0)} source vertices are unmatched (-1, a partial match); a complete map " \
            "is needed" in capsys.readouterr().err
+
+
+def test_a_deleted_working_folder_is_named_as_the_reason(tmp_path, monkeypatch, capsys):
+    """Run from a folder deleted while a shell was in it, every relative path names nothing: the messages say
+    so (they said "file not found" or named the output "."), and absolute paths still work."""
+    gone = tmp_path / "gone"
+    gone.mkdir()
+    monkeypatch.chdir(gone)
+    gone.rmdir()
+    wolf0, wolf1 = str(TOSCA / "wolf0.off"), str(TOSCA / "wolf1.off")
+    reason = "relative to the working folder, which no longer exists"
+    for argv, named in ((["match", wolf0, wolf1, "--method", "descriptor-nn", "-o", "r"], "r: cannot write -o"),
+                        (["info", "wolf0.off"], "wolf0.off: file not found"),
+                        (["match", "wolf0.off", wolf1, "-o", str(tmp_path / "m")], "wolf0.off: file not found"),
+                        (["retrieve", wolf0, "collection"], "collection: not a folder"),
+                        (["bench", "dataset", "--method", "descriptor-nn", "-o", str(tmp_path / "b")],
+                         "dataset: not a folder")):
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert f"error: {named}" in err and reason in err, err
+    assert main(["match", wolf0, wolf1, "--method", "descriptor-nn", "-o", str(tmp_path / "abs"), "-q"]) == 0

@@ -68,9 +68,7 @@ def _info_contour(path: Path) -> dict:
 
 
 def cmd_info(args) -> int:
-    from corrlib.io import shape_kind
-
-    from corrlib.io import lost_working_folder
+    from corrlib.io import lost_working_folder, shape_kind
 
     path = Path(args.file)
     if not path.exists():

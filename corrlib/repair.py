@@ -7,9 +7,9 @@ has one obvious repair, the one mesh editors offer (MeshLab's "merge close verti
 1. vertices at one position welded into one (a triangle soup, or parts exported with their seams split);
 2. faces dropped that repeat a vertex (welding can make them), that are flat to the coordinates' precision
    (:func:`~corrlib.shapes.degenerate_faces`), or that repeat another face's three vertices;
-3. the largest connected component kept (a scan's loose fragments, a second body);
-4. vertices dropped that no face uses;
-5. the faces' windings made to agree (:func:`~corrlib.shapes.consistently_oriented`).
+3. the faces' windings made to agree (:func:`~corrlib.shapes.consistently_oriented`);
+4. the largest connected component kept (a scan's loose fragments, a second body), and the vertices dropped
+   that no face uses.
 
 What has no safe repair (NaN coordinates, indices out of range, edges of three faces) is refused, naming it.
 Every kept vertex keeps its index in the input (:attr:`Repaired.source_index`), so that ground truth and maps
@@ -22,11 +22,9 @@ from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
-import scipy.sparse as sp
-from scipy.sparse.csgraph import connected_components
 
 from corrlib.errors import InputError, MeshError
-from corrlib.shapes import consistently_oriented, degenerate_faces, inspect_mesh
+from corrlib.shapes import TriMesh, consistently_oriented, degenerate_faces, face_components, inspect_mesh
 
 #: findings that no repair here removes: the input is refused with them
 UNREPAIRABLE = frozenset({"vertices-type", "faces-type", "vertices-shape", "faces-shape", "empty", "non-finite",
@@ -57,6 +55,10 @@ def repaired(vertices, faces, *, name: str = "mesh") -> Repaired:
     """The mesh with the repairs of the module applied in their order; a :class:`~corrlib.errors.MeshError`
     naming ``name`` and the problem where one is left that has no repair here.
 
+    The last two steps and the final validation are the loader's own: the faces' windings made to agree
+    (:func:`~corrlib.shapes.consistently_oriented`) and :meth:`TriMesh.from_arrays` with
+    ``largest_component=True``, which keeps the largest component and the vertices its faces use.
+
     Parameters
     ----------
     vertices : (n, 3) array_like of float
@@ -73,15 +75,23 @@ def repaired(vertices, faces, *, name: str = "mesh") -> Repaired:
     f = _without_bad_faces(v, f, notes)
     if f.shape[0] == 0:
         raise MeshError(f"{name}: no face is left after dropping the degenerate ones")
-    f = _largest_component(v.shape[0], f, notes)
-    v, f, source = _without_unused_vertices(v, f, source, notes)
     f, turned = consistently_oriented(f, v.shape[0])
     if turned:
         notes.append(f"turned {_count(turned, 'face', 'faces')} to agree with their neighbours' winding")
-    left = [fd for fd in inspect_mesh(v, f) if fd.level == "error"]
-    if left:
-        raise MeshError(f"{name}: after the repairs ({'; '.join(notes) or 'none needed'}), {left[0].message}")
-    return Repaired(v, f, source, notes)
+    used = np.unique(f)
+    components = np.unique(face_components(v.shape[0], f)[1][used]).size
+    try:
+        mesh = TriMesh.from_arrays(v, f, name=name, largest_component=True)
+    except MeshError as exc:
+        raise MeshError(f"{exc} (after the repairs: {'; '.join(notes) or 'none needed'})") from None
+    if components > 1:
+        notes.append(f"kept the largest of {components} connected components ({mesh.n_vertices} of {used.size} "
+                     "vertices in faces)")
+    if used.size < v.shape[0]:
+        notes.append(f"dropped {_count(v.shape[0] - used.size, 'vertex', 'vertices')} that no face uses")
+    if mesh.original_indices is not None:
+        source = source[mesh.original_indices]
+    return Repaired(np.asarray(mesh.vertices), np.asarray(mesh.faces), source, notes)
 
 
 #: beside a repaired mesh ``OUT.off``: ``OUT.source_vertices.txt``, the input vertex of each of its vertices
@@ -153,34 +163,6 @@ def _without_bad_faces(v: np.ndarray, f: np.ndarray, notes: list[str]) -> np.nda
         if count:
             notes.append(f"dropped {_count(count, 'face that ' + one, 'faces that ' + many)}")
     return f[kept]
-
-
-def _largest_component(n: int, f: np.ndarray, notes: list[str]) -> np.ndarray:
-    """The faces of the connected component with the most vertices."""
-    edges = np.concatenate([f[:, [0, 1]], f[:, [1, 2]]])
-    graph = sp.coo_matrix((np.ones(len(edges)), (edges[:, 0], edges[:, 1])), shape=(n, n))
-    count, labels = connected_components(graph, directed=False)
-    used = np.zeros(n, dtype=bool)
-    used[f.ravel()] = True
-    sizes = np.bincount(labels[used], minlength=count)
-    if np.count_nonzero(sizes) <= 1:
-        return f
-    largest = int(np.argmax(sizes))
-    notes.append(f"kept the largest of {np.count_nonzero(sizes)} connected components ({sizes[largest]} of "
-                 f"{int(used.sum())} vertices in faces)")
-    return f[labels[f[:, 0]] == largest]
-
-
-def _without_unused_vertices(v: np.ndarray, f: np.ndarray, source: np.ndarray,
-                             notes: list[str]) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-    """The vertices that faces use, renumbered in their order."""
-    used = np.zeros(v.shape[0], dtype=bool)
-    used[f.ravel()] = True
-    if used.all():
-        return v, f, source
-    notes.append(f"dropped {_count(int((~used).sum()), 'vertex', 'vertices')} that no face uses")
-    index = np.cumsum(used) - 1
-    return v[used], index[f], source[used]
 
 
 def _count(n: int, one: str, many: str) -> str:

@@ -118,7 +118,7 @@ def area_weighted_normals(vertices: np.ndarray, faces: np.ndarray) -> np.ndarray
     return np.divide(out, norm, out=np.zeros_like(out), where=norm > 0)
 
 
-def _face_components(n_vertices: int, faces: np.ndarray) -> tuple[int, np.ndarray]:
+def face_components(n_vertices: int, faces: np.ndarray) -> tuple[int, np.ndarray]:
     """Connected components of the vertex graph induced by the faces."""
     rows = np.concatenate([faces[:, 0], faces[:, 1], faces[:, 2]])
     cols = np.concatenate([faces[:, 1], faces[:, 2], faces[:, 0]])
@@ -313,7 +313,7 @@ def _connectivity_findings(v: np.ndarray, f: np.ndarray) -> list[Finding]:
             Finding("error", "unreferenced-vertex", f"{unused.size} vertices belong to no face "
                     f"(e.g. vertex {_examples(unused)}); {REPAIR_ADVICE}")
         )
-    _, labels = _face_components(n, f)
+    _, labels = face_components(n, f)
     n_comp_used = np.unique(labels[used]).size
     if n_comp_used > 1:
         sizes = np.bincount(labels[used])
@@ -321,7 +321,7 @@ def _connectivity_findings(v: np.ndarray, f: np.ndarray) -> list[Finding]:
         counts = f"{', '.join(map(str, sizes[:5]))}{', ...' if sizes.size > 5 else ''}"
         _, position = np.unique(v, axis=0, return_inverse=True)
         position = position.ravel()
-        n_welded = np.unique(_face_components(n, position[f])[1][position[used]]).size
+        n_welded = np.unique(face_components(n, position[f])[1][position[used]]).size
         if n_welded < n_comp_used:  # the parts share positions but not vertices
             advice = (f"{n - (position.max() + 1)} vertices repeat the position of another, so faces that "
                       f"meet there are not joined (welded, {n_welded} component{'s' if n_welded > 1 else ''} would "
@@ -534,7 +534,7 @@ class TriMesh:
             v, f, findings = _as_arrays(vertices, faces)
             if not findings and f.size and f.min() >= 0 and f.max() < v.shape[0]:
                 n = v.shape[0]
-                _, labels = _face_components(n, f)
+                _, labels = face_components(n, f)
                 used = np.zeros(n, dtype=bool)
                 used[f.ravel()] = True
                 sizes = np.bincount(labels[used], minlength=labels.max() + 1)

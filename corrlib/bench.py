@@ -570,6 +570,19 @@ def _markdown(summary: dict) -> str:
 CONTOUR_SUFFIXES = suffixes("contour", readable=True)
 
 
+def _checked_retrieval_run(queries, out, jobs: int | None, scheduler: str | None) -> Path:
+    """Before any query of :func:`retrieval_benchmark` (each would fail alike): the workers' count or address,
+    and the output folder, made and writable and not among the queries, which the next run would read."""
+    from corrlib.outputs import check_outside, ensure_output_folder
+    from corrlib.parallel import check_jobs, check_scheduler_address
+
+    check_jobs(jobs)
+    if scheduler is not None:
+        check_scheduler_address(scheduler)
+    check_outside(out, queries, "output", "queries")
+    return ensure_output_folder(out)
+
+
 def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | None = None,
                         scheduler: str | None = None, callback=None) -> dict:
     """Rank a collection against every query; average precision per query and class, and their mean.
@@ -608,8 +621,7 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
 
     query_paths = files_under(queries, CONTOUR_SUFFIXES, "query silhouettes or contour files")
     meshes = mesh_files(collection)
-    out = Path(out)
-    out.mkdir(parents=True, exist_ok=True)
+    out = _checked_retrieval_run(queries, out, jobs, scheduler)
     rows, ranking, failed_meshes = [], [], set()
     for number, q in enumerate(query_paths, 1):
         name = collection_name(q, queries)

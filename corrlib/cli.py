@@ -96,6 +96,8 @@ def cmd_repair(args) -> int:
     result = repair_file(args.mesh, args.output)
     for note in result.notes or ["no repair was needed"]:
         print(f"{Path(args.mesh).name}: {note}")
+    for warning in result.warnings:  # what the loader still says and no repair here removes
+        print(f"warning: {Path(args.mesh).name}: {warning}", file=sys.stderr)
     print(f"wrote {args.output} ({len(result.vertices)} vertices, {len(result.faces)} faces) and "
           f"{index_file(args.output)} (the input vertex of each vertex, one per line)")
     return 0
@@ -192,13 +194,30 @@ def _warned(shape):
 
 
 def _parse_overrides(pairs: list[str]) -> dict:
+    """``--param NAME=VALUE`` items as a dict; a name given twice is refused (the last would win unseen)."""
     out = {}
     for item in pairs or []:
         if "=" not in item:
             raise CorrError(f"parameter {item!r} must be NAME=VALUE")
         key, value = item.split("=", 1)
+        if key.strip() in out:
+            raise CorrError(f"--param {key.strip()} is given twice ({out[key.strip()]!r} and {value.strip()!r}); "
+                            "give it once")
         out[key.strip()] = value.strip()
     return out
+
+
+def _with_options(overrides: dict, args, options: dict[str, str]) -> dict:
+    """``overrides`` with the options that set a parameter (``{parameter: option}``, e.g. ``{"k": "--k"}``) where
+    given; a parameter set by both its option and ``--param`` is refused (one would win unseen)."""
+    for key, option in options.items():
+        value = getattr(args, key, None)
+        if value is None:
+            continue
+        if key in overrides:
+            raise CorrError(f"{option} {value} and --param {key}={overrides[key]} both set {key}; give one")
+        overrides[key] = value
+    return overrides
 
 
 def _preload_plotting():
@@ -379,13 +398,13 @@ def cmd_match(args) -> int:
     initial = None
     if args.init:
         if args.init in _init_choices(spec):
-            overrides["init"] = args.init
+            overrides = _with_options(overrides, args, {"init": "--init"})
         elif spec.refines:
             initial = _initial_match(args.init, source, target, spec)
         else:
             raise CorrError(f"method {spec.name!r} does not take an initial map (--init)")
     if args.times:
-        overrides["times"] = args.times
+        overrides = _with_options(overrides, args, {"times": "--times"})
     plotting = _preload_plotting() if args.pictures else None
     result = solve(spec, source, target, callback=_progress_printer(args.quiet), initial=initial, **overrides)
     if plotting is not None:
@@ -395,7 +414,7 @@ def cmd_match(args) -> int:
     print(f"method {result.method}: energy {result.energy}, {result.timings.get('total', 0):.2f} s")
     if result.search is not None:
         print(f"path search: {result.search.describe()}")
-    _print_reversal_note(result)
+    _print_result_notes(result)
     _print_collapse_note(result, source, target)
     if result.energy_trace is not None:
         trace = result.energy_trace
@@ -422,7 +441,7 @@ def cmd_refine(args) -> int:
         plotting.join()
     _write_match_outputs(result, source, target, Path(args.output), quiet=args.quiet, pictures=args.pictures)
     print(f"method {result.method}: {result.timings.get('total', 0):.2f} s")
-    _print_reversal_note(result)
+    _print_result_notes(result)
     _print_collapse_note(result, source, target)
     kept = result.extras.get("kept_matches")
     if kept is not None and not args.quiet:
@@ -443,7 +462,7 @@ def _print_collapse_note(result, source, target) -> None:
         print(f"warning: {note}", file=sys.stderr)
 
 
-def _print_reversal_note(result) -> None:
+def _print_result_notes(result) -> None:
     """Warn (on stderr) when a mesh-to-mesh map reverses orientation on most of the shape, or was turned; note
     the other things a method tells about its result (copies, starts, a target matched unremeshed)."""
     from corrlib.methods.contour3d import remeshing_note
@@ -513,8 +532,12 @@ def _say_failures(failures: list[str], where: Path) -> None:
 
 def cmd_bench_retrieval(args) -> int:
     from corrlib.bench import retrieval_benchmark
+    from corrlib.io import ensure_output_folder
+    from corrlib.outputs import check_outside
 
     params = _contour3d_params(args, retrieval=True)  # named errors before any work
+    check_outside(args.output, args.queries, "-o", "queries")
+    ensure_output_folder(args.output, "-o")
 
     failures = []
 
@@ -535,9 +558,7 @@ def cmd_bench_retrieval(args) -> int:
 def cmd_bench_contour(args) -> int:
     from corrlib.contour_bench import contour_benchmark
 
-    params = _parse_overrides(args.param or [])
-    if args.n_contour is not None:
-        params["n_contour"] = args.n_contour
+    params = _with_options(_parse_overrides(args.param or []), args, {"n_contour": "--n-contour"})
     planes = [p.strip() for p in args.planes.split(",") if p.strip() and p.strip() != "none"]
 
     failures = []
@@ -675,10 +696,8 @@ def _query_contour(path: str, labels: str | None = None):
 def _contour3d_params(args, *, retrieval: bool = False):
     """``contour3d`` parameters from ``--param`` and the options ``--eps``, ``--k``, ``--n-contour``: the
     method's defaults, or a retrieval's (:func:`corrlib.retrieval.retrieval_params`) if ``retrieval``."""
-    overrides = _parse_overrides(args.param or [])
-    for key in ("eps", "k", "n_contour"):
-        if getattr(args, key, None) is not None:
-            overrides[key] = getattr(args, key)
+    overrides = _with_options(_parse_overrides(args.param or []), args,
+                              {"eps": "--eps", "k": "--k", "n_contour": "--n-contour"})
     if retrieval:
         from corrlib.retrieval import retrieval_params
 
@@ -707,6 +726,7 @@ def cmd_match_contour(args) -> int:
           f"{search.describe()}), {search.iterations} branch-and-bound "
           f"iterations, {search.dijkstra_runs} layered Dijkstra runs of {search.seconds_per_dijkstra:.3f} s, "
           f"{result.timings['total']:.2f} s in total")
+    _print_result_notes(result)  # e.g. a mesh matched as given because it could not be remeshed
     from corrlib.io import staged_output
 
     with staged_output(out.parent, replaces=_match_output_names(out.name).__contains__) as stage:
@@ -786,9 +806,21 @@ def cmd_perf(args) -> int:
 # ----------------------------------------------------------------------------- parser
 
 
+def _jobs_option(text: str) -> int:
+    """``--jobs``: 0 (all cores) or a positive number of worker processes; argparse names the option otherwise."""
+    try:
+        value = int(text)
+    except ValueError:
+        value = None
+    if value is None or value < 0:
+        raise argparse.ArgumentTypeError(f"expected 0 (all cores) or a positive number of worker processes, "
+                                         f"got {text}")
+    return value
+
+
 def _add_scale_out(p: argparse.ArgumentParser) -> None:
     """``--jobs`` / ``--scheduler`` of the commands that run independent jobs (see corrlib.parallel.job_executor)."""
-    p.add_argument("--jobs", type=int, help="local worker processes (default: all cores)")
+    p.add_argument("--jobs", type=_jobs_option, help="local worker processes (default: all cores)")
     p.add_argument("--scheduler", help="Dask scheduler address (tcp://host:8786) instead of local processes")
 
 

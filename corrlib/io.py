@@ -235,6 +235,18 @@ def _check_ascii_ply_counts(path: Path) -> None:
                               f"file has {lines} data lines")
 
 
+def _missing_vertex(exc: IndexError, path: Path) -> str:
+    """`` (vertex I, counting from B as FORMAT does; the file has N)`` from numpy's index error in a reader (its
+    0-based index, which an OBJ file writes from 1), or the error's own text where it says something else."""
+    found = re.search(r"index (-?\d+) is out of bounds for axis 0 with size (\d+)", str(exc))
+    if found is None:
+        return f" ({exc})"
+    index, size = int(found.group(1)), int(found.group(2))
+    base = 1 if path.suffix.lower() == ".obj" else 0
+    return (f" (vertex {index + base}, counting from {base} as {path.suffix.lstrip('.').upper() or 'the format'} "
+            f"does; the file has {size} vertices)")
+
+
 def _read_trimesh(path: Path, *, weld: bool) -> tuple[np.ndarray, np.ndarray]:
     from corrlib.interrupts import signals_held
 
@@ -247,8 +259,8 @@ def _read_trimesh(path: Path, *, weld: bool) -> tuple[np.ndarray, np.ndarray]:
         raise FileFormatError(f"{path}: cannot read mesh: the property {exc} is missing (vertices need x, y "
                               f"and z)") from None
     except IndexError as exc:  # a face naming a vertex the file does not have
-        raise FileFormatError(f"{path}: cannot read mesh: a face refers to a vertex the file does not have "
-                              f"({exc})") from None
+        raise FileFormatError(f"{path}: cannot read mesh: a face refers to a vertex the file does not have"
+                              f"{_missing_vertex(exc, path)}") from None
     except Exception as exc:  # trimesh raises many exception types for malformed files
         raise FileFormatError(f"{path}: cannot read mesh: {exc}") from exc
     if weld and hasattr(loaded, "merge_vertices"):

@@ -141,6 +141,24 @@ def check_outputs_apart(outputs, inputs) -> None:
         seen.append((what, path))
 
 
+def check_outside(out, folder, what: str, role: str) -> None:
+    """Refuse an output folder ``out`` that is ``folder`` or lies inside it, where a command reads every file of
+    ``folder`` (its ``role``, e.g. the queries): the next run would read the outputs as inputs.
+
+    Raises
+    ------
+    InputError
+        Naming both folders.
+    """
+    try:
+        out_path, folder_path = Path(out).resolve(), Path(folder).resolve()
+    except OSError:  # no working folder to resolve against: the folder checks name that
+        return
+    if out_path == folder_path or folder_path in out_path.parents:
+        raise InputError(f"{out}: the {what} folder is inside {folder}, the folder of {role}; the next run would read "
+                         f"its files as {role}, choose a folder outside it")
+
+
 @contextlib.contextmanager
 def staged_output(folder, replaces=None):
     """Write a set of files all-or-nothing into ``folder`` (a generator-based context manager).

@@ -62,9 +62,10 @@ def _check_socket_folder() -> None:
 
 
 def check_jobs(jobs) -> None:
-    """:class:`ParameterError` unless ``jobs`` is a whole number of worker processes (0 or None: all cores)."""
+    """:class:`ParameterError` unless ``jobs`` is 0 or None (all cores) or a positive whole number of worker
+    processes."""
     if jobs is not None and (isinstance(jobs, bool) or not isinstance(jobs, numbers.Integral) or jobs < 0):
-        raise ParameterError(f"jobs must be a whole number of worker processes (0 or none: all cores), "
+        raise ParameterError(f"jobs must be 0 or None (all cores) or a positive whole number of worker processes, "
                              f"got {jobs!r}")
 
 

@@ -8,8 +8,10 @@ has one obvious repair, the one mesh editors offer (MeshLab's "merge close verti
 2. faces dropped that repeat a vertex (welding can make them), that are flat to the coordinates' precision
    (:func:`~corrlib.shapes.degenerate_faces`), or that repeat another face's three vertices;
 3. the faces' windings made to agree (:func:`~corrlib.shapes.consistently_oriented`);
-4. the largest connected component kept (a scan's loose fragments, a second body), and the vertices dropped
-   that no face uses.
+4. the largest connected component by surface area kept (a scan's loose fragments, a second body), and the
+   vertices dropped that no face uses;
+5. a closed surface turned inside out (every face) so that its normals point outward (MeshLab's "invert faces
+   orientation"; the methods do not need it, but renderers and other tools read a negative volume as inside out).
 
 What has no safe repair (NaN coordinates, indices out of range, edges of three faces) is refused, naming it.
 Every kept vertex keeps its index in the input (:attr:`Repaired.source_index`), so that ground truth and maps
@@ -43,12 +45,16 @@ class Repaired:
         The input vertex each vertex is (the first of those welded into it).
     notes : list of str
         What was done, one repair per entry; empty when the input needed nothing.
+    warnings : list of str
+        What the loader still warns of and has no repair here (a non-orientable surface, two parts that
+        touch at a vertex, ...).
     """
 
     vertices: np.ndarray
     faces: np.ndarray
     source_index: np.ndarray
     notes: list[str] = field(default_factory=list)
+    warnings: list[str] = field(default_factory=list)
 
 
 def repaired(vertices, faces, *, name: str = "mesh") -> Repaired:
@@ -85,13 +91,20 @@ def repaired(vertices, faces, *, name: str = "mesh") -> Repaired:
     except MeshError as exc:
         raise MeshError(f"{exc} (after the repairs: {'; '.join(notes) or 'none needed'})") from None
     if components > 1:
-        notes.append(f"kept the largest of {components} connected components ({mesh.n_vertices} of {used.size} "
-                     "vertices in faces)")
+        notes.append(f"kept the largest of {components} connected components by surface area ({mesh.n_vertices} of "
+                     f"{used.size} vertices in faces)")
     if used.size < v.shape[0]:
         notes.append(f"dropped {_count(v.shape[0] - used.size, 'vertex', 'vertices')} that no face uses")
     if mesh.original_indices is not None:
         source = source[mesh.original_indices]
-    return Repaired(np.asarray(mesh.vertices), np.asarray(mesh.faces), source, notes)
+    faces = np.asarray(mesh.faces)
+    warnings = [fd for fd in mesh.report() if fd.level == "warning" and fd.code != "reoriented"]
+    volume = mesh.enclosed_volume()  # a non-orientable surface has no inside
+    if volume is not None and volume < 0 and not any(fd.code == "orientation" for fd in warnings):
+        faces = faces[:, ::-1]
+        notes.append("turned every face so that the normals point outward (the closed surface was inside out)")
+    return Repaired(np.asarray(mesh.vertices), np.ascontiguousarray(faces), source, notes,
+                    [fd.message for fd in warnings])
 
 
 #: beside a repaired mesh ``OUT.off``: ``OUT.source_vertices.txt``, the input vertex of each of its vertices

@@ -49,12 +49,27 @@ class Finding:
     code : str
         Short machine-readable identifier, e.g. ``"non-manifold-edge"``.
     message : str
-        Human-readable explanation with counts and example indices.
+        Human-readable explanation with counts and example indices, ending with ``advice`` if there is one.
+    advice : str
+        How the user can fix the input (e.g. :data:`REPAIR_ADVICE`), or "".
     """
 
     level: str
     code: str
     message: str
+    advice: str = ""
+
+    @property
+    def problem(self) -> str:
+        """The message without its advice: what is wrong, for a caller whose input is not at fault (a mesh it
+        made itself, such as a remeshed surface)."""
+        return self.message.removesuffix(f"; {self.advice}") if self.advice else self.message
+
+
+def _repairable(code: str, problem: str, advice: str | None = None) -> Finding:
+    """An error finding that ``corr repair`` removes: ``problem`` with ``advice`` (default :data:`REPAIR_ADVICE`)."""
+    advice = REPAIR_ADVICE if advice is None else advice
+    return Finding("error", code, f"{problem}; {advice}", advice)
 
 
 def _readonly(a: np.ndarray) -> np.ndarray:
@@ -242,14 +257,14 @@ def _face_findings(v: np.ndarray, f: np.ndarray) -> list[Finding]:
     repeated = np.flatnonzero((f[:, 0] == f[:, 1]) | (f[:, 1] == f[:, 2]) | (f[:, 0] == f[:, 2]))
     if repeated.size:
         findings.append(
-            Finding("error", "degenerate-face", f"{repeated.size} faces repeat a vertex index "
-                    f"(e.g. face {_examples(repeated)}); {REPAIR_ADVICE}")
+            _repairable("degenerate-face", f"{repeated.size} faces repeat a vertex index "
+                        f"(e.g. face {_examples(repeated)})")
         )
     zero = np.setdiff1d(np.flatnonzero(degenerate_faces(v, f)), repeated)
     if zero.size:
         findings.append(
-            Finding("error", "zero-area-face", f"{zero.size} faces have zero area: their vertices are collinear "
-                    f"or coincide to the precision of the coordinates (e.g. face {_examples(zero)}); {REPAIR_ADVICE}")
+            _repairable("zero-area-face", f"{zero.size} faces have zero area: their vertices are collinear "
+                        f"or coincide to the precision of the coordinates (e.g. face {_examples(zero)})")
         )
     return findings
 
@@ -296,7 +311,7 @@ def _duplicate_face_findings(f: np.ndarray, n: int) -> list[Finding]:
     else:
         dup_faces = np.unique(sorted_faces, axis=0).shape[0]
     if dup_faces < f.shape[0]:
-        return [Finding("error", "duplicate-face", f"{f.shape[0] - dup_faces} faces are duplicates; {REPAIR_ADVICE}")]
+        return [_repairable("duplicate-face", f"{f.shape[0] - dup_faces} faces are duplicates")]
     return []
 
 
@@ -310,8 +325,8 @@ def _connectivity_findings(v: np.ndarray, f: np.ndarray) -> list[Finding]:
     unused = np.flatnonzero(~used)
     if unused.size:
         findings.append(
-            Finding("error", "unreferenced-vertex", f"{unused.size} vertices belong to no face "
-                    f"(e.g. vertex {_examples(unused)}); {REPAIR_ADVICE}")
+            _repairable("unreferenced-vertex", f"{unused.size} vertices belong to no face "
+                        f"(e.g. vertex {_examples(unused)})")
         )
     _, labels = face_components(n, f)
     n_comp_used = np.unique(labels[used]).size
@@ -329,8 +344,8 @@ def _connectivity_findings(v: np.ndarray, f: np.ndarray) -> list[Finding]:
         else:
             advice = f"to keep the largest part, {REPAIR_ADVICE}"
         findings.append(
-            Finding("error", "components", f"the mesh has {n_comp_used} connected components (vertex counts "
-                    f"{counts}); {advice}")
+            _repairable("components", f"the mesh has {n_comp_used} connected components (vertex counts {counts})",
+                        advice)
         )
     return findings
 
@@ -509,8 +524,8 @@ class TriMesh:
         """Build a mesh, optionally keeping only its largest connected component.
 
         With ``largest_component=True`` vertices outside the largest component
-        (and unreferenced vertices) are removed; the kept original indices are
-        available as :attr:`original_indices`.
+        by surface area (and unreferenced vertices) are removed; the kept original
+        indices are available as :attr:`original_indices`.
 
         Faces whose windings disagree with their neighbours' (half of a file's faces turned by an exporter) are
         turned to agree (:func:`consistently_oriented`; normals, descriptors that tell left from right and the
@@ -537,8 +552,9 @@ class TriMesh:
                 _, labels = face_components(n, f)
                 used = np.zeros(n, dtype=bool)
                 used[f.ravel()] = True
-                sizes = np.bincount(labels[used], minlength=labels.max() + 1)
-                keep = used & (labels == np.argmax(sizes))
+                # by surface area, which does not depend on how finely each part is meshed (the first on a tie)
+                areas = np.bincount(labels[f[:, 0]], weights=triangle_areas(v, f), minlength=labels.max() + 1)
+                keep = used & (labels == np.argmax(areas))
                 if not np.all(keep):
                     new_index = -np.ones(n, dtype=np.int64)
                     new_index[keep] = np.arange(int(keep.sum()))

@@ -68,9 +68,15 @@ def test_output_locations_are_checked_before_any_work(tmp_path, capsys):
     dataset.mkdir()
     for name in ("wolf0", "wolf1"):
         (dataset / f"{name}.off").symlink_to(TOSCA / f"{name}.off")
-    assert "whole number of worker processes" in error_of(capsys, ["bench", dataset, *FAST, "--jobs", "-3", "-o",
-                                                                   tmp_path / "b"])
-    assert not (tmp_path / "b").exists()  # not even environment.json
+    for argv in (["bench", dataset, *FAST, "--jobs", "-3", "-o", tmp_path / "b"],
+                 # found by fuzzing: bench-retrieval started, failed every query and left its outputs
+                 ["bench-retrieval", dataset, dataset, "--jobs", "-3", "-o", tmp_path / "b"]):
+        with pytest.raises(SystemExit) as stopped:
+            main(list(map(str, argv)))
+        assert stopped.value.code == 2
+        assert "argument --jobs: expected 0 (all cores) or a positive number of worker processes, got -3" in \
+            capsys.readouterr().err
+        assert not (tmp_path / "b").exists()  # not even environment.json
 
 
 def test_a_folder_where_an_output_file_goes_stops_before_any_work_and_a_dotted_stem_keeps_its_dot(tmp_path,
@@ -184,8 +190,14 @@ def test_a_target_that_cannot_be_remeshed_is_said_and_left_out_of_a_ranking(caps
                  "--param", "mesh_vertices=800"]) == 1
     out = capsys.readouterr()
     assert "inf" in out.out and "remeshing to 800 vertices gave an invalid mesh" in out.out, out.out
+    # the input is not at fault (found by fuzzing: the loader's advice to repair it was passed on)
+    assert "corr repair" not in out.out and "mesh_vertices" in out.out, out.out
     assert main(["match", str(tmp_path / "q.txt"), WOLF0, "--method", "contour3d", "--param", "mesh_vertices=800",
                  "--param", "n_contour=60", "-q", "-o", str(tmp_path / "m")]) == 0
+    assert "note: the target could not be remeshed" in capsys.readouterr().err
+    # match-contour said nothing (found by fuzzing)
+    assert main(["match-contour", str(tmp_path / "q.txt"), WOLF0, "--param", "mesh_vertices=800",
+                 "--param", "n_contour=60", "-q", "-o", str(tmp_path / "mc")]) == 0
     assert "note: the target could not be remeshed" in capsys.readouterr().err
 
 
@@ -651,8 +663,43 @@ def test_a_deleted_working_folder_is_named_as_the_reason(tmp_path, monkeypatch, 
                         (["match", "wolf0.off", wolf1, "-o", str(tmp_path / "m")], "wolf0.off: file not found"),
                         (["retrieve", wolf0, "collection"], "collection: not a folder"),
                         (["bench", "dataset", "--method", "descriptor-nn", "-o", str(tmp_path / "b")],
-                         "dataset: not a folder")):
+                         "dataset: not a folder"),
+                        (["bench-retrieval", str(tmp_path), str(tmp_path), "-o", "res"], "res: cannot write -o")):
         assert main(argv) == 2, argv
         err = capsys.readouterr().err
         assert f"error: {named}" in err and reason in err, err
     assert main(["match", wolf0, wolf1, "--method", "descriptor-nn", "-o", str(tmp_path / "abs"), "-q"]) == 0
+
+
+def test_a_retrieval_benchmark_s_output_folder_is_checked_before_any_work(tmp_path, capsys):
+    """Found by fuzzing: `bench-retrieval -o` inside its queries folder was accepted, and the next run read the
+    results as queries; a file, or a folder under a file, was named only by the OS's words."""
+    queries, collection = tmp_path / "queries", tmp_path / "collection"
+    queries.mkdir()
+    collection.mkdir()
+    angles = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    np.savetxt(queries / "wolf1.txt", np.column_stack([np.cos(angles), 2 * np.sin(angles)]))
+    (collection / "wolf0.off").symlink_to(TOSCA / "wolf0.off")
+    (tmp_path / "afile").write_text("x")
+    for out, named in ((queries / "res", "is inside"), (queries, "is inside"),
+                       (tmp_path / "afile", "afile: cannot write -o there"),
+                       (tmp_path / "afile" / "sub", "cannot write -o there")):
+        message = error_of(capsys, ["bench-retrieval", queries, collection, "-o", out])
+        assert named in message, message
+    assert sorted(p.name for p in queries.iterdir()) == ["wolf1.txt"]
+
+
+def test_a_parameter_set_twice_is_refused(tmp_path, capsys):
+    """Found by fuzzing: `--param k=10 --k 12` ran with 12 and `--param n=1 --param n=2` with 2, unseen."""
+    query = tmp_path / "q.txt"
+    angles = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    np.savetxt(query, np.column_stack([np.cos(angles), 2 * np.sin(angles)]))
+    message = error_of(capsys, ["match-contour", query, WOLF0, "--param", "k=10", "--k", "12", "-o", tmp_path / "m"])
+    assert "--k 12 and --param k=10 both set k; give one" in message, message
+    (tmp_path / "coll").mkdir()
+    (tmp_path / "coll" / "wolf0.off").symlink_to(TOSCA / "wolf0.off")
+    message = error_of(capsys, ["retrieve", query, tmp_path / "coll", "--param", "eps=0.1", "--param", "eps=0.2"])
+    assert "--param eps is given twice ('0.1' and '0.2')" in message, message
+    message = error_of(capsys, ["match", WOLF0, WOLF1, "--method", "kernel-matching", "--init", "fmap", "--param",
+                                "init=descriptors", "-o", tmp_path / "k"])
+    assert "--init fmap and --param init=descriptors both set init" in message, message

@@ -40,7 +40,7 @@ def test_every_repair_of_a_damaged_mesh_and_the_index_back_to_the_input():
     assert _errors(out.vertices, out.faces) == []
     assert out.notes == ["welded 1 vertex into others at the same position", "dropped 1 face that has zero area",
                          "dropped 1 face that repeats another face",
-                         f"kept the largest of 2 connected components ({len(wolf.vertices)} of "
+                         f"kept the largest of 2 connected components by surface area ({len(wolf.vertices)} of "
                          f"{len(wolf.vertices) + 4} vertices in faces)", "dropped 2 vertices that no face uses"]
     # the wolf itself, vertex for vertex and face for face, and every vertex is the input's vertex it names
     assert np.array_equal(out.source_index, np.arange(len(wolf.vertices)))
@@ -106,3 +106,47 @@ def test_corr_repair_writes_the_mesh_and_the_input_vertices(tmp_path, capsys):
     assert main(["repair", str(tmp_path / "fin.off"), "-o", str(tmp_path / "fin_fixed.off")]) == 2
     assert "more than two faces" in capsys.readouterr().err
     assert not (tmp_path / "fin_fixed.off").exists() and not (tmp_path / "fin_fixed.source_vertices.txt").exists()
+
+
+def test_an_inside_out_surface_is_turned_and_what_no_repair_removes_is_said(tmp_path, capsys):
+    """Found by fuzzing: a closed surface inside out was left so; a Möbius strip (which no turning of faces
+    orients) and two spheres welded at one point passed as "no repair was needed"."""
+    sphere = trimesh.creation.icosphere(subdivisions=2)
+    out = repaired(sphere.vertices, sphere.faces[:, ::-1])
+    assert out.notes == ["turned every face so that the normals point outward (the closed surface was inside out)"]
+    assert np.array_equal(out.faces, sphere.faces) and out.warnings == []
+    count = 24
+    rows = []
+    for t in np.linspace(0, 2 * np.pi, count, endpoint=False):
+        rows += [[(1 + w * np.cos(t / 2)) * np.cos(t), (1 + w * np.cos(t / 2)) * np.sin(t), w * np.sin(t / 2)]
+                 for w in (-0.3, 0.3)]
+    strip = []
+    for i in range(count):  # the last quad joins the first edge turned over
+        c, d = (2 * i + 2, 2 * i + 3) if i < count - 1 else (1, 0)
+        strip += [[2 * i, 2 * i + 1, d], [2 * i, d, c]]
+    save_mesh(tmp_path / "moebius.off", np.array(rows), np.array(strip))
+    assert main(["repair", str(tmp_path / "moebius.off"), "-o", str(tmp_path / "fixed.off")]) == 0
+    said = capsys.readouterr()
+    assert "no repair was needed" in said.out and "warning: moebius.off: 1 interior edges join faces of " \
+        "inconsistent orientation" in said.err, said
+    touching = trimesh.util.concatenate([sphere, sphere.copy().apply_translation([2, 0, 0])])
+    out = repaired(touching.vertices, touching.faces)
+    assert out.notes == ["welded 1 vertex into others at the same position"]
+    assert len(out.warnings) == 1 and "join separate fans of faces" in out.warnings[0]
+
+
+def test_the_largest_component_is_the_largest_surface():
+    """Found by fuzzing: the part with more vertices was kept, though the other had four times its area."""
+    fine = trimesh.creation.icosphere(subdivisions=3)  # 642 vertices, area 4π
+    coarse = trimesh.creation.icosphere(subdivisions=1).apply_scale(2.0).apply_translation([10, 0, 0])  # 42, 16π
+    both = trimesh.util.concatenate([fine, coarse])
+    out = repaired(both.vertices, both.faces)
+    assert len(out.vertices) == len(coarse.vertices)
+    assert out.notes == [f"kept the largest of 2 connected components by surface area ({len(coarse.vertices)} of "
+                         f"{len(both.vertices)} vertices in faces)"]
+
+
+def test_an_obj_face_beyond_the_file_s_vertices_is_named_as_the_file_counts(tmp_path, capsys):
+    (tmp_path / "bad.obj").write_text("v 0 0 0\nv 1 0 0\nv 0 1 0\nv 0 0 1\nf 1 2 3\nf 1 3 9\n")
+    assert main(["repair", str(tmp_path / "bad.obj"), "-o", str(tmp_path / "fixed.off")]) == 2
+    assert "(vertex 9, counting from 1 as OBJ does; the file has 4 vertices)" in capsys.readouterr().err

@@ -30,7 +30,7 @@ import numpy as np
 import scipy.sparse as sp
 
 from corrlib.errors import MeshError
-from corrlib.shapes import TriMesh, area_weighted_normals, triangle_areas
+from corrlib.shapes import TriMesh, area_weighted_normals, inspect_mesh, triangle_areas
 
 
 @dataclass(frozen=True)
@@ -177,12 +177,13 @@ def _decimate_unit(mesh: TriMesh, n_vertices: int) -> tuple[np.ndarray, np.ndarr
         if len(points) >= (1 - BUDGET_TOLERANCE) * n_vertices or face_budget >= mesh.n_faces:
             break
         face_budget = min(mesh.n_faces, round(face_budget * n_vertices / len(points)))
-    try:
-        coarse = TriMesh(points, faces, name="remeshed surface")
-    except MeshError as err:
-        raise MeshError(f"remeshing to {n_vertices} vertices gave an invalid mesh ({err}); remesh it with "
-                        "another tool first, or change the vertex budget") from None
-    coarse = tangentially_relaxed(coarse, mesh)
+    # the collapse's own output: what is wrong with it, without the loader's advice to repair the input
+    errors = [finding for finding in inspect_mesh(points, faces) if finding.level == "error"]
+    if errors:
+        raise MeshError(f"remeshing to {n_vertices} vertices gave an invalid mesh (the collapse pinched or split a "
+                        f"thin part: {errors[0].problem}); change the vertex budget (mesh_vertices), set it to 0 "
+                        "to match the mesh as given, or remesh it with another tool first")
+    coarse = tangentially_relaxed(TriMesh(points, faces, name="remeshed surface"), mesh)
     return np.asarray(coarse.vertices), np.asarray(coarse.faces)
 
 

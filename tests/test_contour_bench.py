@@ -159,8 +159,12 @@ def test_command_and_its_errors(tmp_path, capsys):
     assert "plane must be one of" in capsys.readouterr().err
     assert main(["bench-contour", str(data), "--param", "k=-3", "-o", str(tmp_path / "o3")]) == 2
     assert "k" in capsys.readouterr().err
-    assert main(["bench-contour", str(data), "--jobs", "-1", "-o", str(tmp_path / "o4")]) == 2
-    assert "jobs must be a whole number" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as stopped:  # refused by the parser, naming the option
+        main(["bench-contour", str(data), "--jobs", "-1", "-o", str(tmp_path / "o4")])
+    assert stopped.value.code == 2
+    assert "argument --jobs: expected 0 (all cores) or a positive number" in capsys.readouterr().err
+    with pytest.raises(ParameterError, match="jobs must be 0 or None .* got -1"):  # and by the library
+        contour_benchmark([data], tmp_path / "o4", planes=["main"], jobs=-1)
     assert not any((tmp_path / name).exists() for name in ("o2", "o3", "o4"))
 
 

@@ -413,3 +413,18 @@ def test_the_log_says_when_the_contour_was_matched_at_fewer_points():
 
     assert "matched at 116 points instead of 200" in reading(116, 200)
     assert "instead of" not in reading(200, 200)
+
+
+def test_a_mesh_is_shown_alone_until_the_other_comes(qtbot, window):
+    """The pair view drew nothing until both meshes were loaded: a user could not see what was loaded (or what
+    a repair made of it) before choosing the other."""
+    window.load_file(str(TOSCA / "wolf1.off"), "target")
+    wait_loaded(qtbot, window)
+    view = window.pair_view
+    assert len(view.shown_points) == 1 and len(view.shown_points[0]) == window.target.n_vertices
+    assert view.info.text() == "Load a source mesh, then run a method."
+    assert view.camera() is not None  # framed on the target
+    window.load_file(str(TOSCA / "wolf0.off"), "source")
+    wait_loaded(qtbot, window)
+    assert [len(points) for points in view.shown_points] == [window.source.n_vertices, window.target.n_vertices]
+    assert view.info.text() == "Run a method to see the correspondence."

@@ -76,10 +76,12 @@ class PairView(QWidget, FramedView):
         enable_hover(self.plotter, self._hover_text, self.hovered.emit)
 
     def set_shapes(self, source, target) -> None:
+        """The meshes of the pair (either may be None: the other is shown alone until it comes)."""
         self.source, self.target, self.result, self.errors = source, target, None, None
         self.function, self.n_unmatched = None, 0
         self.picked = []
-        self.info.setText("Run a method to see the correspondence.")
+        self.info.setText("Run a method to see the correspondence." if source is not None and target is not None else
+                          f"Load a {'target' if source is not None else 'source'} mesh, then run a method.")
         self.redraw()
 
     def set_result(self, result, errors: np.ndarray | None = None, *, function: np.ndarray | None = None,
@@ -134,7 +136,7 @@ class PairView(QWidget, FramedView):
         self.target_colors = None
         self.shown_points = []
         if self.source is None or self.target is None:
-            p.render()
+            self._draw_alone()
             return
         mode = self.mode.currentText()
         self.displayed = Displayed.of((self.source, self.target), self.up, reuse=self.displayed)
@@ -159,6 +161,30 @@ class PairView(QWidget, FramedView):
         p.add_text(f"target: {self.target.name}", font_size=LABEL_FONT_SIZE)
         p.link_views()
         self.shown_points = [src_points, tgt_points]
+        self.fit_preset()
+        p.render()
+
+    def _draw_alone(self) -> None:
+        """Before the pair is complete: the mesh loaded so far in its half of the view (the user sees what was
+        loaded, and what a repair or the up axis made of it, before loading the other)."""
+        p = self.plotter
+        halves = [(index, which, shape) for index, (which, shape) in
+                  enumerate((("source", self.source), ("target", self.target))) if shape is not None]
+        if not halves:
+            p.render()
+            return
+        for renderer, viewport in zip(p.renderers, self.split_viewports):
+            renderer.SetViewport(*viewport)
+        self.displayed = Displayed.of([shape for _, _, shape in halves], self.up, reuse=self.displayed)
+        for (index, which, shape), points in zip(halves, self.displayed.points):
+            p.subplot(0, index)
+            p.add_text(f"{which}: {shape.name}", font_size=LABEL_FONT_SIZE)
+            p.add_mesh(polydata(points, shape.faces), color=PLAIN_COLOR)
+        if len(halves) == 1:
+            p.subplot(0, 1 - halves[0][0])
+            p.add_text(f"{('source', 'target')[1 - halves[0][0]]}: none loaded", font_size=LABEL_FONT_SIZE)
+        p.link_views()
+        self.shown_points = list(self.displayed.points)
         self.fit_preset()
         p.render()
 
@@ -261,7 +287,7 @@ class PairView(QWidget, FramedView):
         p.render()
 
     def _on_pick(self, point, *_args) -> None:
-        if self.source is None or self.mode.currentText() != "lines" or point is None:
+        if self.source is None or self.target is None or self.mode.currentText() != "lines" or point is None:
             return
         self.add_line(picked_vertex(self.displayed.points[0], point))
 

@@ -641,8 +641,7 @@ class MainWindow(QMainWindow):
         self.gt = None
         self.last_result = None
         self.sequence_view.clear()  # the last pair's motion: its frames would mix two shapes on export
-        # the meshes of the pair, either alone until the other comes (a contour is shown in the Product tab)
-        self.pair_view.set_shapes(*(s if isinstance(s, TriMesh) else None for s in (self.source, self.target)))
+        self.pair_view.set_shapes(self.source, self.target)  # a mesh is shown at once, alone until the other comes
         self.refresh_methods()
 
     def try_retrieval(self) -> None:

@@ -9,7 +9,7 @@ import pytest
 os.environ.setdefault("QT_QPA_PLATFORM", "xcb")
 pytest.importorskip("pyvistaqt")
 
-from _data import TOSCA  # noqa: E402
+from _data import ROOT, TOSCA  # noqa: E402
 from _studio import keep_widget, wait_loaded  # noqa: E402
 
 from app.views.camera import HOVER_INTERVAL  # noqa: E402
@@ -428,3 +428,7 @@ def test_a_mesh_is_shown_alone_until_the_other_comes(qtbot, window):
     wait_loaded(qtbot, window)
     assert [len(points) for points in view.shown_points] == [window.source.n_vertices, window.target.n_vertices]
     assert view.info.text() == "Run a method to see the correspondence."
+    window.load_file(str(ROOT / "resources" / "data" / "sketch2d" / "human_sketch_a_contour.txt"), "source")
+    wait_loaded(qtbot, window)  # a contour is named where the source was, the target drawn alone
+    assert len(view.shown_points) == 1 and len(view.shown_points[0]) == window.target.n_vertices
+    assert view.info.text() == "The source is a contour: a 2D-to-3D match is shown in the Product tab."

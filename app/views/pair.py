@@ -20,6 +20,7 @@ from app.views.scene import (
     transfer_colors,
 )
 from corrlib.geometry.uv import checkerboard, cylindrical_uv
+from corrlib.shapes import TriMesh
 
 MODES = ("coordinates", "function", "texture", "lines", "error")
 N_LINES = 12  # correspondence lines drawn before the user picks more
@@ -63,6 +64,7 @@ class PairView(QWidget, FramedView):
         layout.addLayout(top)
         layout.addWidget(self.plotter.interactor, 1)
         self.source = self.target = None
+        self.absent: dict[str, str] = {}  # what stands where a mesh of the pair is not (set_shapes)
         self.result = None
         self.errors = None  # (n_x,) per-vertex errors of the source, NaN where unknown or unmatched
         self.function = None  # (n_x,) source function of the "function" mode (from the method's job)
@@ -76,12 +78,21 @@ class PairView(QWidget, FramedView):
         enable_hover(self.plotter, self._hover_text, self.hovered.emit)
 
     def set_shapes(self, source, target) -> None:
-        """The meshes of the pair (either may be None: the other is shown alone until it comes)."""
-        self.source, self.target, self.result, self.errors = source, target, None, None
-        self.function, self.n_unmatched = None, 0
+        """The inputs of the pair: the meshes are drawn (either alone until the other comes); a contour (None if
+        nothing is loaded) is named, its match being the Product tab's."""
+        inputs = {"source": source, "target": target}
+        self.source, self.target = (shape if isinstance(shape, TriMesh) else None for shape in (source, target))
+        self.result, self.errors, self.function, self.n_unmatched = None, None, None, 0
         self.picked = []
-        self.info.setText("Run a method to see the correspondence." if source is not None and target is not None else
-                          f"Load a {'target' if source is not None else 'source'} mesh, then run a method.")
+        self.absent = {which: "none loaded" if shape is None else "a contour (Product tab)"
+                       for which, shape in inputs.items() if not isinstance(shape, TriMesh)}
+        contours = [which for which, shape in inputs.items() if shape is not None and which in self.absent]
+        if not self.absent:
+            self.info.setText("Run a method to see the correspondence.")
+        elif contours:
+            self.info.setText(f"The {contours[0]} is a contour: a 2D-to-3D match is shown in the Product tab.")
+        else:
+            self.info.setText(f"Load a {' and a '.join(self.absent)} mesh, then run a method.")
         self.redraw()
 
     def set_result(self, result, errors: np.ndarray | None = None, *, function: np.ndarray | None = None,
@@ -182,7 +193,8 @@ class PairView(QWidget, FramedView):
             p.add_mesh(polydata(points, shape.faces), color=PLAIN_COLOR)
         if len(halves) == 1:
             p.subplot(0, 1 - halves[0][0])
-            p.add_text(f"{('source', 'target')[1 - halves[0][0]]}: none loaded", font_size=LABEL_FONT_SIZE)
+            other = ("source", "target")[1 - halves[0][0]]
+            p.add_text(f"{other}: {self.absent.get(other, 'none loaded')}", font_size=LABEL_FONT_SIZE)
         p.link_views()
         self.shown_points = list(self.displayed.points)
         self.fit_preset()

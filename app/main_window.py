@@ -72,6 +72,8 @@ N_EXPORT_FRAMES = 11  # morph frames written by Export > Morph frames (t = 0 .. 
 ABOUT_PROVENANCE_CHARS = 3000  # how much of the data provenance the About box shows
 #: job keys; one job at a time per key (a new job with a running key supersedes it)
 LOAD_KEY, PAIR_KEY, COMPARE_KEY, RETRIEVAL_KEY = "load", "pair", "compare", "retrieval"
+#: how the job panel names each kind of job
+JOB_NAMES = {LOAD_KEY: "loading", PAIR_KEY: "the method", COMPARE_KEY: "the comparison", RETRIEVAL_KEY: "the ranking"}
 
 
 class JobPanel(QWidget):
@@ -130,14 +132,18 @@ class JobPanel(QWidget):
         if report.message:
             self.write(progress_text(report))
 
-    def stopped(self, text: str) -> None:
-        self.timer.stop()
+    def stopped(self, text: str, still_running: tuple[str, ...] = ()) -> None:
+        """A job ended (``text`` says how); ``still_running`` names the jobs that go on, which keep Cancel."""
         self.bar.setRange(0, PROGRESS_STEPS)
         self.bar.setValue(PROGRESS_STEPS)
-        self.cancel.setEnabled(False)
         took = time.perf_counter() - self._start if self._start else 0.0
-        self.stage.setText(text)
         self.write(f"{text} ({took:.2f} s; longest GUI stall {1000 * self.max_stall:.0f} ms)")
+        if still_running:
+            text += f"; still running: {', '.join(still_running)}"
+        else:
+            self.timer.stop()
+        self.cancel.setEnabled(bool(still_running))
+        self.stage.setText(text)
 
     def _tick(self) -> None:
         now = time.perf_counter()
@@ -606,13 +612,13 @@ class MainWindow(QMainWindow):
             self.loading_finished.emit()
             return
         path, which, _then, job = self._loading
-        self._cancel_method_jobs()  # the pair is changing: a running method's result would not fit it
+        # a running method goes on: set_shape cancels it once a shape is replaced (a load can fail)
         self.job_panel.started(f"loading {which}: {Path(path).name}")
         self.runner.start(LOAD_KEY, load_job(path) if job is None else job)
 
     def _on_loaded(self, loaded: LoadedShape) -> None:
         _path, which, then, _job = self._loading
-        self.job_panel.stopped(f"loaded {loaded.shape.name}")
+        self._job_stopped(f"loaded {loaded.shape.name}")
         if isinstance(loaded.shape, Contour2D):
             self.sketch.show_contour(loaded.shape)
             self.retrieval_view.set_query(loaded.shape)
@@ -641,8 +647,12 @@ class MainWindow(QMainWindow):
         self.gt = None
         self.last_result = None
         self.sequence_view.clear()  # the last pair's motion: its frames would mix two shapes on export
+        self.product_view.clear()  # and its match or torus, and its comparison
+        if self.compare_view.has_results():
+            self.compare_view.clear_results()
         self.pair_view.set_shapes(self.source, self.target)  # a mesh is shown at once, alone until the other comes
         self.refresh_methods()
+        self.statusBar().showMessage(self.next_step())  # and no earlier error stays
 
     def try_retrieval(self) -> None:
         """The Retrieval tab with the bundled collection (10 meshes, 4 classes) and a drawn person as the query."""
@@ -753,12 +763,24 @@ class MainWindow(QMainWindow):
     def current_params(self, name: str):
         return self._forms[name].params()
 
+    def next_step(self) -> str:
+        """What the user can do with the inputs loaded (the status bar after each load, and why Run cannot)."""
+        if self.source is None or self.target is None:
+            return (f"Load a {'target' if self.source is not None else 'source'} (File menu, drag and drop) or "
+                    "open the demo pair.")
+        if self.method_box.count():
+            return "Pick a method and press Run."
+        if isinstance(self.source, TriMesh) and isinstance(self.target, Contour2D):
+            return ("No method matches a mesh to a contour: a 2D-to-3D match takes the contour as the source and "
+                    "the mesh as the target.")
+        return "No method takes these two inputs."
+
     def run_method(self, *_args, method: str | None = None) -> None:
         if method is not None and self.method_box.findData(method) >= 0:
             self.method_box.setCurrentIndex(self.method_box.findData(method))  # the form shows what runs
         name = method or self.method_box.currentData()
         if name is None:
-            self.show_error("no method accepts the loaded inputs (load a source and a target)")
+            self.show_error(f"no method to run: {self.next_step()[0].lower()}{self.next_step()[1:]}")
             return
         self._start_method(PAIR_KEY, name)
 
@@ -793,8 +815,12 @@ class MainWindow(QMainWindow):
     def _on_progress(self, key: str, report) -> None:
         self.job_panel.report(report)
 
+    def _job_stopped(self, text: str) -> None:
+        """The job panel told that a job ended, and which go on (the panel is shared by every kind of job)."""
+        self.job_panel.stopped(text, tuple(name for key, name in JOB_NAMES.items() if self.runner.is_running(key)))
+
     def _on_failed(self, key: str, message: str) -> None:
-        self.job_panel.stopped("failed")
+        self._job_stopped("failed")
         if key == COMPARE_KEY:  # one method failing leaves the others of the comparison to run
             self.show_error(f"{self._compare_current}: {message}")
             self._next_compare()
@@ -808,7 +834,7 @@ class MainWindow(QMainWindow):
             self._next_load()
 
     def _on_cancelled(self, key: str) -> None:
-        self.job_panel.stopped("cancelled")
+        self._job_stopped("cancelled")
         if key == LOAD_KEY:
             self._next_load()
         else:
@@ -821,12 +847,16 @@ class MainWindow(QMainWindow):
         if key == RETRIEVAL_KEY:
             hits, meshes = payload
             self.retrieval_view.show_results(hits, meshes)
-            self.job_panel.stopped(f"ranked {len(hits)} meshes")
+            failed = [hit for hit in hits if hit.error]
+            for hit in failed:  # the gallery shows why on hover only
+                self.job_panel.write(f"not ranked: {hit.name}: {hit.error}")
+            self._job_stopped(f"ranked {len(hits) - len(failed)} meshes" +
+                              (f"; {len(failed)} could not be matched (see the log)" if failed else ""))
             self.result_ready.emit(hits)
             return
         outcome: MethodOutcome = payload
         result = outcome.result
-        self.job_panel.stopped(f"{result.method} finished")
+        self._job_stopped(f"{result.method} finished")
         if outcome.source is not self.source or outcome.target is not self.target:
             self.job_panel.write(f"{result.method}: result dropped, the inputs changed while it ran")
             return

@@ -133,6 +133,7 @@ def test_retrieval_gallery_order(qtbot, window, tmp_path):
     folder.mkdir()
     for name in ("wolf0.off", "wolf1.off", "cat0.off"):
         shutil.copy(TOSCA / name, folder / name)
+    (folder / "empty.off").write_text("")  # not ranked, and the log says why (it said only "inf")
     wolf = load_mesh(TOSCA / "wolf0.off")
     axes = np.linalg.svd(wolf.vertices - wolf.vertices.mean(0), full_matrices=False)[2]
     window.retrieval_view.set_query(render_silhouette(wolf, axes[2], 300, up=axes[1]))
@@ -140,7 +141,9 @@ def test_retrieval_gallery_order(qtbot, window, tmp_path):
     with qtbot.waitSignal(window.result_ready, timeout=180_000):
         window.run_retrieval()
     names = window.retrieval_view.ranked_names()
-    assert len(names) == 3 and set(names[:2]) == {"wolf0.off", "wolf1.off"}
+    assert len(names) == 4 and set(names[:2]) == {"wolf0.off", "wolf1.off"} and names[3] == "empty.off"
+    assert window.job_panel.stage.text() == "ranked 3 meshes; 1 could not be matched (see the log)"
+    assert "not ranked: empty.off: " in window.job_panel.log.toPlainText()
     assert window.retrieval_view.gallery.item(0).icon().isNull() is False
     # a ranking that fails (an empty folder) leaves no gallery of the last folder standing for it
     empty = tmp_path / "empty"

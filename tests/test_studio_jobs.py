@@ -14,7 +14,7 @@ import pytest
 os.environ.setdefault("QT_QPA_PLATFORM", "xcb")
 pytest.importorskip("pyvistaqt")
 
-from _data import TOSCA  # noqa: E402
+from _data import ROOT, TOSCA  # noqa: E402
 from _studio import keep_widget, make_window, wait_loaded  # noqa: E402
 
 APP = Path(__file__).resolve().parents[1] / "app"
@@ -85,6 +85,27 @@ def fake_solver(unmatched_every: int):
         return MatchResult(name, map_xy, map_yx, 0.0, timings={"total": 0.0})
 
     return solve_iter
+
+
+def gated_run(qtbot, window, monkeypatch) -> tuple[threading.Event, list]:
+    """A method running on the demo pair, :func:`fake_solver` in place of the methods, waiting until the returned
+    event is set; the list returned collects the results the window reports."""
+    import corrlib.methods
+
+    gate = threading.Event()
+    fake = fake_solver(4)
+
+    def gated(*args, **kwargs):
+        assert gate.wait(30)
+        return (yield from fake(*args, **kwargs))
+
+    monkeypatch.setattr(corrlib.methods, "solve_iter", gated)
+    window.load_demo()
+    wait_loaded(qtbot, window)
+    ready = []
+    window.result_ready.connect(ready.append)
+    window.run_method(method="descriptor-nn")
+    return gate, ready
 
 
 def test_unmatched_vertices_are_left_out_of_the_error(qtbot, window, monkeypatch):
@@ -208,21 +229,7 @@ def test_bad_file_shows_a_message_and_the_window_keeps_running(qtbot, tmp_path, 
 
 
 def test_a_result_for_replaced_inputs_is_dropped(qtbot, window, monkeypatch):
-    import corrlib.methods
-
-    gate = threading.Event()
-    fake = fake_solver(4)
-
-    def gated(*args, **kwargs):
-        assert gate.wait(30)
-        return (yield from fake(*args, **kwargs))
-
-    monkeypatch.setattr(corrlib.methods, "solve_iter", gated)
-    window.load_demo()
-    wait_loaded(qtbot, window)
-    ready = []
-    window.result_ready.connect(ready.append)
-    window.run_method(method="descriptor-nn")
+    gate, ready = gated_run(qtbot, window, monkeypatch)
     window.load_file(str(TOSCA / "cat0.off"), "target")
     wait_loaded(qtbot, window)  # the new target cancels the running method
     gate.set()
@@ -270,3 +277,47 @@ def test_the_previous_tests_window_is_closed_and_kept(qtbot):
     previous = _CLOSED_WINDOWS[0]
     assert shiboken6.isValid(previous) and not previous.isVisible() and previous in CLOSED_WIDGETS
     assert previous._closed and not studio_threads_alive()
+
+
+def test_a_failed_load_keeps_the_running_method_and_cancel_stays_for_a_job_that_goes_on(qtbot, window, monkeypatch,
+                                                                                       tmp_path):
+    """Found by fuzzing the studio: a load cancelled the running method when it *started*, so a file that failed to
+    load lost the run for nothing; and the shared job panel turned Cancel off when one job ended while another
+    still ran. Also: the status bar kept an old error after a good load."""
+    gate, ready = gated_run(qtbot, window, monkeypatch)
+    (tmp_path / "empty.off").write_text("")
+    window.load_file(str(tmp_path / "empty.off"), "source")
+    wait_loaded(qtbot, window)  # the load failed: the pair did not change
+    assert "empty.off" in window.statusBar().currentMessage()
+    assert window.runner.is_running("pair") and window.job_panel.cancel.isEnabled()
+    assert "still running: the method" in window.job_panel.stage.text()
+    gate.set()
+    qtbot.waitUntil(lambda: bool(ready), timeout=30_000)  # the run finished and its result stands
+    assert window.pair_view.result is not None and not window.job_panel.cancel.isEnabled()
+    window.load_file(str(TOSCA / "wolf0.off"), "source")
+    wait_loaded(qtbot, window)
+    assert window.statusBar().currentMessage() == "Pick a method and press Run."
+
+
+def test_a_new_input_clears_the_last_pair_s_match_and_a_mesh_to_a_contour_is_explained(qtbot, window):
+    """Found by fuzzing the studio: the Product tab kept the last pair's match after new inputs were loaded, and a
+    mesh source with a contour target was told "load a source and a target" though both were loaded."""
+    from corrlib.io import load_mesh
+
+    view = window.product_view
+    wolf = load_mesh(TOSCA / "wolf0.off")
+    angles = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    view.show_contour_match(np.column_stack([np.cos(angles), np.sin(angles)]), wolf, np.arange(40), np.arange(40),
+                            1.0)
+    assert view.curve is not None
+    window.load_file(str(TOSCA / "wolf0.off"), "source")
+    window.load_file(str(ROOT / "resources" / "data" / "sketch2d" / "human_sketch_a_contour.txt"), "target")
+    wait_loaded(qtbot, window)
+    assert view.curve is None and view.mesh_points is None and view.info.text().startswith("Match a contour")
+    assert window.pair_view.info.text() == \
+        "The target is a contour: a 2D-to-3D match takes the contour as the source."
+    shown = []
+    window.error_shown.connect(shown.append)
+    window.run_method()
+    assert shown == ["no method to run: no method matches a mesh to a contour: a 2D-to-3D match takes the contour "
+                     "as the source and the mesh as the target."]

@@ -432,3 +432,35 @@ def test_a_mesh_is_shown_alone_until_the_other_comes(qtbot, window):
     wait_loaded(qtbot, window)  # a contour is named where the source was, the target drawn alone
     assert len(view.shown_points) == 1 and len(view.shown_points[0]) == window.target.n_vertices
     assert view.info.text() == "The source is a contour: a 2D-to-3D match is shown in the Product tab."
+
+
+def test_the_query_contour_fills_its_viewport_after_a_resize_and_a_redraw(qtbot, window):
+    """Found by fuzzing: the contour's camera came from VTK's reset, which fits the window size VTK last rendered
+    at: right after a resize the fit was the old one, and after the next render a redraw divided by the narrow
+    viewport's aspect, so the contour showed at about half its size. Its box now fills the width or the height."""
+    from app.views.camera import viewport_aspect
+    from app.views.product import CONTOUR_MARGIN
+    from corrlib.io import load_mesh
+
+    wolf = load_mesh(TOSCA / "wolf0.off")
+    angles = np.linspace(0, 2 * np.pi, 60, endpoint=False)
+    outline = np.column_stack([np.cos(angles), 2 * np.sin(angles)])
+    view = window.product_view
+    window.tabs.setCurrentWidget(view)
+    view.show_contour_match(outline, wolf, np.arange(60), np.arange(60), 1.0)
+
+    def fills_its_viewport():
+        renderer = view.plotter.renderers[0]
+        camera = renderer.camera
+        half_height = np.linalg.norm(np.subtract(camera.position, camera.focal_point)) * \
+            np.tan(np.radians(camera.view_angle) / 2)
+        needed = CONTOUR_MARGIN * max(1.0 / viewport_aspect(view.plotter, renderer), 2.0)
+        return half_height == pytest.approx(needed, rel=1e-6)
+
+    for size in ((1280, 720), (900, 700)):
+        window.resize(*size)
+        qtbot.wait(300)
+        assert fills_its_viewport(), size
+        view.plotter.render()
+        view.redraw()
+        assert fills_its_viewport(), size

@@ -10,7 +10,11 @@ from app.views.scene import LABEL_FONT_SIZE, PLAIN_COLOR, LazyPlotter, hue_color
 from corrlib.viewing import outline_frame
 
 CURVE_WIDTH = 4  # line width of the query contour
+#: what the Product tab says before a match
+PRODUCT_HINT = ("Match a contour to a mesh (2D-to-3D) to see the matched curve here. Product-torus views of contour "
+                "pairs appear when that method is available.")
 CONTOUR_MARGIN = 1.05  # the query contour fills its viewport up to this margin
+CONTOUR_VIEW_ANGLE = 30.0  # degrees: VTK's default, the contour's camera
 CURVE_TUBE_RADIUS = 0.004  # radius of the matched curve's tube, relative to the mesh's bounding-box diagonal
 
 
@@ -19,8 +23,7 @@ class ProductView(QWidget, FramedView):
 
     def __init__(self, parent=None):
         super().__init__(parent)
-        self.info = QLabel("Match a contour to a mesh (2D-to-3D) to see the matched curve here. "
-                           "Product-torus views of contour pairs appear when that method is available.")
+        self.info = QLabel(PRODUCT_HINT)
         self.info.setWordWrap(True)
         self.function = QComboBox()
         self.function.setToolTip("Product function drawn on the torus (what the method provides: cost, "
@@ -41,6 +44,19 @@ class ProductView(QWidget, FramedView):
         self._match = None  # the arguments of the last show_contour_match (redrawn on a new up axis)
         self.mesh_points: np.ndarray | None = None  # the matched mesh in its display frame
         self.drawn_frame = None  # the upright view the matched curve looks most like the query from (ViewFrame)
+
+    def clear(self) -> None:
+        """Forget the last match or contour pair (the inputs changed: it belongs to the previous pair)."""
+        if self._match is None and self._pair is None:
+            return
+        self._match = self._pair = None
+        self.mesh_points = self.drawn_frame = self.curve = self.torus_curve = None
+        self.function.blockSignals(True)
+        self.function.clear()
+        self.function.blockSignals(False)
+        self.plotter.clear_actors()
+        self.plotter.render()
+        self.info.setText(PRODUCT_HINT)
 
     def view_plotter(self):
         return self._plotter.get() if self.mesh_points is not None else None
@@ -120,18 +136,21 @@ class ProductView(QWidget, FramedView):
             self.plotter.render()
 
     def _fit_contour(self, points: np.ndarray) -> None:
-        """The contour seen from +z and fitted to the width of its viewport too: the bounding-sphere reset
-        fits the height only, so a wide outline in a narrow viewport was cut at the sides."""
+        """The contour seen from +z, its bounding box filling the width or the height of its viewport (up to
+        :data:`CONTOUR_MARGIN`). The camera is placed here from the widget's own size: VTK's reset fits a
+        bounding sphere to the window size it last rendered at, which lags a resize (too near) and, once it
+        knows a narrow viewport, divides by its aspect (the contour at half its size)."""
         p = self.plotter
-        p.view_xy()
-        p.reset_camera()
         camera = p.renderers[0].camera
-        half_width, half_height = np.ptp(points[:, :2], axis=0) / 2
-        # the reset shows a half-height of radius / cos(view angle / 2) at the focal point
-        shown = float(np.hypot(half_width, half_height)) / np.cos(np.radians(camera.view_angle) / 2)
-        needed = CONTOUR_MARGIN * max(half_width / viewport_aspect(p, p.renderers[0]), half_height)
-        if needed > shown:
-            camera.zoom(shown / needed)
+        low, high = points[:, :2].min(axis=0), points[:, :2].max(axis=0)
+        half_width, half_height = (high - low) / 2
+        half_shown = CONTOUR_MARGIN * max(half_width / viewport_aspect(p, p.renderers[0]), half_height, 1e-12)
+        camera.view_angle = CONTOUR_VIEW_ANGLE
+        centre = np.append((low + high) / 2, 0.0)
+        camera.focal_point = centre
+        camera.position = centre + [0.0, 0.0, half_shown / np.tan(np.radians(CONTOUR_VIEW_ANGLE) / 2)]
+        camera.up = (0.0, 1.0, 0.0)
+        p.renderers[0].ResetCameraClippingRange()
 
     def show_contour_pair(self, result) -> None:
         """Two contours: the product torus (3D) and the flat square, with the correspondence curve."""
@@ -183,8 +202,9 @@ class ProductView(QWidget, FramedView):
                 p.add_mesh(self.torus_curve.tube(radius=0.015), color="crimson")
                 p.add_text("product torus A × B", font_size=9)
             p.reset_camera()
-            if not flat:
-                p.camera.zoom(0.8)
+            if not flat:  # farther away (a zoom would widen the view angle, compounding at every redraw)
+                p.camera.Dolly(0.8)
+                p.renderer.ResetCameraClippingRange()
         p.render()
         self.info.setText(f"{len(u)} × {len(v)} product torus; correspondence energy {result.energy:.4g}")
 

@@ -780,7 +780,8 @@ class MainWindow(QMainWindow):
             self.method_box.setCurrentIndex(self.method_box.findData(method))  # the form shows what runs
         name = method or self.method_box.currentData()
         if name is None:
-            self.show_error(f"no method to run: {self.next_step()[0].lower()}{self.next_step()[1:]}")
+            step = self.next_step()
+            self.show_error(f"no method to run: {step[0].lower()}{step[1:]}")
             return
         self._start_method(PAIR_KEY, name)
 

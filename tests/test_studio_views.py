@@ -464,3 +464,23 @@ def test_the_query_contour_fills_its_viewport_after_a_resize_and_a_redraw(qtbot,
         view.plotter.render()
         view.redraw()
         assert fills_its_viewport(), size
+
+
+def test_the_methods_unticked_for_a_comparison_stay_unticked_for_the_next_pair(qtbot, window):
+    """Found by fuzzing the studio: every load ticked every method of the Compare tab again, the slow ones too."""
+    from PySide6.QtCore import Qt
+
+    load_demo(qtbot, window)
+    methods = window.compare_view.methods
+    names = [methods.item(i).data(Qt.UserRole) for i in range(methods.count())]
+    assert "kernel-matching" in names and "divergence-free" in names
+    for i in range(methods.count()):
+        if methods.item(i).data(Qt.UserRole) in ("kernel-matching", "divergence-free"):
+            methods.item(i).setCheckState(Qt.Unchecked)
+    window.load_file(str(TOSCA / "cat0.off"), "target")
+    wait_loaded(qtbot, window)
+    assert sorted(window.compare_view.selected()) == sorted(set(names) - {"kernel-matching", "divergence-free"})
+    window.load_file(str(ROOT / "resources" / "data" / "sketch2d" / "human_sketch_a_contour.txt"), "source")
+    window.load_file(str(TOSCA / "wolf0.off"), "source")  # no mesh pair in between: remembered all the same
+    wait_loaded(qtbot, window)
+    assert sorted(window.compare_view.selected()) == sorted(set(names) - {"kernel-matching", "divergence-free"})

@@ -72,6 +72,7 @@ class CompareView(QWidget, FramedView):
     def __init__(self, parent=None):
         super().__init__(parent)
         self.methods = QListWidget()  # a wrapping strip of check boxes, so the grid gets the width
+        self.unticked: set[str] = set()  # the methods the user unticked (set_methods keeps them so)
         self.methods.setFlow(QListWidget.LeftToRight)
         self.methods.setWrapping(True)
         self.methods.setResizeMode(QListWidget.Adjust)
@@ -120,12 +121,20 @@ class CompareView(QWidget, FramedView):
         self.captions: dict[int, str] = {}  # view index -> caption (for tests and the picture)
 
     def set_methods(self, specs) -> None:
+        """The methods that can be compared on the pair loaded, each ticked as the user last left it (a method not
+        listed before is ticked), so that a new pair does not bring back the slow methods the user unticked."""
+        for i in range(self.methods.count()):  # remembered also across pairs the methods do not take (contours)
+            item = self.methods.item(i)
+            if item.checkState() == Qt.Checked:
+                self.unticked.discard(item.data(Qt.UserRole))
+            else:
+                self.unticked.add(item.data(Qt.UserRole))
         self.methods.clear()
         for spec in specs:
             item = QListWidgetItem(spec.label)
             item.setData(Qt.UserRole, spec.name)
             item.setFlags(item.flags() | Qt.ItemIsUserCheckable)
-            item.setCheckState(Qt.Checked)
+            item.setCheckState(Qt.Unchecked if spec.name in self.unticked else Qt.Checked)
             self.methods.addItem(item)
 
     def selected(self) -> list[str]:

@@ -533,11 +533,9 @@ def _say_failures(failures: list[str], where: Path) -> None:
 def cmd_bench_retrieval(args) -> int:
     from corrlib.bench import retrieval_benchmark
     from corrlib.io import ensure_output_folder
-    from corrlib.outputs import check_outside
 
     params = _contour3d_params(args, retrieval=True)  # named errors before any work
-    check_outside(args.output, args.queries, "-o", "queries")
-    ensure_output_folder(args.output, "-o")
+    ensure_output_folder(args.output, "-o")  # named as the option; the library checks the rest before any query
 
     failures = []
 
@@ -808,13 +806,14 @@ def cmd_perf(args) -> int:
 
 def _jobs_option(text: str) -> int:
     """``--jobs``: 0 (all cores) or a positive number of worker processes; argparse names the option otherwise."""
+    from corrlib.parallel import check_jobs
+
     try:
         value = int(text)
-    except ValueError:
-        value = None
-    if value is None or value < 0:
+        check_jobs(value)  # the library's rule
+    except (ValueError, CorrError):
         raise argparse.ArgumentTypeError(f"expected 0 (all cores) or a positive number of worker processes, "
-                                         f"got {text}")
+                                         f"got {text}") from None
     return value
 
 

@@ -138,12 +138,12 @@ def source_function(source: TriMesh) -> np.ndarray:
 
 
 def sequence_of(result, source: TriMesh, target: TriMesh) -> tuple:
-    """``(positions, description)`` for the sequence view: the method's deformation, else linear."""
+    """``(positions, description)`` for the sequence view: the method's deformation, else the as-rigid-as-possible
+    interpolation through its map (:func:`corrlib.morph.sequence_positions`)."""
     from corrlib.methods.divergence_free import SEQUENCE_T_MAX
-    from corrlib.morph import FLOW_DESCRIPTION, LINEAR_DESCRIPTION, has_deformation, sequence_positions
+    from corrlib.morph import describe_sequence, sequence_positions
 
-    description = FLOW_DESCRIPTION if has_deformation(result) else LINEAR_DESCRIPTION
-    return sequence_positions(result, source, target, t_max=SEQUENCE_T_MAX), description
+    return sequence_positions(result, source, target, t_max=SEQUENCE_T_MAX), describe_sequence(result)
 
 
 @dataclass

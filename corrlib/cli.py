@@ -593,9 +593,11 @@ def cmd_morph(args) -> int:
     import numpy as np
 
     from corrlib.methods import get_method, solve
-    from corrlib.morph import export_sequence, frame_positions, has_deformation, largest_volume_change
+    from corrlib.morph import INTERPOLATIONS, export_sequence, frame_positions, largest_volume_change, sequence_kind
     from corrlib.shapes import TriMesh
 
+    if args.interpolation not in INTERPOLATIONS:
+        raise CorrError(f"--interpolation must be one of {', '.join(INTERPOLATIONS)}, got {args.interpolation!r}")
     if not 2 <= args.frames <= MAX_FRAMES:
         raise CorrError(f"--frames must be between 2 and {MAX_FRAMES}, got {args.frames}")
     from corrlib.methods.divergence_free import SEQUENCE_T_MAX
@@ -620,12 +622,13 @@ def cmd_morph(args) -> int:
     spec = get_method(args.method)
     result = solve(spec, source, target, callback=_progress_printer(args.quiet), **_parse_overrides(args.param))
     times = np.linspace(0.0, args.t_max, args.frames)
-    frames = frame_positions(result, source, target, times)
+    frames = frame_positions(result, source, target, times, interpolation=args.interpolation)
     with staged_output(out, replaces=replaced) as stage:  # the result and every frame, or nothing
         _stage_match_outputs(result, source, target, stage / "result", pictures=True)
         written = export_sequence(stage, frames, source.faces, times, fmt=args.format, closed=source.is_closed)
     written["animation"] = written["animation"] and out / Path(written["animation"]).name
-    kind = "divergence-free flow" if has_deformation(result) else "linear interpolation through the map"
+    kind = {"flow": "divergence-free flow", "rigid": "as-rigid-as-possible interpolation through the map",
+            "linear": "linear interpolation through the map"}[sequence_kind(result, args.interpolation)]
     print(f"{len(frames)} frames t = 0 .. {args.t_max:g} ({kind}) in {out}/, animation {written['animation']}")
     change = largest_volume_change(written["volume"], source.area)
     if change is not None:
@@ -1010,7 +1013,11 @@ def _add_morph_parser(sub) -> None:
     p.add_argument("source")
     p.add_argument("target")
     p.add_argument("--method", default="divergence-free",
-                   help="registered method (divergence-free: its flow; others: linear interpolation through the map)")
+                   help="registered method (divergence-free: its flow; others: interpolation through the map)")
+    p.add_argument("--interpolation", default="auto",
+                   help="auto (default): the method's flow if it has one, else rigid; rigid: as rigid as possible "
+                        "(every face turns and stretches by a share of its deformation); linear: vertex positions "
+                        "(shrinks what turns)")
     p.add_argument("--frames", type=int, default=11, help="number of frames (default 11)")
     p.add_argument("--t-max", dest="t_max", type=float, default=1.5,
                    help="last time: 1 is the target, above 1 extrapolates, at most 3 (default 1.5)")

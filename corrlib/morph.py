@@ -1,10 +1,11 @@
 """Shape sequences between a source and a target.
 
-:func:`linear_sequence` is the fallback for any point-to-point map: vertex
-positions interpolated (and extrapolated for t > 1) linearly between the
-source and the partners of its vertices on the target, with the source's
-connectivity. It is not volume preserving and folds where the map does;
-methods with a deformation model (divergence-free flow) provide their own.
+A method with a deformation model (the divergence-free flow) moves the source along it. For any other
+point-to-point map the sequence is the as-rigid-as-possible interpolation of the source towards the map's
+image (:mod:`corrlib.deformation.rigid_interpolation`): each face turns and stretches by a share of its own
+deformation, so a limb that swings keeps its length and the body its volume. Linear interpolation of the
+vertex positions (``interpolation="linear"``) is kept for comparison: it shrinks whatever turns and folds
+where the map does. All kinds extrapolate for t > 1 and keep the source's connectivity.
 """
 
 from __future__ import annotations
@@ -13,21 +14,23 @@ import numpy as np
 
 from corrlib.errors import InputError
 
+#: how the studio and the CLI describe each kind of sequence
+FLOW_DESCRIPTION = "divergence-free flow (volume preserving; t > 1 extrapolates along the same field)"
+RIGID_DESCRIPTION = ("as-rigid-as-possible interpolation through the map (each face turns and stretches by a share "
+                     "of its own deformation; t > 1 extrapolates)")
+LINEAR_DESCRIPTION = ("linear vertex interpolation through the map (shrinks what turns, folds where the map "
+                      "does)")
+#: ``interpolation`` choices: "auto" is the method's flow where it has one, else "rigid"
+INTERPOLATIONS = ("auto", "rigid", "linear")
 
-def linear_positions(source_vertices: np.ndarray, target_vertices: np.ndarray, map_xy: np.ndarray,
-                     t: float) -> np.ndarray:
-    """(n_x, 3) float: ``(1 - t) X + t Y[map_xy]``; unmatched vertices (-1) stay at the source position."""
+
+def map_image(source_vertices: np.ndarray, target_vertices: np.ndarray, map_xy: np.ndarray) -> np.ndarray:
+    """(n_x, 3) float: where the map sends every source vertex, ``Y[map_xy]``; an unmatched vertex (-1) stays
+    where it is."""
     mp = np.asarray(map_xy)
     if mp.shape[0] != source_vertices.shape[0]:
         raise InputError(f"the map has {mp.shape[0]} entries for {source_vertices.shape[0]} source vertices")
-    partner = np.where((mp >= 0)[:, None], target_vertices[np.clip(mp, 0, None)], source_vertices)
-    return (1.0 - t) * source_vertices + t * partner
-
-
-#: how the studio and the CLI describe the two kinds of sequence
-FLOW_DESCRIPTION = "divergence-free flow (volume preserving; t > 1 extrapolates along the same field)"
-LINEAR_DESCRIPTION = ("linear vertex interpolation through the map (fallback: not a deformation model; folds "
-                      "where the map does)")
+    return np.where((mp >= 0)[:, None], target_vertices[np.clip(mp, 0, None)], source_vertices)
 
 
 def has_deformation(result) -> bool:
@@ -35,14 +38,37 @@ def has_deformation(result) -> bool:
     return result.deformation is not None
 
 
-def _linear(result, source, target):
+def sequence_kind(result, interpolation: str = "auto") -> str:
+    """``"flow"``, ``"rigid"`` or ``"linear"``: what ``interpolation`` (:data:`INTERPOLATIONS`) means for a
+    result."""
+    if interpolation not in INTERPOLATIONS:
+        raise InputError(f"unknown interpolation {interpolation!r} (use {', '.join(INTERPOLATIONS)})")
+    if interpolation == "auto":
+        return "flow" if has_deformation(result) else "rigid"
+    return interpolation
+
+
+def describe_sequence(result, interpolation: str = "auto") -> str:
+    """The words the studio and the CLI use for the sequence of a result."""
+    return {"flow": FLOW_DESCRIPTION, "rigid": RIGID_DESCRIPTION,
+            "linear": LINEAR_DESCRIPTION}[sequence_kind(result, interpolation)]
+
+
+def _through_map(result, source, target, kind: str):
     if result.map_xy is None:
         raise InputError(f"the result of {result.method!r} has no point-to-point map to interpolate")
-    return lambda t: linear_positions(source.vertices, target.vertices, result.map_xy, t)
+    image = map_image(source.vertices, target.vertices, result.map_xy)
+    if kind == "linear":
+        return lambda t: (1.0 - t) * source.vertices + t * image
+    from corrlib.deformation.rigid_interpolation import rigid_interpolation
+
+    # a vertex map onto the target is known to within the target's vertex spacing
+    return rigid_interpolation(source.vertices, source.faces, image,
+                               resolution=float(np.mean(target.edge_lengths))).positions
 
 
-def sequence_positions(result, source, target, t_max: float = 1.5):
-    """A ``positions(t)`` callable for a result: the method's deformation if it has one, else linear.
+def sequence_positions(result, source, target, t_max: float = 1.5, interpolation: str = "auto"):
+    """A ``positions(t)`` callable for a result (see the module's notes).
 
     Parameters
     ----------
@@ -50,31 +76,33 @@ def sequence_positions(result, source, target, t_max: float = 1.5):
     source, target : TriMesh
     t_max : float
         Largest time the callable will be asked for (the flow is precomputed up to it).
+    interpolation : {"auto", "rigid", "linear"}
+        "auto": the method's flow where it has one, else "rigid".
 
     Returns
     -------
     callable
-        ``positions(t) -> (n_x, 3)``; for a divergence-free result the flow's
-        RK2 trajectory (exact at its steps, linear in between), otherwise
-        :func:`linear_positions` through ``result.map_xy``.
+        ``positions(t) -> (n_x, 3)``; for the flow its RK2 trajectory (exact at its steps, linear in between).
     """
-    if not has_deformation(result):
-        return _linear(result, source, target)
-    return result.deformation.source_interpolator(source.vertices, t_max)
+    kind = sequence_kind(result, interpolation)
+    if kind == "flow":
+        return result.deformation.source_interpolator(source.vertices, t_max)
+    return _through_map(result, source, target, kind)
 
 
-def frame_positions(result, source, target, times) -> list[np.ndarray]:
-    """Exact positions at ``times`` (the flow integrated to each time, or linear interpolation); the times must
-    be finite numbers (a flow extrapolates beyond 1, a linear interpolation too)."""
+def frame_positions(result, source, target, times, interpolation: str = "auto") -> list[np.ndarray]:
+    """Exact positions at ``times`` (the flow integrated to each time, or the interpolation through the map); the
+    times must be finite numbers (every kind extrapolates beyond 1)."""
     try:
         times = np.asarray(times, dtype=np.float64).reshape(-1)
     except (TypeError, ValueError):
         raise InputError(f"times must be numbers, got {times!r}") from None
     if not np.all(np.isfinite(times)):
         raise InputError(f"times must be finite, got {float(times[~np.isfinite(times)][0])!r}")
-    if has_deformation(result):
+    kind = sequence_kind(result, interpolation)
+    if kind == "flow":
         return [result.deformation.positions(source.vertices, float(t)) for t in times]
-    positions = _linear(result, source, target)
+    positions = _through_map(result, source, target, kind)
     return [positions(float(t)) for t in times]
 
 

@@ -598,18 +598,6 @@ def test_sequence_export_glb_and_volumes(warped_wolf, warped_result, tmp_path):
     assert "not applicable" in (tmp_path / "open" / "volumes.csv").read_text()
 
 
-def test_linear_fallback_for_methods_without_a_deformation(wolf_pair):
-    from corrlib.methods.base import MatchResult
-    from corrlib.morph import frame_positions, sequence_positions
-
-    wolf0, wolf1 = wolf_pair
-    ident = np.arange(wolf0.n_vertices)
-    result = MatchResult("descriptor-nn", ident, ident)
-    mid = sequence_positions(result, wolf0, wolf1)(0.5)
-    assert np.allclose(mid, 0.5 * (wolf0.vertices + wolf1.vertices))
-    assert np.allclose(frame_positions(result, wolf0, wolf1, [1.0])[0], wolf1.vertices)
-
-
 def test_cli_morph(tmp_path):
     from _data import TOSCA
     from corrlib.cli import main

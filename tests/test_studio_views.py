@@ -484,3 +484,20 @@ def test_the_methods_unticked_for_a_comparison_stay_unticked_for_the_next_pair(q
     window.load_file(str(TOSCA / "wolf0.off"), "source")  # no mesh pair in between: remembered all the same
     wait_loaded(qtbot, window)
     assert sorted(window.compare_view.selected()) == sorted(set(names) - {"kernel-matching", "divergence-free"})
+
+
+def test_the_sequence_description_does_not_widen_the_window(qtbot, window):
+    """The sequence of a map without a deformation is described in a long line; unwrapped, it raised the window's
+    minimum width to 1,461 pixels, wider than a 1280 × 720 screen."""
+    from corrlib.methods.base import MatchResult
+    from corrlib.morph import describe_sequence, sequence_positions
+
+    load_demo(qtbot, window)
+    narrowest = window.minimumSizeHint().width()
+    ident = np.arange(window.source.n_vertices)
+    result = MatchResult("descriptor-nn", ident, ident)
+    window.sequence_view.set_sequence(window.source, sequence_positions(result, window.source, window.target),
+                                      describe_sequence(result))
+    qtbot.wait(50)
+    assert "as-rigid-as-possible" in window.sequence_view.kind.text()
+    assert window.minimumSizeHint().width() <= max(narrowest, 1280)

@@ -54,6 +54,7 @@ class SequenceView(QWidget, FramedView):
         self.play_button.clicked.connect(self.toggle_play)
         self.label = QLabel("t = 0.00")
         self.kind = QLabel("")
+        self.kind.setWordWrap(True)  # a long description must not widen the window
         self.timer = QTimer(self)
         self.timer.setInterval(FRAME_INTERVAL_MS)
         self.timer.timeout.connect(self._tick)

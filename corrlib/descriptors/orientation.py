@@ -24,7 +24,7 @@ from __future__ import annotations
 import numpy as np
 
 from corrlib.errors import InputError
-from corrlib.geometry.laplacian import mass_matrix
+from corrlib.geometry.laplacian import hat_gradients, mass_matrix
 
 
 def face_gradients(vertices: np.ndarray, faces: np.ndarray, values: np.ndarray) -> np.ndarray:
@@ -46,15 +46,10 @@ def face_gradients(vertices: np.ndarray, faces: np.ndarray, values: np.ndarray) 
     values = np.asarray(values, dtype=np.float64)
     if values.ndim != 2 or values.shape[0] != vertices.shape[0]:
         raise InputError(f"values must have shape (n_vertices, d) = ({vertices.shape[0]}, d), got {values.shape}")
-    p = vertices[faces]  # (f, 3, 3)
-    edges = np.stack([p[:, 2] - p[:, 1], p[:, 0] - p[:, 2], p[:, 1] - p[:, 0]], axis=1)
-    normal = np.cross(edges[:, 2], -edges[:, 1])
-    double_area = np.linalg.norm(normal, axis=1)
-    if np.any(double_area <= 0):
+    hat, areas = hat_gradients(vertices, faces)  # (f, 3 corners, 3)
+    if np.any(areas <= 0):
         raise InputError("face_gradients: the mesh has faces of zero area")
-    normal /= double_area[:, None]
-    rotated = np.cross(normal[:, None, :], edges) / double_area[:, None, None]  # (f, 3 corners, 3)
-    return np.einsum("fcd,fck->fdk", values[faces], rotated)
+    return np.einsum("fcd,fck->fdk", values[faces], hat)
 
 
 def corner_integrals(mesh, face_values: np.ndarray) -> np.ndarray:

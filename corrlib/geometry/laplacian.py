@@ -85,6 +85,36 @@ def cotan_stiffness(vertices: np.ndarray, faces: np.ndarray) -> sp.csr_matrix:
     return (off + sp.diags(diag)).tocsr()
 
 
+def hat_gradients(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    """The gradients of the piecewise-linear hat functions on every face, and the face areas.
+
+    ``∇φ_i = (n × e_i) / (2A)`` on a face of area ``A`` and unit normal ``n``, ``e_i`` the edge opposite its
+    corner ``i`` (counter-clockwise). They span the face's plane and sum to zero, and
+    ``Σ_f A_f ∇φ_i · ∇φ_j`` is :func:`cotan_stiffness`. A face of zero area gets zero gradients.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float
+    faces : (f, 3) int
+
+    Returns
+    -------
+    hat : (f, 3, 3) float
+        ``hat[f, i]`` the gradient of the hat function of corner ``i`` of face ``f``.
+    areas : (f,) float
+    """
+    p = np.asarray(vertices, dtype=np.float64)[np.asarray(faces, dtype=np.int64)]  # (f, 3, 3)
+    edges = np.stack([p[:, 2] - p[:, 1], p[:, 0] - p[:, 2], p[:, 1] - p[:, 0]], axis=1)
+    normal = np.cross(edges[:, 2], -edges[:, 1])
+    double_area = np.linalg.norm(normal, axis=1)
+    flat = double_area <= 0
+    safe = np.where(flat, 1.0, double_area)
+    normal /= safe[:, None]
+    hat = np.cross(normal[:, None, :], edges) / safe[:, None, None]
+    hat[flat] = 0.0
+    return hat, 0.5 * double_area
+
+
 def mass_matrix(vertices: np.ndarray, faces: np.ndarray, kind: str = "lumped") -> sp.csr_matrix:
     """Mass matrix of a triangle mesh.
 

@@ -166,7 +166,7 @@ class MethodOutcome:
     sequence : tuple (callable, str) or None
         ``positions(t) -> (n_x, 3)`` for the sequence view (the flow integrated up to
         :data:`~corrlib.methods.divergence_free.SEQUENCE_T_MAX` for a divergence-free
-        result, else linear) and a one-line description of it.
+        result, else the as-rigid-as-possible interpolation through the map) and a one-line description of it.
     """
 
     result: object
@@ -192,21 +192,45 @@ def method_job(name: str, source, target, params, gt=None, *, view_data: bool = 
 
     def factory(token):
         result = yield from solve_iter(name, source, target, params, token)
-        outcome = MethodOutcome(result, source, target)
-        map_xy = result.map_xy
-        if map_xy is not None:
-            outcome.n_unmatched = int(np.count_nonzero(np.asarray(map_xy) < 0))
-        if gt is not None and map_xy is not None and isinstance(target, TriMesh):
-            yield Progress("geodesic errors", -1.0, f"{np.asarray(gt[0]).size} ground-truth rows")
-            try:
-                outcome.errors = map_errors(map_xy, target, gt[0], gt[1], gt[2] if len(gt) > 2 else None)
-            except CorrError as exc:  # a bad ground truth must not lose the result
-                outcome.note = f"no error figures: {exc}"
-        if view_data and isinstance(source, TriMesh) and isinstance(target, TriMesh):
-            yield Progress("source function", -1.0, "eigenfunction for the pair view")
-            outcome.function = source_function(source)
-            yield Progress("sequence", -1.0, "positions between the poses")
-            outcome.sequence = sequence_of(result, source, target)
-        return outcome
+        return (yield from _outcome(result, source, target, gt, view_data))
 
     return factory
+
+
+def map_job(path, source: TriMesh, target: TriMesh, gt=None):
+    """Job factory: a map read from a file (one 0-based target index per source vertex, or a result's .npz),
+    shown as a method's result is (:func:`method_job`); the reverse map for the colour transfer is the nearest
+    image of every target vertex (:func:`corrlib.neighbours.reverse_map`). Returns a :class:`MethodOutcome`."""
+
+    def factory(token):
+        from corrlib.io import load_map
+        from corrlib.methods.base import MatchResult
+        from corrlib.neighbours import reverse_map
+
+        yield Progress("reading the map", -1.0, str(path))
+        map_xy = load_map(path, n_target=target.n_vertices, n_source=source.n_vertices, allow_unmatched=True)
+        result = MatchResult(f"the map {Path(path).name}", map_xy, reverse_map(map_xy, target.vertices))
+        return (yield from _outcome(result, source, target, gt, True))
+
+    return factory
+
+
+def _outcome(result, source, target, gt, view_data: bool):
+    """The :class:`MethodOutcome` of a result (a generator): errors against ``gt``, and with ``view_data`` the
+    pair view's source function and the sequence."""
+    outcome = MethodOutcome(result, source, target)
+    map_xy = result.map_xy
+    if map_xy is not None:
+        outcome.n_unmatched = int(np.count_nonzero(np.asarray(map_xy) < 0))
+    if gt is not None and map_xy is not None and isinstance(target, TriMesh):
+        yield Progress("geodesic errors", -1.0, f"{np.asarray(gt[0]).size} ground-truth rows")
+        try:
+            outcome.errors = map_errors(map_xy, target, gt[0], gt[1], gt[2] if len(gt) > 2 else None)
+        except CorrError as exc:  # a bad ground truth must not lose the result
+            outcome.note = f"no error figures: {exc}"
+    if view_data and isinstance(source, TriMesh) and isinstance(target, TriMesh):
+        yield Progress("source function", -1.0, "eigenfunction for the pair view")
+        outcome.function = source_function(source)
+        yield Progress("sequence", -1.0, "positions between the poses")
+        outcome.sequence = sequence_of(result, source, target)
+    return outcome

@@ -31,7 +31,7 @@ from PySide6.QtWidgets import (
 
 import corrlib
 from app.gui_gc import STUDIO_THREAD_PREFIX, collect_on_gui_thread
-from app.jobs import LoadedShape, MethodOutcome, describe, load_job, method_job, repair_job
+from app.jobs import LoadedShape, MethodOutcome, describe, load_job, map_job, method_job, repair_job
 from app.param_form import ParamForm
 from app.sketch import SketchPanel
 from app.views.compare import CompareView
@@ -326,6 +326,7 @@ class MainWindow(QMainWindow):
                                      ("Open contour / silhouette…", self.open_contour_dialog, None),
                                      ("Repair and open a mesh…", self.repair_dialog, None),
                                      ("Load ground truth (.vts pair)…", self.open_gt_dialog, None),
+                                     ("Open a map of this pair…", self.open_map_dialog, None),
                                      ("Texture image…", self.open_texture_dialog, None),
                                      ("Demo pair", self.load_demo, None),
                                      ("Try retrieval (bundled collection)", self.try_retrieval, None)):
@@ -981,6 +982,20 @@ class MainWindow(QMainWindow):
                 save_mesh(path, self.target.vertices, self.target.faces, colors)
             except (CorrError, OSError) as exc:
                 self.show_error(str(exc))
+
+    def open_map_dialog(self) -> None:
+        path, _ = QFileDialog.getOpenFileName(self, "Map of the loaded pair", "", dialog_filter("map", "result"))
+        if path:
+            self.load_map(path)
+
+    def load_map(self, path: str) -> None:
+        """Show a map from a file (another tool's, an earlier run's) as a method's result: pair view, errors
+        against the loaded ground truth, sequence (:func:`app.jobs.map_job`)."""
+        if not (isinstance(self.source, TriMesh) and isinstance(self.target, TriMesh)):
+            self.show_error("a map needs two meshes: " + self.next_step().lower())
+            return
+        self.job_panel.started(f"reading the map {Path(path).name}")
+        self.runner.start(PAIR_KEY, map_job(path, self.source, self.target, self.gt))
 
     def open_texture_dialog(self) -> None:
         path, _ = QFileDialog.getOpenFileName(self, "Texture image", "", dialog_filter("texture"))

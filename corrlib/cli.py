@@ -584,27 +584,55 @@ def cmd_bench_contour(args) -> int:
     return 0 if failed == 0 else 1
 
 
+#: the method ``corr morph`` runs unless told otherwise: the one with a deformation model of its own
+MORPH_METHOD = "divergence-free"
 #: most frames ``corr morph`` writes (the glTF animation's weights grow with the square of the count: 2,000
 #: frames need 16 MB of them, and every frame is a mesh file)
 MAX_FRAMES = 2000
 
 
-def cmd_morph(args) -> int:
+def _check_morph_options(args) -> None:
+    """Everything about ``corr morph``'s options that can be refused before any work."""
     import numpy as np
 
-    from corrlib.methods import get_method, solve
-    from corrlib.morph import INTERPOLATIONS, export_sequence, frame_positions, largest_volume_change, sequence_kind
-    from corrlib.shapes import TriMesh
+    from corrlib.methods.divergence_free import SEQUENCE_T_MAX
+    from corrlib.morph import INTERPOLATIONS
 
     if args.interpolation not in INTERPOLATIONS:
         raise CorrError(f"--interpolation must be one of {', '.join(INTERPOLATIONS)}, got {args.interpolation!r}")
+    if args.map is not None and (args.method is not None or args.param):
+        given = "--method" if args.method is not None else "--param"
+        raise CorrError(f"--map gives the map to interpolate through, so no method runs: give --map or {given}, "
+                        "not both")
     if not 2 <= args.frames <= MAX_FRAMES:
         raise CorrError(f"--frames must be between 2 and {MAX_FRAMES}, got {args.frames}")
-    from corrlib.methods.divergence_free import SEQUENCE_T_MAX
-
     if not (np.isfinite(args.t_max) and 0 < args.t_max <= SEQUENCE_T_MAX):
         raise CorrError(f"--t-max must be a positive number of at most {SEQUENCE_T_MAX:g} (the way between the "
                         f"shapes extrapolated {SEQUENCE_T_MAX:g} times), got {args.t_max}")
+
+
+def _morph_result(args, source, target):
+    """The match a morph moves through: the method's (``--method``, divergence-free by default), or a
+    :class:`~corrlib.methods.base.MatchResult` holding the map of ``--map``."""
+    from corrlib.methods import get_method, solve
+    from corrlib.methods.base import MatchResult
+
+    if args.map is None:
+        spec = get_method(args.method or MORPH_METHOD)
+        return solve(spec, source, target, callback=_progress_printer(args.quiet), **_parse_overrides(args.param))
+    from corrlib.io import load_map
+
+    map_xy = load_map(args.map, n_target=target.n_vertices, n_source=source.n_vertices, allow_unmatched=True)
+    return MatchResult(f"the map {Path(args.map).name}", map_xy, None)
+
+
+def cmd_morph(args) -> int:
+    import numpy as np
+
+    from corrlib.morph import export_sequence, frame_positions, largest_volume_change, sequence_kind
+    from corrlib.shapes import TriMesh
+
+    _check_morph_options(args)
     from corrlib.io import check_outputs_apart, ensure_output_folder, staged_output
 
     out = ensure_output_folder(args.output, "-o")
@@ -614,17 +642,17 @@ def cmd_morph(args) -> int:
     def replaced(name: str) -> bool:
         return name.startswith("frame_") or name in replaced_names
 
-    inputs = [("source", args.source), ("target", args.target)]
+    inputs = [("source", args.source), ("target", args.target)] + ([("--map", args.map)] if args.map else [])
     check_outputs_apart([("-o", out / Path(path).name) for _, path in inputs if replaced(Path(path).name)], inputs)
     source, target = _load_shape(args.source), _load_shape(args.target)
     if not (isinstance(source, TriMesh) and isinstance(target, TriMesh)):
         raise CorrError("corr morph takes two meshes")
-    spec = get_method(args.method)
-    result = solve(spec, source, target, callback=_progress_printer(args.quiet), **_parse_overrides(args.param))
+    result = _morph_result(args, source, target)
     times = np.linspace(0.0, args.t_max, args.frames)
     frames = frame_positions(result, source, target, times, interpolation=args.interpolation)
     with staged_output(out, replaces=replaced) as stage:  # the result and every frame, or nothing
-        _stage_match_outputs(result, source, target, stage / "result", pictures=True)
+        if args.map is None:  # a given map is the user's file already
+            _stage_match_outputs(result, source, target, stage / "result", pictures=True)
         written = export_sequence(stage, frames, source.faces, times, fmt=args.format, closed=source.is_closed)
     written["animation"] = written["animation"] and out / Path(written["animation"]).name
     kind = {"flow": "divergence-free flow", "rigid": "as-rigid-as-possible interpolation through the map",
@@ -1012,8 +1040,11 @@ def _add_morph_parser(sub) -> None:
                  func=cmd_morph)
     p.add_argument("source")
     p.add_argument("target")
-    p.add_argument("--method", default="divergence-free",
-                   help="registered method (divergence-free: its flow; others: interpolation through the map)")
+    p.add_argument("--method", default=None,
+                   help=f"registered method (default {MORPH_METHOD}: its flow; others: interpolation through the map)")
+    p.add_argument("--map", default=None, metavar="MAPFILE",
+                   help="interpolate through this map instead of running a method (one 0-based target index per "
+                        "source vertex, -1 unmatched; or a result .npz)")
     p.add_argument("--interpolation", default="auto",
                    help="auto (default): the method's flow if it has one, else rigid; rigid: as rigid as possible "
                         "(every face turns and stretches by a share of its deformation); linear: vertex positions "

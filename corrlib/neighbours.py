@@ -107,3 +107,24 @@ def _descend(query, data, start, indptr, indices):
             here = nearer
         out[i] = here
     return out
+
+
+def reverse_map(map_xy: np.ndarray, target_vertices: np.ndarray) -> np.ndarray:
+    """(n_y,) int: for every target vertex, the source vertex whose image under ``map_xy`` is nearest to it.
+
+    A map given one way only (a file, another tool) has no target-to-source map; this one is what colour and
+    texture transfer onto the target need. Target vertices that no image reaches take the source vertex of the
+    nearest image. All -1 where ``map_xy`` matches no source vertex.
+
+    Parameters
+    ----------
+    map_xy : (n_x,) int
+        Target vertex of every source vertex, -1 where unmatched.
+    target_vertices : (n_y, 3) float
+    """
+    map_xy = np.asarray(map_xy)
+    matched = np.flatnonzero(map_xy >= 0)
+    if matched.size == 0:
+        return np.full(len(target_vertices), -1, dtype=np.int64)
+    images = np.asarray(target_vertices, dtype=np.float64)[map_xy[matched]]
+    return matched[cKDTree(images).query(target_vertices, k=1, workers=-1)[1]].astype(np.int64)

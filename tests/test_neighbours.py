@@ -72,3 +72,19 @@ def test_descent_rejects_indices_outside_the_data():
         descended_nearest_rows(query, data, np.array([0, 5]), *_csr(path))
     with pytest.raises(ValueError, match="do not fit"):
         descended_nearest_rows(query, data[:4], np.array([0, 1]), *_csr(path))
+
+
+def test_reverse_map_is_the_nearest_image_by_brute_force():
+    from corrlib.neighbours import reverse_map
+
+    rng = np.random.default_rng(3)
+    target = rng.normal(size=(40, 3))
+    map_xy = rng.integers(0, 40, size=25)
+    map_xy[:5] = -1  # unmatched source vertices take no part
+    reverse = reverse_map(map_xy, target)
+    matched = np.flatnonzero(map_xy >= 0)
+    distances = np.linalg.norm(target[:, None, :] - target[map_xy[matched]][None, :, :], axis=2)
+    assert np.allclose(np.linalg.norm(target - target[map_xy[reverse]], axis=1), distances.min(axis=1))
+    hit = np.unique(map_xy[matched])
+    assert np.array_equal(map_xy[reverse[hit]], hit)  # a target vertex that is an image maps back to a preimage
+    assert np.array_equal(reverse_map(np.full(5, -1), target), np.full(40, -1))

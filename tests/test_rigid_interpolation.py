@@ -230,3 +230,29 @@ def test_cli_morph_through_a_map(tmp_path, capsys):
     assert main(argv[:-2] + ["--interpolation", "cubic", "-o", str(tmp_path / "never")]) == 2
     assert "--interpolation must be one of auto, rigid, linear, got 'cubic'" in capsys.readouterr().err
     assert not (tmp_path / "never").exists()  # refused before any work
+
+
+def test_cli_morph_through_a_given_map(tmp_path, capsys):
+    """``corr morph --map``: no method runs; the frames go from the source to the map's image."""
+    from _data import TOSCA
+    from corrlib.cli import main
+    from corrlib.io import load_mesh, save_map
+
+    wolf0, wolf1 = load_mesh(TOSCA / "wolf0.off"), load_mesh(TOSCA / "wolf1.off")
+    identity = save_map(tmp_path / "identity.txt", np.arange(wolf0.n_vertices))  # the wolves share connectivity
+    out = tmp_path / "frames"
+    argv = ["morph", str(TOSCA / "wolf0.off"), str(TOSCA / "wolf1.off"), "--map", str(identity), "--frames", "3",
+            "--t-max", "1", "--format", "off"]
+    assert main(argv + ["-o", str(out)]) == 0
+    said = capsys.readouterr().out
+    assert "as-rigid-as-possible" in said and "largest relative change" in said
+    assert np.allclose(load_mesh(out / "frame_002.off").vertices, wolf1.vertices, atol=1e-4)
+    assert not list(out.glob("result*"))  # the map is the user's file: nothing to write back
+    for extra, message in [(["--method", "kernel-matching"], "give --map or --method, not both"),
+                           (["--param", "k=3"], "give --map or --param, not both")]:
+        assert main(argv + extra + ["-o", str(tmp_path / "never")]) == 2
+        assert message in capsys.readouterr().err
+    short = save_map(tmp_path / "short.txt", np.arange(10))
+    assert main(argv[:4] + [str(short), "-o", str(tmp_path / "never")]) == 2
+    assert "short.txt: map has 10 entries but the source has 4344 vertices" in capsys.readouterr().err
+    assert not (tmp_path / "never").exists()

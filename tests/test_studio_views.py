@@ -501,3 +501,30 @@ def test_the_sequence_description_does_not_widen_the_window(qtbot, window):
     qtbot.wait(50)
     assert "as-rigid-as-possible" in window.sequence_view.kind.text()
     assert window.minimumSizeHint().width() <= max(narrowest, 1280)
+
+
+def test_a_map_from_a_file_is_shown_like_a_result(qtbot, window, tmp_path):
+    """File ▸ Open a map of this pair…: another tool's map is coloured, scored against the ground truth and
+    interpolated as a method's result is; a map that does not fit is said, naming the file."""
+    from corrlib.io import save_map
+
+    messages = []
+    window.error_shown.connect(messages.append)
+    window.load_map(str(tmp_path / "nothing.txt"))
+    assert messages and "two meshes" in messages[-1]
+    load_demo(qtbot, window)
+    identity = save_map(tmp_path / "identity.txt", np.arange(window.source.n_vertices))  # the demo pair's truth
+    with qtbot.waitSignal(window.result_ready, timeout=60_000):
+        window.load_map(str(identity))
+    assert window.last_result.method == "the map identity.txt"
+    assert window.pair_view.info.text().startswith("the map identity.txt, mean geodesic error 0.0000")
+    assert window.pair_view.target_colors is not None and window.pair_view.target_colors.std(axis=0).min() > 0.1
+    assert "error: mean 0.000" in window.job_panel.log.toPlainText()
+    view = window.sequence_view
+    assert "as-rigid-as-possible" in view.kind.text()
+    assert np.allclose(view.positions(1.0), window.target.vertices, atol=1e-6)
+    short = save_map(tmp_path / "short.txt", np.arange(10))
+    window.load_map(str(short))
+    qtbot.waitUntil(lambda: any("short.txt" in m for m in messages), timeout=30_000)
+    assert "map has 10 entries but the source has" in messages[-1]
+    assert window.last_result.method == "the map identity.txt"  # the shown result stays

@@ -111,7 +111,8 @@ class PairView(QWidget, FramedView):
             Source vertices the map leaves unmatched (reported, drawn grey).
         """
         self.result, self.errors, self.function, self.n_unmatched = result, errors, function, n_unmatched
-        text = f"{result.method}: {result.timings.get('total', 0):.2f} s"
+        seconds = result.timings.get("total")  # none for a map read from a file
+        text = result.method + ("" if seconds is None else f": {seconds:.2f} s")
         if errors is not None:
             known = errors[np.isfinite(errors)]
             text += (f", mean geodesic error {known.mean():.4f}, {100 * np.mean(known <= ERROR_WITHIN):.1f} % "

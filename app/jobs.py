@@ -163,6 +163,8 @@ class MethodOutcome:
         Source vertices the map leaves unmatched (-1).
     note : str
         Why the errors are missing although ground truth was given (else empty).
+    map_file : str or None
+        The file of a map read by :func:`map_job` (None: a method's result).
     sequence : tuple (callable, str) or None
         ``positions(t) -> (n_x, 3)`` for the sequence view (the flow integrated up to
         :data:`~corrlib.methods.divergence_free.SEQUENCE_T_MAX` for a divergence-free
@@ -177,6 +179,7 @@ class MethodOutcome:
     n_unmatched: int = 0
     note: str = ""
     sequence: tuple | None = None
+    map_file: str | None = None
 
     @property
     def report(self):
@@ -197,7 +200,7 @@ def method_job(name: str, source, target, params, gt=None, *, view_data: bool = 
     return factory
 
 
-def map_job(path, source: TriMesh, target: TriMesh, gt=None):
+def map_job(path, source: TriMesh, target: TriMesh, gt=None, *, view_data: bool = True):
     """Job factory: a map read from a file (one 0-based target index per source vertex, or a result's .npz),
     shown as a method's result is (:func:`method_job`); the reverse map for the colour transfer is the nearest
     image of every target vertex (:func:`corrlib.neighbours.reverse_map`). Returns a :class:`MethodOutcome`."""
@@ -210,7 +213,9 @@ def map_job(path, source: TriMesh, target: TriMesh, gt=None):
         yield Progress("reading the map", -1.0, str(path))
         map_xy = load_map(path, n_target=target.n_vertices, n_source=source.n_vertices, allow_unmatched=True)
         result = MatchResult(f"the map {Path(path).name}", map_xy, reverse_map(map_xy, target.vertices))
-        return (yield from _outcome(result, source, target, gt, True))
+        outcome = yield from _outcome(result, source, target, gt, view_data)
+        outcome.map_file = str(path)
+        return outcome
 
     return factory
 
@@ -234,3 +239,25 @@ def _outcome(result, source, target, gt, view_data: bool):
         yield Progress("sequence", -1.0, "positions between the poses")
         outcome.sequence = sequence_of(result, source, target)
     return outcome
+
+
+def contour_reading(result) -> str:
+    """One log line on how a 2D-to-3D match read its query: the energy's meaning and, for ``contour3d``, the
+    view it took with the two measures that decided it (so that a wrong view can be forced)."""
+    line = f"{result.method}: {result.energy_meaning or 'energy'} {result.energy:.6g}"
+    extras = result.extras or {}
+    if "view" in extras:
+        overruled = extras["view"] == "front" and extras.get("mesh_seen_from_side") is False
+        line += (f"; read as a {extras['view']} view (mirror asymmetry {extras.get('asymmetry', float('nan')):.3f}, "
+                 f"intrinsic asymmetry {extras.get('intrinsic_asymmetry', float('nan')):.3f}"
+                 + ("; a side view by the outline, but the target is not thinnest across its plane of symmetry"
+                    if overruled else "")
+                 + "; the parameter view=side or view=front forces one)")
+    if extras.get("contour_points", 0) < extras.get("contour_points_asked", 0):
+        line += (f"; the contour was matched at {extras['contour_points']} points instead of "
+                 f"{extras['contour_points_asked']}: the target's mean edge is longer than the finer step, "
+                 "which would press the curve short")
+    from corrlib.methods.contour3d import remeshing_note
+
+    note = remeshing_note(extras)
+    return line + (f"; {note}" if note else "")

@@ -31,7 +31,7 @@ from PySide6.QtWidgets import (
 
 import corrlib
 from app.gui_gc import STUDIO_THREAD_PREFIX, collect_on_gui_thread
-from app.jobs import LoadedShape, MethodOutcome, describe, load_job, map_job, method_job, repair_job
+from app.jobs import LoadedShape, MethodOutcome, contour_reading, describe, load_job, map_job, method_job, repair_job
 from app.param_form import ParamForm
 from app.sketch import SketchPanel
 from app.views.compare import CompareView
@@ -190,8 +190,9 @@ class MainWindow(QMainWindow):
         self.runner.finished.connect(self._on_finished)
         self.runner.failed.connect(self._on_failed)
         self.runner.cancelled.connect(self._on_cancelled)
-        self._compare_queue: list[str] = []
-        self._compare_current = ""  # the compared method running (named in its failure)
+        self._compare_queue: list[tuple[str, str]] = []  # ("method", name) or ("map", file)
+        self._compare_current = ""  # the compared method or map running (named in its failure)
+        self.map_files: list[str] = []  # maps of this pair opened from files: compared with the methods
         # files waiting to be loaded (one load job at a time, in request order): (path, which, then, job factory)
         self._load_queue: list[tuple[str, str, Callable[[], None] | None, object]] = []
         self._loading: tuple[str, str, Callable[[], None] | None, object] | None = None
@@ -647,6 +648,7 @@ class MainWindow(QMainWindow):
             self.target_info.setText(text)
         self.gt = None
         self.last_result = None
+        self.map_files = []
         self.sequence_view.clear()  # the last pair's motion: its frames would mix two shapes on export
         self.product_view.clear()  # and its match or torus, and its comparison
         if self.compare_view.has_results():
@@ -871,6 +873,8 @@ class MainWindow(QMainWindow):
                 self.result_ready.emit(result)
             return
         self.last_result = result
+        if outcome.map_file is not None and outcome.map_file not in self.map_files:
+            self.map_files.append(outcome.map_file)
         if isinstance(self.source, Contour2D) and isinstance(self.target, Contour2D):
             self.tabs.setCurrentWidget(self.product_view)
             self.product_view.show_contour_pair(result)
@@ -933,9 +937,10 @@ class MainWindow(QMainWindow):
         if not (isinstance(self.source, TriMesh) and isinstance(self.target, TriMesh)):
             self.show_error("the comparison needs a source and a target mesh")
             return
-        self._compare_queue = self.compare_view.selected()
+        self._compare_queue = [("method", m) for m in self.compare_view.selected()] + [("map", f) for f in
+                                                                                        self.map_files]
         if not self._compare_queue:
-            self.show_error("select at least one method to compare")
+            self.show_error("select at least one method to compare (or open a map of this pair)")
             return
         self.tabs.setCurrentWidget(self.compare_view)
         self.compare_view.clear_results(len(self._compare_queue))
@@ -946,7 +951,11 @@ class MainWindow(QMainWindow):
     def _next_compare(self) -> None:
         """Start the next method of the comparison; one whose parameters are invalid is skipped (it said why)."""
         while self._compare_queue:
-            self._compare_current = self._compare_queue.pop(0)
+            kind, self._compare_current = self._compare_queue.pop(0)
+            if kind == "map":
+                self.runner.start(COMPARE_KEY, map_job(self._compare_current, self.source, self.target, self.gt,
+                                                       view_data=False))
+                return
             if self._start_method(COMPARE_KEY, self._compare_current):
                 return
 
@@ -1173,24 +1182,3 @@ class MainWindow(QMainWindow):
         self._collector.release(self)
         super().closeEvent(event)
 
-
-def contour_reading(result) -> str:
-    """One log line on how a 2D-to-3D match read its query: the energy's meaning and, for ``contour3d``, the
-    view it took with the two measures that decided it (so that a wrong view can be forced)."""
-    line = f"{result.method}: {result.energy_meaning or 'energy'} {result.energy:.6g}"
-    extras = result.extras or {}
-    if "view" in extras:
-        overruled = extras["view"] == "front" and extras.get("mesh_seen_from_side") is False
-        line += (f"; read as a {extras['view']} view (mirror asymmetry {extras.get('asymmetry', float('nan')):.3f}, "
-                 f"intrinsic asymmetry {extras.get('intrinsic_asymmetry', float('nan')):.3f}"
-                 + ("; a side view by the outline, but the target is not thinnest across its plane of symmetry"
-                    if overruled else "")
-                 + "; the parameter view=side or view=front forces one)")
-    if extras.get("contour_points", 0) < extras.get("contour_points_asked", 0):
-        line += (f"; the contour was matched at {extras['contour_points']} points instead of "
-                 f"{extras['contour_points_asked']}: the target's mean edge is longer than the finer step, "
-                 "which would press the curve short")
-    from corrlib.methods.contour3d import remeshing_note
-
-    note = remeshing_note(extras)
-    return line + (f"; {note}" if note else "")

@@ -435,8 +435,38 @@ def suite_bench(repeat: int, quick: bool = False) -> None:
               f"over --jobs 1: {times[1] / times[2]:.2f}x (one job already uses both cores)")
 
 
+def suite_morph(repeat: int, quick: bool = False) -> None:
+    """Sequences through a map: the as-rigid-as-possible interpolation's preparation and frames (the studio scrubs
+    and exports them), on the wolves and on a subdivided copy; the volume half way against linear."""
+    import trimesh
+
+    from corrlib.deformation.rigid_interpolation import rigid_interpolation
+    from corrlib.io import load_mesh
+    from corrlib.resources import resource
+    from corrlib.shapes import signed_volume
+
+    wolf0, wolf1 = load_mesh(resource("data/tosca/wolf0.off")), load_mesh(resource("data/tosca/wolf1.off"))
+    source, image, faces = wolf0.vertices, wolf1.vertices, wolf0.faces  # shared connectivity: the identity map
+    for level in ((0,) if quick else (0, 1, 2)):
+        if level:  # midpoint subdivision keeps the two poses on one connectivity
+            source, faces_next = trimesh.remesh.subdivide(source, faces)
+            image, _ = trimesh.remesh.subdivide(image, faces)
+            faces = faces_next
+        t_build, sequence = _best_time(lambda: rigid_interpolation(source, faces, image,
+                                                                   resolution=float(np.mean(wolf1.edge_lengths))),
+                                       repeat)
+        times = np.linspace(0.0, 1.5, 16)
+        t_frames = _best_time(lambda: [sequence.positions(t) for t in times], repeat)[0] / times.size
+        mid = signed_volume(sequence.positions(0.5), faces)
+        linear_mid = signed_volume(0.5 * (source + image), faces)
+        reference = 0.5 * (signed_volume(source, faces) + signed_volume(image, faces))
+        _line(f"as-rigid-as-possible interpolation wolf0 -> wolf1, {len(source)} vertices: preparation", t_build,
+              f"one frame {1000 * t_frames:.1f} ms; volume half way {mid / reference:.3f} of the mean "
+              f"(linear {linear_mid / reference:.3f})")
+
+
 SUITES = {"foundation": suite_foundation, "contour3d": suite_contour3d, "kernel": suite_kernel,
-          "divfree": suite_divfree, "product": suite_product, "bench": suite_bench}
+          "divfree": suite_divfree, "product": suite_product, "bench": suite_bench, "morph": suite_morph}
 
 
 def run_suite(name: str, repeat: int = 3, quick: bool = False) -> None:

@@ -386,7 +386,7 @@ def test_the_log_says_when_the_target_overruled_a_side_view():
     side view but the target is not thinnest across its plane of symmetry (a person), says so."""
     from types import SimpleNamespace
 
-    from app.main_window import contour_reading
+    from app.jobs import contour_reading
 
     def reading(view, seen_from_side):
         result = SimpleNamespace(method="contour3d", energy_meaning="paper energy", energy=1.0,
@@ -405,7 +405,7 @@ def test_the_log_says_when_the_contour_was_matched_at_fewer_points():
     (``contour3d.query_for_mesh``); the log line says so and why, and says nothing where all points were used."""
     from types import SimpleNamespace
 
-    from app.main_window import contour_reading
+    from app.jobs import contour_reading
 
     def reading(used, asked):
         return contour_reading(SimpleNamespace(method="contour3d", energy_meaning="paper energy", energy=1.0,
@@ -528,3 +528,19 @@ def test_a_map_from_a_file_is_shown_like_a_result(qtbot, window, tmp_path):
     qtbot.waitUntil(lambda: any("short.txt" in m for m in messages), timeout=30_000)
     assert "map has 10 entries but the source has" in messages[-1]
     assert window.last_result.method == "the map identity.txt"  # the shown result stays
+
+
+def test_a_map_opened_for_the_pair_is_compared_with_the_methods(qtbot, window, tmp_path):
+    from corrlib.io import save_map
+
+    load_demo(qtbot, window)
+    identity = save_map(tmp_path / "identity.txt", np.arange(window.source.n_vertices))
+    with qtbot.waitSignal(window.result_ready, timeout=60_000):
+        window.load_map(str(identity))
+    view = compare(qtbot, window, ["descriptor-nn"])
+    rows = {row["method"]: row for row in view.rows}
+    assert set(rows) == {"descriptor-nn", "the map identity.txt"}
+    assert rows["the map identity.txt"]["mean"] == 0.0 and rows["descriptor-nn"]["mean"] > 0.0
+    window.load_file(str(TOSCA / "wolf1.off"), "source")  # another pair: the map is not its map
+    wait_loaded(qtbot, window)
+    assert window.map_files == []

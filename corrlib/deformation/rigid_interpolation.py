@@ -109,7 +109,7 @@ def nearest_rotations(matrices: np.ndarray) -> np.ndarray:
 
 
 def dual_edges(faces: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-    """The pairs of faces (a, b), a < b, that share an edge (every pair of faces around a non-manifold edge)."""
+    """The pairs of faces (a, b), a < b, that share an edge (the faces around a non-manifold edge in a chain)."""
     edges = np.sort(np.concatenate([faces[:, [0, 1]], faces[:, [1, 2]], faces[:, [2, 0]]]), axis=1)
     owner = np.tile(np.arange(faces.shape[0]), 3)
     order = np.lexsort((edges[:, 1], edges[:, 0]))
@@ -137,7 +137,7 @@ def unwrapped_rotation_vectors(rotations: np.ndarray, faces: np.ndarray, weights
     a, b = dual_edges(faces)
     n = faces.shape[0]
     cos_between = (np.einsum("fij,fij->f", rotations[a], rotations[b]) - 1.0) / 2.0  # of R_aᵀ R_b's angle
-    # the angle's order by 2 − cos (> 0: an entry of zero would be no edge)
+    # weighted by 2 − cos, which orders the angles as they are and is never 0 (a stored 0 is no edge)
     tree = minimum_spanning_tree(sp.coo_matrix((2.0 - cos_between, (a, b)), shape=(n, n)).tocsr())
     n_parts, part = connected_components(tree, directed=False)
     vectors = principal.copy()

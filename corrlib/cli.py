@@ -629,7 +629,7 @@ def _morph_result(args, source, target):
 def cmd_morph(args) -> int:
     import numpy as np
 
-    from corrlib.morph import export_sequence, frame_positions, largest_volume_change, sequence_kind
+    from corrlib.morph import describe_sequence, export_sequence, frame_positions, largest_volume_change
     from corrlib.shapes import TriMesh
 
     _check_morph_options(args)
@@ -655,9 +655,8 @@ def cmd_morph(args) -> int:
             _stage_match_outputs(result, source, target, stage / "result", pictures=True)
         written = export_sequence(stage, frames, source.faces, times, fmt=args.format, closed=source.is_closed)
     written["animation"] = written["animation"] and out / Path(written["animation"]).name
-    kind = {"flow": "divergence-free flow", "rigid": "as-rigid-as-possible interpolation through the map",
-            "linear": "linear interpolation through the map"}[sequence_kind(result, args.interpolation)]
-    print(f"{len(frames)} frames t = 0 .. {args.t_max:g} ({kind}) in {out}/, animation {written['animation']}")
+    print(f"{len(frames)} frames t = 0 .. {args.t_max:g} in {out}/, animation {written['animation']}: "
+          f"{describe_sequence(result, args.interpolation)}")
     change = largest_volume_change(written["volume"], source.area)
     if change is not None:
         print(f"enclosed volume: largest relative change {change:.2e} over the frames")

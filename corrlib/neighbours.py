@@ -127,4 +127,4 @@ def reverse_map(map_xy: np.ndarray, target_vertices: np.ndarray) -> np.ndarray:
     if matched.size == 0:
         return np.full(len(target_vertices), -1, dtype=np.int64)
     images = np.asarray(target_vertices, dtype=np.float64)[map_xy[matched]]
-    return matched[cKDTree(images).query(target_vertices, k=1, workers=-1)[1]].astype(np.int64)
+    return matched[nearest_rows(target_vertices, images)]

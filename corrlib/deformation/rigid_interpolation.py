@@ -35,7 +35,7 @@ face.
 
 from __future__ import annotations
 
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 import scipy.sparse as sp
@@ -44,7 +44,7 @@ from scipy.sparse.linalg import splu
 from scipy.spatial.transform import Rotation
 
 from corrlib.errors import InputError
-from corrlib.geometry.laplacian import cotan_stiffness, hat_gradients, mass_matrix
+from corrlib.geometry.laplacian import hat_gradients
 from corrlib.shapes import face_components
 
 #: stretches below this (relative: 1 is the face's own size) are raised to it before ``S^t`` is formed; a face
@@ -206,25 +206,34 @@ class RigidInterpolation:
         return self._poisson(t) + t * self.residual
 
 
-def smoothed_gradients(gradients: np.ndarray, source: np.ndarray, faces: np.ndarray,
-                       diffusion_time: float) -> np.ndarray:
+def smoothed_gradients(gradients: np.ndarray, faces: np.ndarray, areas: np.ndarray, stiffness: sp.spmatrix,
+                       lumped: np.ndarray, diffusion_time: float) -> np.ndarray:
     """(f, 3, 3) float: the faces' deformation gradients diffused over the source surface for ``diffusion_time``.
 
     Each of the nine entries, carried to the vertices (area-weighted means of the faces around them), takes one
-    implicit heat step ``(M + t L) u = M u₀`` (``t`` the diffusion time; cotangent stiffness, lumped mass) and
-    returns to the faces as the mean of their corners. A gradient that is the same over a part, such as a rigidly
-    turned limb, stays as it is away from the part's border, however thin the part (smoothing the *positions*
-    instead would shrink a tail); a face whose gradient disagrees with its neighbours' (a vertex map snapping
-    to the target's vertices) is pulled towards theirs.
+    implicit heat step ``(M + t L) u = M u₀`` (``t`` the diffusion time; ``L`` the source's stiffness, ``M`` its
+    lumped mass) and returns to the faces as the mean of their corners. A gradient that is the same over a part,
+    such as a rigidly turned limb, stays as it is away from the part's border, however thin the part (smoothing
+    the *positions* instead would shrink a tail); a face whose gradient disagrees with its neighbours' (a vertex
+    map snapping to the target's vertices) is pulled towards theirs.
+
+    Parameters
+    ----------
+    gradients : (f, 3, 3) float
+    faces : (f, 3) int
+    areas : (f,) float
+    stiffness : (n, n) sparse
+    lumped : (n,) float
+        The lumped mass (a third of the area around each vertex).
+    diffusion_time : float
     """
-    n = source.shape[0]
-    areas = hat_gradients(source, faces)[1]
+    n = lumped.size
     to_vertices = sp.csr_matrix((np.repeat(areas, 3), (faces.ravel(), np.repeat(np.arange(faces.shape[0]), 3))),
                                 shape=(n, faces.shape[0]))
     weight = np.asarray(to_vertices.sum(axis=1)).ravel()
     at_vertices = (to_vertices @ gradients.reshape(-1, 9)) / np.where(weight > 0, weight, 1.0)[:, None]
-    mass = mass_matrix(source, faces)
-    diffused = splu((mass + diffusion_time * cotan_stiffness(source, faces)).tocsc()).solve(mass @ at_vertices)
+    mass = sp.diags(lumped)
+    diffused = splu((mass + diffusion_time * stiffness).tocsc()).solve(mass @ at_vertices)
     return diffused[faces].mean(axis=1).reshape(-1, 3, 3)
 
 
@@ -268,8 +277,8 @@ def rigid_interpolation(source: np.ndarray, faces: np.ndarray, image: np.ndarray
     cols = np.broadcast_to(faces[:, :, None], hat.shape)
     gradient = sp.csr_matrix((hat.ravel(), (rows.ravel(), cols.ravel())), shape=(3 * faces.shape[0], n))
     divergence = (gradient.T @ sp.diags(np.repeat(areas, 3))).tocsr()
-    stiffness = (divergence @ gradient).tocsc()
-    lumped = mass_matrix(source, faces).diagonal()
+    stiffness = (divergence @ gradient).tocsc()  # the cotangent stiffness, with faces of zero area left out
+    lumped = np.bincount(faces.ravel(), weights=np.repeat(areas / 3.0, 3), minlength=n)
     loose = lumped <= 0  # in no face or only in faces of zero area: moved linearly (RigidInterpolation._poisson)
     components = face_components(n, faces[areas > 0])[1]  # the parts the stiffness connects
     pinned = loose.copy()
@@ -279,10 +288,10 @@ def rigid_interpolation(source: np.ndarray, faces: np.ndarray, image: np.ndarray
     solver = splu(stiffness[free][:, free].tocsc())
     gradients = deformation_gradients(source, image, faces)
     if resolution > 0:
-        gradients = smoothed_gradients(gradients, source, faces, resolution ** 2)
+        gradients = smoothed_gradients(gradients, faces, areas, stiffness, lumped, resolution ** 2)
     rotations, stretch_axes, stretches = polar_parts(gradients)
     prepared = RigidInterpolation(source, image, unwrapped_rotation_vectors(rotations, faces, areas), stretch_axes,
                                   stretches, divergence, solver, free, components, lumped, loose,
                                   residual=np.zeros_like(source))
     residual = image - prepared._poisson(1.0)
-    return RigidInterpolation(**{**prepared.__dict__, "residual": residual})
+    return replace(prepared, residual=residual)

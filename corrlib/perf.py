@@ -452,8 +452,9 @@ def suite_morph(repeat: int, quick: bool = False) -> None:
             source, faces_next = trimesh.remesh.subdivide(source, faces)
             image, _ = trimesh.remesh.subdivide(image, faces)
             faces = faces_next
-        t_build, sequence = _best_time(lambda: rigid_interpolation(source, faces, image,
-                                                                   resolution=float(np.mean(wolf1.edge_lengths))),
+        edges = faces[:, [0, 1]]
+        resolution = float(np.mean(np.linalg.norm(image[edges[:, 0]] - image[edges[:, 1]], axis=1)))  # as morph does
+        t_build, sequence = _best_time(lambda: rigid_interpolation(source, faces, image, resolution=resolution),
                                        repeat)
         times = np.linspace(0.0, 1.5, 16)
         t_frames = _best_time(lambda: [sequence.positions(t) for t in times], repeat)[0] / times.size

@@ -38,6 +38,26 @@ def test_plane_distances_are_euclidean(plane):
     assert rel.max() < 0.12 and rel.mean() < 0.03  # the heat method is approximate (a few percent)
 
 
+def test_graph_distances_are_computed_in_short_calls(plane, monkeypatch):
+    """Many sources give scipy's Dijkstra, row for row, in the order asked; no call takes more than
+    ``GRAPH_SOURCES_PER_CALL`` of them (each call holds the interpreter lock, which a studio's drawing needs)."""
+    from corrlib.geometry import geodesics
+
+    sources = np.random.default_rng(2).integers(0, plane.n_vertices, 3 * geodesics.GRAPH_SOURCES_PER_CALL + 5)
+    expected = dijkstra(plane.adjacency, directed=False, indices=sources)
+    calls = []
+
+    def recording(graph, **kwargs):
+        calls.append(len(kwargs["indices"]))
+        return dijkstra(graph, **kwargs)
+
+    monkeypatch.setattr(geodesics, "dijkstra", recording)
+    got = GeodesicSolver(plane).distances(sources, method="graph")
+    assert np.array_equal(got, expected)
+    assert sum(calls) == sources.size and max(calls) <= geodesics.GRAPH_SOURCES_PER_CALL
+    assert np.array_equal(GeodesicSolver(plane).distances(int(sources[0]), method="graph"), expected[0])
+
+
 def test_sphere_great_circle(sphere):
     solver = GeodesicSolver(sphere)
     rng = np.random.default_rng(1)

@@ -25,6 +25,10 @@ from scipy.sparse.csgraph import dijkstra
 
 from corrlib.errors import InputError, ParameterError
 
+#: sources per call of scipy's Dijkstra, which holds the interpreter lock for the whole call: about 10 ms at 5k
+#: vertices, so that a studio running a method in a worker thread keeps redrawing (the lock is free between calls)
+GRAPH_SOURCES_PER_CALL = 16
+
 
 def _check_sources(sources, n: int, name: str) -> np.ndarray:
     idx = np.atleast_1d(np.asarray(sources))
@@ -156,7 +160,8 @@ class GeodesicSolver:
             out = np.stack([self.heat.compute_distance(int(s)) for s in idx])
             out = np.maximum(out, 0.0)
         elif method == "graph":
-            out = dijkstra(self.mesh.adjacency, directed=False, indices=idx)
+            out = np.vstack([dijkstra(self.mesh.adjacency, directed=False, indices=idx[i:i + GRAPH_SOURCES_PER_CALL])
+                             for i in range(0, idx.size, GRAPH_SOURCES_PER_CALL)])
         else:
             raise ParameterError(f"unknown geodesic method {method!r} (use 'heat' or 'graph')")
         return out[0] if single else out

@@ -82,9 +82,9 @@ def run_benchmarks(t_process_start: float) -> int:
 
     # scrub the sequence slider over the 5k-vertex morph of that result
     window.tabs.setCurrentWidget(window.sequence_view)
-    from corrlib.morph import describe_sequence, sequence_positions
+    from app.jobs import sequence_options
 
-    window.sequence_view.set_sequence(cat0, sequence_positions(result, cat0, cat1), describe_sequence(result))
+    window.sequence_view.set_sequences(cat0, sequence_options(result, cat0, cat1))
     app.processEvents()
     from app.views.sequence import STEPS
 

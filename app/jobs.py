@@ -12,12 +12,14 @@ from pathlib import Path
 
 import numpy as np
 
-from corrlib.errors import CorrError, FileFormatError
+from corrlib.errors import CorrError, FileFormatError, MeshError
 from corrlib.progress import Progress
 from corrlib.shapes import Contour2D, TriMesh
 
-#: geodesic distance method of the studio's error figures (fast enough to run after every solve)
-ERROR_GEODESICS = "heat"
+#: geodesic distance method of the studio's error figures: the one `corr bench` reports (and faster than the heat
+#: method's one solve per ground-truth partner); the heat method where a pinched vertex rules it out
+ERROR_GEODESICS = "exact"
+FALLBACK_ERROR_GEODESICS = "heat"
 #: eigenpairs computed for the pair view's "function" mode (the second one is drawn)
 FUNCTION_EIGENPAIRS = 3
 
@@ -104,12 +106,15 @@ class MapErrors:
         Ground-truth rows left out because the map leaves their source vertex unmatched (-1).
     n_rows : int
         Ground-truth rows in total.
+    note : str
+        How the distances were measured where not as `corr bench` measures them (else empty).
     """
 
     report: object
     per_vertex: np.ndarray
     n_unmatched: int
     n_rows: int
+    note: str = ""
 
 
 def map_errors(map_xy, target: TriMesh, gt_source, gt_target, gt_target_sym=None) -> MapErrors:
@@ -122,12 +127,18 @@ def map_errors(map_xy, target: TriMesh, gt_source, gt_target, gt_target_sym=None
 
     map_xy = np.asarray(map_xy)
     gt_source = np.asarray(gt_source)
-    report, matched = matched_errors(map_xy, target, gt_source, gt_target, gt_target_sym=gt_target_sym,
-                                     method=ERROR_GEODESICS)
+    note = ""
+    try:
+        report, matched = matched_errors(map_xy, target, gt_source, gt_target, gt_target_sym=gt_target_sym,
+                                         method=ERROR_GEODESICS)
+    except MeshError as exc:  # exact geodesics refuse a pinched vertex; the heat method's figures are approximate
+        report, matched = matched_errors(map_xy, target, gt_source, gt_target, gt_target_sym=gt_target_sym,
+                                         method=FALLBACK_ERROR_GEODESICS)
+        note = f"errors by the heat method's distances (a few per cent low on short ones): {exc}"
     per_vertex = np.full(map_xy.shape[0], np.nan)
     if report is not None:
         per_vertex[gt_source[matched]] = report.errors
-    return MapErrors(report, per_vertex, int(np.count_nonzero(~matched)), int(gt_source.size))
+    return MapErrors(report, per_vertex, int(np.count_nonzero(~matched)), int(gt_source.size), note)
 
 
 def source_function(source: TriMesh) -> np.ndarray:
@@ -137,13 +148,23 @@ def source_function(source: TriMesh) -> np.ndarray:
     return np.asarray(mesh_spectrum(source, FUNCTION_EIGENPAIRS).evecs[:, 1])
 
 
-def sequence_of(result, source: TriMesh, target: TriMesh) -> tuple:
-    """``(positions, description)`` for the sequence view: the method's deformation, else the as-rigid-as-possible
-    interpolation through its map (:func:`corrlib.morph.sequence_positions`)."""
+def sequence_options(result, source: TriMesh, target: TriMesh) -> dict[str, tuple]:
+    """Every motion the sequence view offers for a result, the default first: ``kind -> (positions,
+    description)`` with kind ``"flow"`` (the method's own deformation, where it has one), ``"rigid"`` (the
+    as-rigid-as-possible interpolation through its map) and ``"linear"`` (:func:`corrlib.morph.sequence_positions`).
+    Built in the worker: the rigid interpolation factorises a Poisson system, too slow for the GUI thread on a
+    fine mesh."""
     from corrlib.methods.divergence_free import SEQUENCE_T_MAX
-    from corrlib.morph import describe_sequence, sequence_positions
+    from corrlib.morph import INTERPOLATIONS, describe_sequence, sequence_kind, sequence_positions
 
-    return sequence_positions(result, source, target, t_max=SEQUENCE_T_MAX), describe_sequence(result)
+    # "auto" first (what the method itself offers), then the interpolations through the map that it is not
+    asked = INTERPOLATIONS if result.map_xy is not None else ("auto",)
+    kinds = {}
+    for interpolation in asked:
+        kinds.setdefault(sequence_kind(result, interpolation), interpolation)
+    return {kind: (sequence_positions(result, source, target, t_max=SEQUENCE_T_MAX, interpolation=interpolation),
+                   describe_sequence(result, interpolation))
+            for kind, interpolation in kinds.items()}
 
 
 @dataclass
@@ -162,13 +183,15 @@ class MethodOutcome:
     n_unmatched : int
         Source vertices the map leaves unmatched (-1).
     note : str
-        Why the errors are missing although ground truth was given (else empty).
+        Why the errors are missing although ground truth was given, or how they were measured where not as
+        `corr bench` measures them (else empty).
     map_file : str or None
         The file of a map read by :func:`map_job` (None: a method's result).
-    sequence : tuple (callable, str) or None
-        ``positions(t) -> (n_x, 3)`` for the sequence view (the flow integrated up to
-        :data:`~corrlib.methods.divergence_free.SEQUENCE_T_MAX` for a divergence-free
-        result, else the as-rigid-as-possible interpolation through the map) and a one-line description of it.
+    sequences : dict or None
+        The motions the sequence view offers (:func:`sequence_options`): kind -> ``(positions, description)``,
+        ``positions(t) -> (n_x, 3)``, the default first (the flow integrated up to
+        :data:`~corrlib.methods.divergence_free.SEQUENCE_T_MAX` for a divergence-free result, else the
+        as-rigid-as-possible interpolation through the map).
     """
 
     result: object
@@ -178,7 +201,7 @@ class MethodOutcome:
     function: np.ndarray | None = None
     n_unmatched: int = 0
     note: str = ""
-    sequence: tuple | None = None
+    sequences: dict | None = None
     map_file: str | None = None
 
     @property
@@ -231,13 +254,14 @@ def _outcome(result, source, target, gt, view_data: bool):
         yield Progress("geodesic errors", -1.0, f"{np.asarray(gt[0]).size} ground-truth rows")
         try:
             outcome.errors = map_errors(map_xy, target, gt[0], gt[1], gt[2] if len(gt) > 2 else None)
+            outcome.note = outcome.errors.note
         except CorrError as exc:  # a bad ground truth must not lose the result
             outcome.note = f"no error figures: {exc}"
     if view_data and isinstance(source, TriMesh) and isinstance(target, TriMesh):
         yield Progress("source function", -1.0, "eigenfunction for the pair view")
         outcome.function = source_function(source)
         yield Progress("sequence", -1.0, "positions between the poses")
-        outcome.sequence = sequence_of(result, source, target)
+        outcome.sequences = sequence_options(result, source, target)
     return outcome
 
 

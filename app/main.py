@@ -35,6 +35,8 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("--pair-mode", choices=list(MODES),
                         help="what the pair view shows")
     parser.add_argument("--sequence-t", type=float, help="with --screenshot: put the sequence slider at this t")
+    parser.add_argument("--sequence-motion", choices=["flow", "rigid", "linear"],
+                        help="with --screenshot: the motion the sequence view shows (default: the method's own)")
     parser.add_argument("--torus-function", metavar="NAME",
                         help="with --screenshot: the product function the torus view shows (cost, density, "
                              "harmonic_1, ...)")
@@ -138,6 +140,9 @@ def schedule_screenshot(app, window, args, started: bool) -> None:
     def shoot(*_a):
         select_tab(window, args.tab)  # a finished job switches to its own view; show the requested one
         view = window.sequence_view
+        if args.sequence_motion and not view.choose_motion(args.sequence_motion):
+            print(f"corr-studio: the result offers no {args.sequence_motion} motion (it offers: "
+                  f"{', '.join(view.options) or 'none'}); the screenshot shows the default", file=sys.stderr)
         if args.sequence_t is not None and view.positions is not None:
             view.slider.setValue(int(STEPS * args.sequence_t / view.t_max.value()))
         if args.torus_function:

@@ -888,8 +888,8 @@ class MainWindow(QMainWindow):
             self.tabs.setCurrentWidget(self.pair_view)
             self.pair_view.set_result(result, None if outcome.errors is None else outcome.errors.per_vertex,
                                       function=outcome.function, n_unmatched=outcome.n_unmatched)
-            if outcome.sequence is not None:
-                self.sequence_view.set_sequence(self.source, *outcome.sequence)
+            if outcome.sequences:
+                self.sequence_view.set_sequences(self.source, outcome.sequences)
             from corrlib.methods.kernel_matching import (  # loaded by the method that ran
                 copies_note, reversal_note, start_note, turn_note)
 

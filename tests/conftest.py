@@ -112,6 +112,24 @@ def cat_pair():
     return cat0, cat1, gt
 
 
+def pinched_spheres():
+    """Two icospheres touching at one vertex (a pinched, non-manifold vertex: the two fans of faces round it are
+    separate), as a TriMesh; and the vertex."""
+    import trimesh
+
+    from corrlib.shapes import TriMesh
+
+    sphere = trimesh.creation.icosphere(subdivisions=2)
+    n = len(sphere.vertices)
+    top, bottom = int(np.argmax(sphere.vertices[:, 2])), int(np.argmin(sphere.vertices[:, 2]))
+    keep = np.delete(np.arange(n), bottom)
+    index = np.full(n, -1)
+    index[keep] = n + np.arange(keep.size)
+    index[bottom] = top  # the upper sphere's lowest vertex is the lower one's highest
+    vertices = np.vstack([sphere.vertices, sphere.vertices[keep] + [0.0, 0.0, 2.0]])
+    return TriMesh(vertices, np.vstack([sphere.faces, index[sphere.faces]]), name="pinched.off"), top
+
+
 def grid_mesh(nx, ny, periodic=False):
     """Regular triangulated grid on [0,1]^2 (vertices (x, y)), optionally periodic in both directions.
 

@@ -5,8 +5,8 @@ import pytest
 import trimesh
 from scipy.sparse.csgraph import dijkstra
 
-from conftest import grid_mesh
-from corrlib.errors import InputError, ParameterError
+from conftest import grid_mesh, pinched_spheres
+from corrlib.errors import InputError, MeshError, ParameterError
 from corrlib.geometry.geodesics import GeodesicSolver, geodesic_diameter
 from corrlib.geometry.sampling import farthest_point_sampling, surface_farthest_points, voronoi_cells
 from corrlib.shapes import TriMesh
@@ -56,6 +56,20 @@ def test_graph_distances_are_computed_in_short_calls(plane, monkeypatch):
     assert np.array_equal(got, expected)
     assert sum(calls) == sources.size and max(calls) <= geodesics.GRAPH_SOURCES_PER_CALL
     assert np.array_equal(GeodesicSolver(plane).distances(int(sources[0]), method="graph"), expected[0])
+
+
+def test_exact_distances_on_a_pinched_vertex_are_refused_by_name():
+    """geometry-central's edge flips refuse a vertex whose faces form separate fans: a named MeshError, not its
+    RuntimeError; the heat and graph distances still pass through the pinch."""
+    mesh, pinch = pinched_spheres()
+    solver = GeodesicSolver(mesh)
+    a, b = np.array([0, 5]), np.array([mesh.n_vertices - 1, mesh.n_vertices - 7])
+    with pytest.raises(MeshError, match="pinched.off: exact geodesics need a manifold surface"):
+        solver.pair_distances(a, b, "exact")
+    for method in ("heat", "graph"):
+        across = solver.pair_distances(a, b, method)
+        assert np.all(np.isfinite(across)) and np.all(across > 1.0)  # through the pinch, from sphere to sphere
+    assert np.all(across <= solver.distances(pinch, "graph")[a] + solver.distances(pinch, "graph")[b] + 1e-9)
 
 
 def test_sphere_great_circle(sphere):

@@ -512,6 +512,16 @@ def test_lines_function_texture_and_sequence_exports(qtbot, window, tmp_path, mo
     t_max = window.sequence_view.t_max.value()
     expected = frame_positions(result, window.source, window.target, [t_max])[0]  # extrapolated beyond the target
     assert np.allclose(last.vertices, expected, atol=1e-4)
+    # the other motion through the map: shown at the same t, and what the export then writes
+    seq = window.sequence_view
+    assert [seq.motion.itemData(i) for i in range(seq.motion.count())] == ["rigid", "linear"]
+    seq.slider.setValue(400)
+    seq.motion.setCurrentIndex(1)
+    assert seq.slider.value() == 400 and "linear" in seq.kind.text()
+    linear = frame_positions(result, window.source, window.target, [seq.t(), t_max], interpolation="linear")
+    assert np.allclose(seq.mesh.points, seq.display.points(linear[0]))
+    last = load_mesh(window.export_frames(".ply", folder=str(tmp_path / "linear"))[-1])
+    assert np.allclose(last.vertices, linear[1], atol=1e-4) and not np.allclose(last.vertices, expected, atol=1e-3)
     monkeypatch.setattr(window, "_save_path", lambda *a: str(tmp_path / "strip.png"))
     window.export_strip()
     strip = np.asarray(Image.open(tmp_path / "strip.png"))
@@ -602,6 +612,15 @@ def test_divergence_free_sequence_uses_the_flow(qtbot, window, tmp_path):
     view = window.sequence_view
     assert "divergence-free flow" in view.kind.text()
     assert np.allclose(view.positions(1.0), result.extras["morphed_vertices"], atol=1e-3)
+    # the interpolations through its map are offered too; the flow stays the first
+    from corrlib.morph import frame_positions
+
+    assert [view.motion.itemData(i) for i in range(view.motion.count())] == ["flow", "rigid", "linear"]
+    view.slider.setValue(300)
+    view.motion.setCurrentIndex(1)
+    rigid = frame_positions(result, window.source, window.target, [view.t()], interpolation="rigid")[0]
+    assert np.allclose(view.mesh.points, view.display.points(rigid)) and "as-rigid" in view.kind.text()
+    view.motion.setCurrentIndex(0)
     view.slider.setValue(view.slider.maximum())  # t = t max extrapolates along the flow
     assert np.allclose(view.mesh.points, view.display.points(view.positions(view.t_max.value())), atol=1e-6)
     paths = window.export_frames(".obj", folder=str(tmp_path))
@@ -629,6 +648,7 @@ def test_a_new_shape_forgets_the_last_motion_and_a_bad_export_path_is_said(qtbot
     assert len(messages) == 2 and all("afile" in m for m in messages), messages
     assert load_file(qtbot, window, TOSCA / "cat0.off", "source")
     assert window.sequence_view.positions is None
+    assert window.sequence_view.motion.count() == 0 and not window.sequence_view.motion.isEnabled()
     assert window.export_frames(".obj", folder=str(tmp_path / "frames")) == []
     assert "no sequence to export" in messages[-1] and not (tmp_path / "frames").exists()
 

@@ -159,6 +159,28 @@ def test_map_errors_counts_unmatched_rows(wolf_pair):
     assert none.report is None and none.n_unmatched == gt.size
 
 
+def test_map_errors_are_corr_bench_figures_and_a_pinched_target_falls_back(wolf_pair):
+    """The studio's errors are the exact geodesic errors `corr bench` reports (they were the heat method's, a
+    few per cent off and several times slower); where exact geodesics are ruled out (a pinched vertex) the heat
+    method's figures come with a note instead of no figures."""
+    from app.jobs import map_errors
+    from conftest import pinched_spheres
+    from corrlib.evaluation import geodesic_errors
+
+    _source, target = wolf_pair
+    n = target.n_vertices
+    rng = np.random.default_rng(3)
+    map_xy = np.where(rng.random(n) < 0.2, rng.integers(0, n, n), np.arange(n))
+    gt = np.arange(n)
+    out = map_errors(map_xy, target, gt, gt)
+    assert np.array_equal(out.report.errors, geodesic_errors(map_xy, target, gt, gt).errors) and out.note == ""
+    pinched, _pinch = pinched_spheres()
+    m = pinched.n_vertices
+    out = map_errors(np.roll(np.arange(m), 9), pinched, np.arange(m), np.arange(m))
+    assert "heat method" in out.note and "pinched.off" in out.note
+    assert np.all(np.isfinite(out.report.errors)) and out.report.summary()["mean"] > 0
+
+
 def test_map_errors_with_mirrored_rows_and_the_heat_map_fill(wolf_pair):
     """A map onto the 'mirrored' partners has a large direct and zero mirror-accepted error; per-vertex
     errors stay direct (a flip glows in the heat map), and the display fill keeps unmatched vertices grey."""

@@ -489,15 +489,14 @@ def test_the_methods_unticked_for_a_comparison_stay_unticked_for_the_next_pair(q
 def test_the_sequence_description_does_not_widen_the_window(qtbot, window):
     """The sequence of a map without a deformation is described in a long line; unwrapped, it raised the window's
     minimum width to 1,461 pixels, wider than a 1280 × 720 screen."""
+    from app.jobs import sequence_options
     from corrlib.methods.base import MatchResult
-    from corrlib.morph import describe_sequence, sequence_positions
 
     load_demo(qtbot, window)
     narrowest = window.minimumSizeHint().width()
     ident = np.arange(window.source.n_vertices)
     result = MatchResult("descriptor-nn", ident, ident)
-    window.sequence_view.set_sequence(window.source, sequence_positions(result, window.source, window.target),
-                                      describe_sequence(result))
+    window.sequence_view.set_sequences(window.source, sequence_options(result, window.source, window.target))
     qtbot.wait(50)
     assert "as-rigid-as-possible" in window.sequence_view.kind.text()
     assert window.minimumSizeHint().width() <= max(narrowest, 1280)

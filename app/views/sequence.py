@@ -8,6 +8,7 @@ import numpy as np
 from PySide6.QtCore import Qt, QTimer
 from PySide6.QtWidgets import (
     QCheckBox,
+    QComboBox,
     QDoubleSpinBox,
     QHBoxLayout,
     QLabel,
@@ -28,10 +29,13 @@ SPEED_RANGE = (0.05, 5.0)  # playback speed, t per second
 DEFAULT_SPEED = 0.5
 FRAME_INTERVAL_MS = 30  # playback timer period
 PICTURE_STRIP_FRAMES = 6
+#: the motion box's words for the kinds of :func:`app.jobs.sequence_options`
+MOTION_NAMES = {"flow": "the method's flow", "rigid": "as rigid as possible", "linear": "linear"}
 
 
 class SequenceView(QWidget, FramedView):
-    """Slider over t in [0, t_max] (t > 1 extrapolates), play/pause, speed, loop."""
+    """Slider over t in [0, t_max] (t > 1 extrapolates), play/pause, speed, loop, and the choice of motion
+    where a result offers several (the method's flow, as rigid as possible, linear)."""
 
     def __init__(self, parent=None):
         super().__init__(parent)
@@ -55,6 +59,11 @@ class SequenceView(QWidget, FramedView):
         self.label = QLabel("t = 0.00")
         self.kind = QLabel("")
         self.kind.setWordWrap(True)  # a long description must not widen the window
+        self.motion = QComboBox()
+        self.motion.setSizeAdjustPolicy(QComboBox.AdjustToContents)  # the longest name whole
+        self.motion.setToolTip("How the source moves to the target: the method's own deformation, or an "
+                               "interpolation through its map. Export ▸ frames writes the motion shown.")
+        self.motion.currentIndexChanged.connect(self._on_motion)
         self.timer = QTimer(self)
         self.timer.setInterval(FRAME_INTERVAL_MS)
         self.timer.timeout.connect(self._tick)
@@ -64,7 +73,11 @@ class SequenceView(QWidget, FramedView):
             row.addWidget(w)
         row.addWidget(self.slider, 1)
         layout = QVBoxLayout(self)
-        layout.addWidget(self.kind)
+        top = QHBoxLayout()
+        top.addWidget(QLabel("motion"))
+        top.addWidget(self.motion)
+        top.addWidget(self.kind, 1)
+        layout.addLayout(top)
         plot_box = QVBoxLayout()
         layout.addLayout(plot_box, 1)
         layout.addLayout(row)
@@ -76,6 +89,7 @@ class SequenceView(QWidget, FramedView):
         self.display: ShapeDisplay | None = None  # the source's display frame (every frame is drawn in it)
         self.description = ""
         self.ends: list[np.ndarray] = []  # the source and the target pose (t = 1) in the display frame
+        self.options: dict[str, tuple] = {}  # kind -> (positions, description) the motion box offers
 
     def view_plotter(self):
         return self._plotter.get() if self.mesh is not None else None
@@ -86,7 +100,7 @@ class SequenceView(QWidget, FramedView):
     def redraw(self) -> None:
         if self.source is not None and self.positions is not None:
             value = self.slider.value()
-            self.set_sequence(self.source, self.positions, self.description)
+            self._show(self.source, self.positions, self.description)
             self.slider.setValue(value)
 
     @property
@@ -98,11 +112,45 @@ class SequenceView(QWidget, FramedView):
         self.source = self.positions = self.mesh = self.display = None
         self.ends, self.description = [], ""
         self.kind.setText("")
+        self._offer({})
         if self._plotter.created:
             self.plotter.clear_actors()
 
-    def set_sequence(self, source, positions: Callable[[float], np.ndarray], description: str) -> None:
-        """Show ``source`` deforming along ``positions(t)`` (see :func:`corrlib.morph.sequence_positions`)."""
+    def set_sequences(self, source, options: dict[str, tuple]) -> None:
+        """Show ``source`` moving along the first of ``options`` (kind -> ``(positions, description)``, see
+        :func:`app.jobs.sequence_options`); the motion box offers all of them."""
+        self._offer(options)
+        kind = next(iter(options))
+        self._show(source, *options[kind])
+
+    def _offer(self, options: dict[str, tuple]) -> None:
+        self.options = dict(options)
+        self.motion.blockSignals(True)  # filling the box is not a choice
+        self.motion.clear()
+        for kind in self.options:
+            self.motion.addItem(MOTION_NAMES.get(kind, kind), kind)
+        self.motion.blockSignals(False)
+        self.motion.setEnabled(len(self.options) > 1)
+
+    def choose_motion(self, kind: str) -> bool:
+        """Show the motion ``kind`` ("flow", "rigid", "linear"); False where the result does not offer it."""
+        index = self.motion.findData(kind)
+        if index < 0:
+            return False
+        self.motion.setCurrentIndex(index)
+        return True
+
+    def _on_motion(self, index: int) -> None:
+        """Another motion of the same result: the slider and the camera stay where they are."""
+        kind = self.motion.itemData(index)
+        if kind not in self.options or self.source is None:
+            return
+        self.positions, self.description = self.options[kind]
+        self.kind.setText(self.description)
+        self._on_slider(self.slider.value())
+
+    def _show(self, source, positions: Callable[[float], np.ndarray], description: str) -> None:
+        """Draw ``source`` anew, deforming along ``positions(t)`` (:func:`corrlib.morph.sequence_positions`)."""
         self.source = source
         self.positions = positions
         self.description = description

@@ -23,7 +23,7 @@ import numba
 import numpy as np
 from scipy.sparse.csgraph import dijkstra
 
-from corrlib.errors import InputError, ParameterError
+from corrlib.errors import InputError, MeshError, ParameterError
 
 #: sources per call of scipy's Dijkstra, which holds the interpreter lock for the whole call: about 10 ms at 5k
 #: vertices, so that a studio running a method in a worker thread keeps redrawing (the lock is free between calls)
@@ -130,10 +130,17 @@ class GeodesicSolver:
 
     @property
     def flip(self):
+        """potpourri3d's edge-flip solver; a :class:`MeshError` where geometry-central refuses the mesh (a vertex
+        whose faces form separate fans: the flips need a manifold neighbourhood round every vertex)."""
         if self._flip is None:
             import potpourri3d as pp3d
 
-            self._flip = pp3d.EdgeFlipGeodesicSolver(self._centred_vertices(), self.mesh.faces)
+            try:
+                self._flip = pp3d.EdgeFlipGeodesicSolver(self._centred_vertices(), self.mesh.faces)
+            except RuntimeError as exc:
+                reason = str(exc).split(" - ", 1)[-1]
+                raise MeshError(f"{self.mesh.name}: exact geodesics need a manifold surface ({reason}); use the "
+                                "'heat' or 'graph' distances, or split that vertex in a mesh editor") from None
         return self._flip
 
     def _centred_vertices(self) -> np.ndarray:

@@ -64,7 +64,7 @@ def test_exact_distances_on_a_pinched_vertex_are_refused_by_name():
     mesh, pinch = pinched_spheres()
     solver = GeodesicSolver(mesh)
     a, b = np.array([0, 5]), np.array([mesh.n_vertices - 1, mesh.n_vertices - 7])
-    with pytest.raises(MeshError, match="pinched.off: exact geodesics need a manifold surface"):
+    with pytest.raises(MeshError, match="pinched.off: no exact geodesics on this mesh .*not manifold"):
         solver.pair_distances(a, b, "exact")
     for method in ("heat", "graph"):
         across = solver.pair_distances(a, b, method)

@@ -139,8 +139,8 @@ class GeodesicSolver:
                 self._flip = pp3d.EdgeFlipGeodesicSolver(self._centred_vertices(), self.mesh.faces)
             except RuntimeError as exc:
                 reason = str(exc).split(" - ", 1)[-1]
-                raise MeshError(f"{self.mesh.name}: exact geodesics need a manifold surface ({reason}); use the "
-                                "'heat' or 'graph' distances, or split that vertex in a mesh editor") from None
+                raise MeshError(f"{self.mesh.name}: no exact geodesics on this mesh (geometry-central: {reason}); "
+                                "use the 'heat' or 'graph' distances, or repair the mesh in a mesh editor") from None
         return self._flip
 
     def _centred_vertices(self) -> np.ndarray:

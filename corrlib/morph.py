@@ -24,13 +24,31 @@ LINEAR_DESCRIPTION = ("linear vertex interpolation through the map (shrinks what
 INTERPOLATIONS = ("auto", "rigid", "linear")
 
 
-def map_image(source_vertices: np.ndarray, target_vertices: np.ndarray, map_xy: np.ndarray) -> np.ndarray:
-    """(n_x, 3) float: where the map sends every source vertex, ``Y[map_xy]``; an unmatched vertex (-1) stays
-    where it is."""
+def map_image(source, target_vertices: np.ndarray, map_xy: np.ndarray) -> np.ndarray:
+    """(n_x, 3) float: where the map sends every source vertex, ``Y[map_xy]``.
+
+    An unmatched vertex (-1, a partial map) moves with the matched ones round it: its displacement is the
+    harmonic extension of theirs (:func:`~corrlib.geometry.laplacian.harmonic_extension` over the source), so
+    that an unmatched limb follows the body instead of staying behind and stretching the faces between. A part
+    of the source without a matched vertex stays where it is.
+
+    Parameters
+    ----------
+    source : TriMesh
+    target_vertices : (n_y, 3) float
+    map_xy : (n_x,) int
+    """
+    from corrlib.geometry.laplacian import harmonic_extension
+
     mp = np.asarray(map_xy)
-    if mp.shape[0] != source_vertices.shape[0]:
-        raise InputError(f"the map has {mp.shape[0]} entries for {source_vertices.shape[0]} source vertices")
-    return np.where((mp >= 0)[:, None], target_vertices[np.clip(mp, 0, None)], source_vertices)
+    if mp.shape[0] != source.n_vertices:
+        raise InputError(f"the map has {mp.shape[0]} entries for {source.n_vertices} source vertices")
+    matched = mp >= 0
+    image = np.asarray(target_vertices, dtype=np.float64)[np.clip(mp, 0, None)]
+    if matched.all():
+        return image
+    displacement = harmonic_extension(source.vertices, source.faces, image - source.vertices, matched)
+    return np.where(matched[:, None], image, source.vertices + displacement)
 
 
 def has_deformation(result) -> bool:
@@ -57,7 +75,7 @@ def describe_sequence(result, interpolation: str = "auto") -> str:
 def _through_map(result, source, target, kind: str):
     if result.map_xy is None:
         raise InputError(f"the result of {result.method!r} has no point-to-point map to interpolate")
-    image = map_image(source.vertices, target.vertices, result.map_xy)
+    image = map_image(source, target.vertices, result.map_xy)
     if kind == "linear":
         return lambda t: (1.0 - t) * source.vertices + t * image
     from corrlib.deformation.rigid_interpolation import rigid_interpolation

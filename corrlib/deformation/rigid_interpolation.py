@@ -44,7 +44,7 @@ from scipy.sparse.linalg import splu
 from scipy.spatial.transform import Rotation
 
 from corrlib.errors import InputError
-from corrlib.geometry.laplacian import hat_gradients
+from corrlib.geometry.laplacian import gradient_operator
 from corrlib.shapes import face_components
 
 #: stretches below this (relative: 1 is the face's own size) are raised to it before ``S^t`` is formed; a face
@@ -271,11 +271,7 @@ def rigid_interpolation(source: np.ndarray, faces: np.ndarray, image: np.ndarray
     if not (np.all(np.isfinite(source)) and np.all(np.isfinite(image))):
         raise InputError("the source and its image must have finite coordinates")
     n = source.shape[0]
-    hat, areas = hat_gradients(source, faces)
-    # G: (3f, n), the gradient of a vertex function on every face; Gᵀ A is the divergence
-    rows = (3 * np.arange(faces.shape[0])[:, None, None] + np.arange(3)[None, None, :]).repeat(3, axis=1)
-    cols = np.broadcast_to(faces[:, :, None], hat.shape)
-    gradient = sp.csr_matrix((hat.ravel(), (rows.ravel(), cols.ravel())), shape=(3 * faces.shape[0], n))
+    gradient, areas = gradient_operator(source, faces)  # (3f, n); Gᵀ A is the divergence
     divergence = (gradient.T @ sp.diags(np.repeat(areas, 3))).tocsr()
     stiffness = (divergence @ gradient).tocsc()  # the cotangent stiffness, with faces of zero area left out
     lumped = np.bincount(faces.ravel(), weights=np.repeat(areas / 3.0, 3), minlength=n)

@@ -115,6 +115,75 @@ def hat_gradients(vertices: np.ndarray, faces: np.ndarray) -> tuple[np.ndarray, 
     return hat, 0.5 * double_area
 
 
+def gradient_operator(vertices: np.ndarray, faces: np.ndarray) -> tuple[sp.csr_matrix, np.ndarray]:
+    """The gradient of a piecewise-linear vertex function on every face, as a matrix, and the face areas.
+
+    ``G`` (3f × n) stacks :func:`hat_gradients`: rows ``3f .. 3f+2`` hold face ``f``'s gradient. Its weak
+    divergence is ``Gᵀ diag(A)`` (each area repeated three times) and ``Gᵀ diag(A) G`` the cotangent stiffness,
+    in which a face of zero area has no weight at all (:func:`cotan_stiffness` would give it near-infinite
+    cotangents).
+
+    Parameters
+    ----------
+    vertices : (n, 3) float
+    faces : (f, 3) int
+
+    Returns
+    -------
+    gradient : (3f, n) csr_matrix
+    areas : (f,) float
+    """
+    faces = np.asarray(faces, dtype=np.int64)
+    hat, areas = hat_gradients(vertices, faces)
+    rows = (3 * np.arange(faces.shape[0])[:, None, None] + np.arange(3)[None, None, :]).repeat(3, axis=1)
+    cols = np.broadcast_to(faces[:, :, None], hat.shape)
+    gradient = sp.csr_matrix((hat.ravel(), (rows.ravel(), cols.ravel())), shape=(3 * faces.shape[0],
+                                                                                  len(vertices)))
+    return gradient, areas
+
+
+def harmonic_extension(vertices: np.ndarray, faces: np.ndarray, values: np.ndarray, known: np.ndarray) -> np.ndarray:
+    """``values`` kept where ``known``, and elsewhere the harmonic function that takes them on: the minimiser of
+    the Dirichlet energy ``uᵀ S u`` (cotangent stiffness ``S``, faces of zero area left out) with the known
+    values fixed, ``S_uu u_u = −S_uk u_k``.
+
+    Every unknown vertex connected (through faces of positive area) to a known one gets a weighted mean of the
+    known values, as a membrane stretched over them would; a part of the mesh without a known vertex, and a
+    vertex in no face of positive area, gets 0.
+
+    Parameters
+    ----------
+    vertices : (n, 3) float
+    faces : (f, 3) int
+    values : (n,) or (n, d) float
+        Read only where ``known``.
+    known : (n,) bool
+
+    Returns
+    -------
+    (n,) or (n, d) float
+    """
+    from scipy.sparse.csgraph import connected_components
+    from scipy.sparse.linalg import splu
+
+    values = np.asarray(values, dtype=np.float64)
+    known = np.asarray(known, dtype=bool)
+    out = np.where(known.reshape(known.shape + (1,) * (values.ndim - 1)), values, 0.0)
+    if known.all() or not known.any():
+        return out
+    gradient, areas = gradient_operator(vertices, faces)
+    stiffness = (gradient.T @ sp.diags(np.repeat(areas, 3)) @ gradient).tocsr()
+    stiffness.eliminate_zeros()  # the zeros of flat faces are no edges of the graph below
+    _, part = connected_components(stiffness, directed=False)  # a vertex in no face of positive area: alone
+    anchored = np.isin(part, np.unique(part[known]))
+    free = np.flatnonzero(~known & anchored)
+    if free.size:
+        fixed = np.flatnonzero(known)
+        rhs = -(stiffness[free][:, fixed] @ values[fixed])
+        out[free] = splu(stiffness[free][:, free].tocsc()).solve(np.asarray(rhs))
+    return out
+
+
 def mass_matrix(vertices: np.ndarray, faces: np.ndarray, kind: str = "lumped") -> sp.csr_matrix:
     """Mass matrix of a triangle mesh.
 

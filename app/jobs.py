@@ -153,7 +153,7 @@ def sequence_options(result, source: TriMesh, target: TriMesh) -> dict[str, tupl
     description)`` with kind ``"flow"`` (the method's own deformation, where it has one), ``"rigid"`` (the
     as-rigid-as-possible interpolation through its map) and ``"linear"`` (:func:`corrlib.morph.sequence_positions`).
     Built in the worker: the rigid interpolation factorises a Poisson system, too slow for the GUI thread on a
-    fine mesh."""
+    fine mesh. A further motion that cannot be built (a named :class:`CorrError`) is left out of the choice."""
     from corrlib.methods.divergence_free import SEQUENCE_T_MAX
     from corrlib.morph import INTERPOLATIONS, describe_sequence, sequence_kind, sequence_positions
 
@@ -162,9 +162,15 @@ def sequence_options(result, source: TriMesh, target: TriMesh) -> dict[str, tupl
     kinds = {}
     for interpolation in asked:
         kinds.setdefault(sequence_kind(result, interpolation), interpolation)
-    return {kind: (sequence_positions(result, source, target, t_max=SEQUENCE_T_MAX, interpolation=interpolation),
-                   describe_sequence(result, interpolation))
-            for kind, interpolation in kinds.items()}
+    options = {}
+    for kind, interpolation in kinds.items():
+        try:
+            options[kind] = (sequence_positions(result, source, target, t_max=SEQUENCE_T_MAX,
+                                                interpolation=interpolation), describe_sequence(result, interpolation))
+        except CorrError:
+            if not options:  # the default one: its error is the job's, as before there was a choice
+                raise
+    return options
 
 
 @dataclass

@@ -181,6 +181,34 @@ def test_map_errors_are_corr_bench_figures_and_a_pinched_target_falls_back(wolf_
     assert np.all(np.isfinite(out.report.errors)) and out.report.summary()["mean"] > 0
 
 
+def test_sequence_options_leave_out_a_motion_that_cannot_be_built(wolf_pair, monkeypatch):
+    """The default motion's error is the job's (as before there was a choice); a further motion that fails with a
+    named error is left out of the choice instead of losing the result."""
+    import corrlib.morph
+    from app.jobs import sequence_options
+    from corrlib.errors import InputError
+    from corrlib.methods.base import MatchResult
+
+    source, target = wolf_pair
+    ident = np.arange(source.n_vertices)
+    result = MatchResult("descriptor-nn", ident, ident)
+    assert list(sequence_options(result, source, target)) == ["rigid", "linear"]
+    real = corrlib.morph.sequence_positions
+
+    def failing(kind):
+        def positions(result, source, target, t_max=1.5, interpolation="auto"):
+            if corrlib.morph.sequence_kind(result, interpolation) == kind:
+                raise InputError(f"no {kind} motion here")
+            return real(result, source, target, t_max=t_max, interpolation=interpolation)
+        return positions
+
+    monkeypatch.setattr(corrlib.morph, "sequence_positions", failing("linear"))
+    assert list(sequence_options(result, source, target)) == ["rigid"]
+    monkeypatch.setattr(corrlib.morph, "sequence_positions", failing("rigid"))
+    with pytest.raises(InputError, match="no rigid motion"):
+        sequence_options(result, source, target)
+
+
 def test_map_errors_with_mirrored_rows_and_the_heat_map_fill(wolf_pair):
     """A map onto the 'mirrored' partners has a large direct and zero mirror-accepted error; per-vertex
     errors stay direct (a flip glows in the heat map), and the display fill keeps unmatched vertices grey."""

@@ -582,6 +582,23 @@ def test_studio_without_display_says_so():
     assert proc.returncode == 2 and "no display" in proc.stderr
 
 
+@pytest.mark.slow
+def test_screenshot_of_a_chosen_motion(tmp_path):
+    """``--sequence-motion`` picks the motion a screenshot shows; one the result lacks is said, and the default
+    shown."""
+    import subprocess
+    import sys
+
+    shot = tmp_path / "sequence.png"
+    proc = subprocess.run([sys.executable, "-m", "app.main", "--demo", "--method", "descriptor-nn", "--tab",
+                           "Sequence", "--sequence-t", "0.5", "--sequence-motion", "flow", "--screenshot", str(shot),
+                           "--timeout", "300"], env={**os.environ, "QT_QPA_PLATFORM": "xcb"}, capture_output=True,
+                          text=True, timeout=400)
+    assert proc.returncode == 0, proc.stderr
+    assert "offers no flow motion (it offers: rigid, linear)" in proc.stderr
+    assert shot.stat().st_size > 10_000
+
+
 def test_about_and_remembered_layout(qtbot, tmp_path, monkeypatch):
     from PySide6.QtWidgets import QMessageBox
 

@@ -543,6 +543,22 @@ def _all_params(method: MethodRun) -> dict:
     return asdict(make_params(get_method(method.name).params, **method.params))
 
 
+def failure_fields(exc: Exception) -> dict:
+    """The row fields of a benchmark match that failed: a named error's message as it is, any other exception
+    with its type (a failing match is recorded and the others go on)."""
+    return {"status": "failed", "error": str(exc) if isinstance(exc, CorrError) else f"{type(exc).__name__}: {exc}"}
+
+
+def path_search_fields(result, seconds: float) -> dict:
+    """The row fields of a 2D-to-3D match's closed path and its search: contour points, distinct vertices of
+    the path, energy, optimality gap, whether it is proven optimal, branch-and-bound iterations, and the
+    match's time."""
+    search = result.search
+    return {"n_points": int(len(result.map_xy)), "distinct_vertices": int(len(np.unique(result.path.vertices))),
+            "energy": float(result.energy), "gap": float(search.upper_bound - search.lower_bound),
+            "optimal": search.optimal, "iterations": search.iterations, "seconds": seconds}
+
+
 def csv_cell(value) -> str:
     if isinstance(value, float):
         return f"{value:.6g}"

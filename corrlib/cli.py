@@ -571,16 +571,20 @@ def cmd_bench_contour(args) -> int:
         elif row["plane"] == "sketch":
             what = (f"part agreement {row['part_agreement']:.2f} (mirror accepted {row['part_agreement_sym']:.2f}), "
                     f"{row['seconds']:.1f} s")
+        elif row["plane"] == "drawn":
+            redrawn = f", redrawn {row['redraw_error']:.3f} (worst {row['redraw_worst']:.3f})" if row["redraws"] else ""
+            what = f"landmark error {row['landmark_error']:.3f}{redrawn}, {row['seconds']:.1f} s"
         else:
             what = f"mean error {row['mean_error']:.3f}, coverage {row['coverage']:.2f}, {row['seconds']:.1f} s"
         print(f"  [{done}/{total}] {row['query']} -> {row['target']}: {what}", file=sys.stderr)
 
     summary = contour_benchmark(args.datasets, args.output, planes=planes, params=params, jobs=args.jobs,
                                 scheduler=args.scheduler, pictures=not args.no_pictures, callback=progress,
-                                sketches=args.sketches or ())
+                                sketches=args.sketches or (), drawings=args.drawn or (), redraws=args.redraws)
     print((Path(args.output) / "contour_summary.md").read_text(encoding="utf-8"))
     _say_failures(failures, Path(args.output) / "contour_bench.csv")
-    failed = summary["all"]["failed"] + summary.get("sketches", {}).get("failed", 0)
+    failed = summary["all"]["failed"] + summary.get("sketches", {}).get("failed", 0) + \
+        summary.get("drawings", {}).get("all", {}).get("failed", 0)
     return 0 if failed == 0 else 1
 
 
@@ -1012,6 +1016,13 @@ def _add_bench_parsers(sub) -> None:
                    help="folder of labelled sketches (NAME_contour.txt, NAME.off, NAME_segmentation.txt), matched "
                         "to every mesh with part labels (MESH_segmentation.txt) and scored by part agreement "
                         "(repeatable)")
+    p.add_argument("--drawn", action="append", metavar="FOLDER",
+                   help="folder of drawings with landmarks (NAME.txt, NAME.landmarks: 'label x y' per line), matched "
+                        "to every mesh with landmarks (MESH.landmarks: 'label vertex') and scored by the geodesic "
+                        "error at the landmarks (repeatable)")
+    p.add_argument("--redraws", type=int, default=0,
+                   help="with --drawn: also match this many redrawn variants of each drawing (every point moved "
+                        "by 1 %% of its size) and report their mean and worst landmark error (default 0)")
     p.add_argument("--n-contour", dest="n_contour", type=int, help="contour points (default: the method's 200)")
     p.add_argument("--param", action="append", metavar="KEY=VALUE", help="a contour3d parameter (repeatable)")
     p.add_argument("--no-pictures", action="store_true", help="do not write a picture per query")

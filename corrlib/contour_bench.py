@@ -47,6 +47,10 @@ whose matched vertex carries the point's label (mirror accepted where the
 target has a ``.sym.vts``: the label of the matched vertex's mirror
 partner). The labels are never given to the solver.
 
+**Drawings with landmarks** (``drawings``): outlines a user drew, with named tips (nose, paws, hands…)
+matched to every mesh that names them, scored by the geodesic error at the landmarks, and over redrawn
+variants of each drawing (:mod:`corrlib.landmark_bench`).
+
 The length of the ground-truth curve on another pose is the section's length
 scaled by the square root of the area ratio (the deformations are nearly
 isometric; a polygon through the transferred ground-truth vertices would
@@ -76,8 +80,10 @@ from pathlib import Path
 import numpy as np
 from scipy.spatial import cKDTree
 
-from corrlib.errors import CorrError, InputError, ParameterError
+from corrlib.bench import checked_ground_truth, csv_cell, failure_fields, load_dataset, path_search_fields
+from corrlib.errors import InputError, ParameterError
 from corrlib.geometry.sections import SilhouetteProjection
+from corrlib.landmark_bench import drawn_jobs, drawn_markdown, drawn_summary, match_drawn_query
 from corrlib.outputs import lost_working_folder
 from corrlib.shapes import Contour2D, TriMesh
 
@@ -360,7 +366,7 @@ def match_cut_query(source_path, target_path, plane: str, params: dict, *, gt_ro
         start = time.perf_counter()
         result = solve("contour3d", query.contour, target, **params)
         seconds = time.perf_counter() - start
-        matched, search = result.path, result.search
+        matched = result.path
         gt = query.ground_truth(matched.contour_points, source.vertices)
         if transfer is not None:
             gt = transfer(gt)
@@ -376,8 +382,7 @@ def match_cut_query(source_path, target_path, plane: str, params: dict, *, gt_ro
                                    solver)
             row["mean_error_sym"] = min(row["mean_error"], mirrored["mean_error"])
         row.update(view=result.extras.get("view", ""), model=result.extras.get("model", ""))
-        row.update(energy=float(result.energy), gap=float(search.upper_bound - search.lower_bound),
-                   optimal=search.optimal, iterations=search.iterations, seconds=seconds)
+        row.update(path_search_fields(result, seconds))
         if picture is not None:
             from corrlib.plotting import save_curve_comparison
 
@@ -386,8 +391,8 @@ def match_cut_query(source_path, target_path, plane: str, params: dict, *, gt_ro
                                   near_side,
                                   title=f"{row['query']} -> {row['target']}: mean error {row['mean_error']:.3f}, "
                                         f"coverage {row['coverage']:.2f}")
-    except Exception as exc:  # a failing match is recorded (with its type if unexpected); the others go on
-        row.update(status="failed", error=str(exc) if isinstance(exc, CorrError) else f"{type(exc).__name__}: {exc}")
+    except Exception as exc:  # a failing match is recorded; the others go on
+        row.update(failure_fields(exc))
     return row
 
 
@@ -512,17 +517,15 @@ def match_sketch_query(sketch: SketchQuery, target_path, labels_path, params: di
             mirrored = _vts_transfer(target.vertices, *mirror_rows)(np.asarray(result.map_xy))
             row["part_agreement_sym"] = max(agreement, part_agreement(labels, mesh_labels[mirrored])[0])
         path = np.asarray(matched.vertices)
-        row.update(n_points=int(len(result.map_xy)), distinct_vertices=int(len(np.unique(path))),
-                   energy=float(result.energy), gap=float(result.search.upper_bound - result.search.lower_bound),
-                   optimal=result.search.optimal, iterations=result.search.iterations, seconds=seconds)
+        row.update(path_search_fields(result, seconds))
         if picture is not None:
             from corrlib.plotting import save_contour_match
 
             save_contour_match(picture, matched.contour_points, target, path, matched.contour_index,
                                title=f"{sketch.name} -> {row['target']}: part agreement {agreement:.2f} "
                                      f"(mirror accepted {row['part_agreement_sym']:.2f})")
-    except Exception as exc:  # a failing match is recorded (with its type if unexpected); the others go on
-        row.update(status="failed", error=str(exc) if isinstance(exc, CorrError) else f"{type(exc).__name__}: {exc}")
+    except Exception as exc:  # a failing match is recorded; the others go on
+        row.update(failure_fields(exc))
     return row
 
 
@@ -572,7 +575,6 @@ def contour_jobs(datasets, planes=DEFAULT_PLANES) -> list[ContourJob]:
         Folders in the layouts of :func:`corrlib.bench.load_dataset`.
     planes : sequence of str
     """
-    from corrlib.bench import checked_ground_truth, load_dataset
     from corrlib.io import load_map, load_mesh
     from corrlib.retrieval import class_of
 
@@ -616,7 +618,6 @@ class SketchJob:
 
 def sketch_jobs(datasets, sketch_folders) -> list[SketchJob]:
     """Every labelled sketch of ``sketch_folders`` against every mesh of ``datasets`` with part labels."""
-    from corrlib.bench import checked_ground_truth, load_dataset
     from corrlib.io import load_labels, load_mesh
 
     sketches = [q for folder in sketch_folders for q in sketch_queries(folder)]
@@ -737,11 +738,14 @@ COLUMNS = ("query", "target", "plane", "self", "other_class", "status", "n_point
            "median_error", "within_005",
            "within_01", "coverage", "distinct_vertices", "gt_distinct_vertices", "view", "model", "energy", "gap",
            "optimal",
-           "iterations", "seconds", "part_agreement", "part_agreement_sym", "scored_points", "error")
+           "iterations", "seconds", "part_agreement", "part_agreement_sym", "scored_points", "landmark_error",
+           "landmark_within_01", "worst_landmark", "scored_landmarks", "redraws", "redraw_error", "redraw_worst",
+           "error")
 
 
 def contour_benchmark(datasets, out, *, planes=DEFAULT_PLANES, params: dict | None = None, jobs: int | None = 1,
-                      scheduler: str | None = None, pictures: bool = True, callback=None, sketches=()) -> dict:
+                      scheduler: str | None = None, pictures: bool = True, callback=None, sketches=(),
+                      drawings=(), redraws: int = 0) -> dict:
     """Run the plane-section benchmark; write ``contour_bench.csv``, ``contour_summary.{json,md}``, pictures.
 
     Parameters
@@ -753,6 +757,11 @@ def contour_benchmark(datasets, out, *, planes=DEFAULT_PLANES, params: dict | No
         Section and silhouette queries; may be empty when ``sketches`` are given.
     sketches : sequence of path
         Folders of labelled sketches, matched to the datasets' meshes with part labels (module docstring).
+    drawings : sequence of path
+        Folders of drawings with landmarks, matched to the datasets' meshes with landmarks
+        (:mod:`corrlib.landmark_bench`).
+    redraws : int
+        Redrawn variants of every drawing (:func:`corrlib.landmark_bench.redrawn`).
     params : dict, optional
         ``contour3d`` parameters (validated before any work).
     jobs, scheduler
@@ -764,20 +773,23 @@ def contour_benchmark(datasets, out, *, planes=DEFAULT_PLANES, params: dict | No
     Returns
     -------
     dict
-        The summary: ``{"all" | "same mesh" | "other pose" | "other class": {...}}``, and ``"sketches"``
-        when sketches were given.
+        The summary: ``{"all" | "same mesh" | "other pose" | "other class": {...}}``, and ``"sketches"`` and
+        ``"drawings"`` when they were given.
     """
-    from corrlib.bench import csv_cell
     from corrlib.io import atomic_write, ensure_output_folder
     from corrlib.methods import get_method, make_params
     from corrlib.parallel import job_executor
 
     params = dict(params or {})
     make_params(get_method("contour3d").params, **params)  # named errors before any work
+    if not isinstance(redraws, (int, np.integer)) or isinstance(redraws, bool) or redraws < 0:
+        raise ParameterError(f"redraws must be a whole number of at least 0, got {redraws!r}")
     todo = contour_jobs(datasets, planes)
     drawn = sketch_jobs(datasets, sketches)
-    if not todo and not drawn:
-        raise ParameterError("nothing to run: give section planes (--planes) or labelled sketches (--sketches)")
+    marked = drawn_jobs(datasets, drawings)
+    if not todo and not drawn and not marked:
+        raise ParameterError("nothing to run: give section planes (--planes), labelled sketches (--sketches) or "
+                             "drawings with landmarks (--drawn)")
     executor = job_executor(jobs, scheduler)
     out = ensure_output_folder(out)
     if pictures:
@@ -800,28 +812,39 @@ def contour_benchmark(datasets, out, *, planes=DEFAULT_PLANES, params: dict | No
             futures.append(pool.submit(match_sketch_query, job.sketch, str(job.target), str(job.labels), params,
                                        mirror_rows=job.mirror_rows, picture=picture))
             picture_of.append(picture)
+        for job in marked:
+            picture = str(out / "pictures" / f"{job.query.name}-drawn__{job.target.stem}.png") if pictures else None
+            futures.append(pool.submit(match_drawn_query, job.query, str(job.target), str(job.landmarks), params,
+                                       redraws=redraws, picture=picture))
+            picture_of.append(picture)
         for number, future in enumerate(futures, 1):
             rows.append(future.result())
             if callback is not None:
                 callback(number, len(futures), rows[-1])
     drawn_now = {Path(picture).name for picture, row in zip(picture_of, rows) if picture and row["status"] == "ok"}
     sketch_rows = [r for r in rows if r["plane"] == "sketch"]
-    rows = [r for r in rows if r["plane"] != "sketch"]
+    drawn_rows = [r for r in rows if r["plane"] == "drawn"]
+    rows = [r for r in rows if r["plane"] not in ("sketch", "drawn")]
     summary = _summary(rows) if rows else {"all": {"queries": 0, "failed": 0}}
     if sketch_rows:
         summary["sketches"] = _sketch_summary(sketch_rows)
+    if drawn_rows:
+        summary["drawings"] = drawn_summary(drawn_rows)
     with atomic_write(out / "contour_bench.csv") as fh:
         fh.write(",".join(COLUMNS) + "\n")
-        for r in rows + sketch_rows:
+        for r in rows + sketch_rows + drawn_rows:
             fh.write(",".join(csv_cell(r.get(c, "")) for c in COLUMNS) + "\n")
     with atomic_write(out / "contour_summary.json") as fh:
         json.dump({"summary": summary, "params": params, "planes": list(planes), "rows": rows,
-                   "sketch_rows": sketch_rows}, fh, indent=1)
+                   "sketch_rows": sketch_rows, "drawn_rows": drawn_rows, "redraws": redraws}, fh, indent=1)
     with atomic_write(out / "contour_summary.md") as fh:
-        if rows:
-            fh.write(_markdown({k: v for k, v in summary.items() if k != "sketches"}, rows))
+        tables = [_markdown({k: v for k, v in summary.items() if k not in ("sketches", "drawings")}, rows)] if rows \
+            else []
         if sketch_rows:
-            fh.write(("\n" if rows else "") + _sketch_markdown(summary["sketches"], sketch_rows))
+            tables.append(_sketch_markdown(summary["sketches"], sketch_rows))
+        if drawn_rows:
+            tables.append(drawn_markdown(summary["drawings"], drawn_rows))
+        fh.write("\n".join(tables))
     remove_stale_pictures(out / "pictures", drawn_now)
     return summary
 

@@ -1022,7 +1022,7 @@ def _add_bench_parsers(sub) -> None:
                         "error at the landmarks (repeatable)")
     p.add_argument("--redraws", type=int, default=0,
                    help="with --drawn: also match this many redrawn variants of each drawing (every point moved "
-                        "by 1 %% of its size) and report their mean and worst landmark error (default 0)")
+                        "by 1 %% of its size) and report their mean and worst landmark error (0-100, default 0)")
     p.add_argument("--n-contour", dest="n_contour", type=int, help="contour points (default: the method's 200)")
     p.add_argument("--param", action="append", metavar="KEY=VALUE", help="a contour3d parameter (repeatable)")
     p.add_argument("--no-pictures", action="store_true", help="do not write a picture per query")

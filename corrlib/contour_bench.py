@@ -83,7 +83,7 @@ from scipy.spatial import cKDTree
 from corrlib.bench import checked_ground_truth, csv_cell, failure_fields, load_dataset, path_search_fields
 from corrlib.errors import InputError, ParameterError
 from corrlib.geometry.sections import SilhouetteProjection
-from corrlib.landmark_bench import drawn_jobs, drawn_markdown, drawn_summary, match_drawn_query
+from corrlib.landmark_bench import MAX_REDRAWS, drawn_jobs, drawn_markdown, drawn_summary, match_drawn_query
 from corrlib.outputs import lost_working_folder
 from corrlib.shapes import Contour2D, TriMesh
 
@@ -782,8 +782,10 @@ def contour_benchmark(datasets, out, *, planes=DEFAULT_PLANES, params: dict | No
 
     params = dict(params or {})
     make_params(get_method("contour3d").params, **params)  # named errors before any work
-    if not isinstance(redraws, (int, np.integer)) or isinstance(redraws, bool) or redraws < 0:
-        raise ParameterError(f"redraws must be a whole number of at least 0, got {redraws!r}")
+    if not isinstance(redraws, (int, np.integer)) or isinstance(redraws, bool) or not 0 <= redraws <= MAX_REDRAWS:
+        raise ParameterError(f"redraws must be a whole number from 0 to {MAX_REDRAWS}, got {redraws!r}")
+    if redraws and not drawings:
+        raise ParameterError("redraws are variants of drawings with landmarks; give them with --drawn")
     todo = contour_jobs(datasets, planes)
     drawn = sketch_jobs(datasets, sketches)
     marked = drawn_jobs(datasets, drawings)

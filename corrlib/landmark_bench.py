@@ -40,6 +40,8 @@ LANDMARKS_SUFFIX = ".landmarks"
 REDRAW_JITTER = 0.01
 #: attempts at a redrawn variant that does not cross itself
 REDRAW_ATTEMPTS = 100
+#: most redrawn variants per drawing (each is a full match; more would run for hours and say no more)
+MAX_REDRAWS = 100
 
 
 def read_landmarks(path, *, n_vertices: int | None = None) -> list[tuple[str, object]]:

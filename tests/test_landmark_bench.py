@@ -137,8 +137,12 @@ def test_benchmark_of_a_drawing_with_redrawn_variants(wolf_drawing_and_dataset, 
     (data / "wolf0.landmarks").unlink()
     with pytest.raises(InputError, match="no mesh of .* has landmarks"):
         contour_benchmark([data], tmp_path / "out2", planes=(), drawings=[drawings])
-    with pytest.raises(ParameterError, match="redraws must be a whole number of at least 0, got -1"):
-        contour_benchmark([data], tmp_path / "out3", planes=("main",), redraws=-1)
+    for bad in (-1, 101, 2.5, True):
+        with pytest.raises(ParameterError, match=f"redraws must be a whole number from 0 to 100, got {bad!r}"):
+            contour_benchmark([data], tmp_path / "out3", planes=("main",), drawings=[drawings], redraws=bad)
+    with pytest.raises(ParameterError, match="redraws are variants of drawings with landmarks; give them with --drawn"):
+        contour_benchmark([data], tmp_path / "out3", planes=("main",), redraws=2)
+    assert not (tmp_path / "out3").exists()  # refused before any output
 
 
 def test_command_with_drawings(wolf_drawing_and_dataset, tmp_path, capsys):

@@ -787,9 +787,9 @@ def contour_benchmark(datasets, out, *, planes=DEFAULT_PLANES, params: dict | No
     if redraws and not drawings:
         raise ParameterError("redraws are variants of drawings with landmarks; give them with --drawn")
     todo = contour_jobs(datasets, planes)
-    drawn = sketch_jobs(datasets, sketches)
-    marked = drawn_jobs(datasets, drawings)
-    if not todo and not drawn and not marked:
+    sketched = sketch_jobs(datasets, sketches)
+    drawn = drawn_jobs(datasets, drawings)
+    if not todo and not sketched and not drawn:
         raise ParameterError("nothing to run: give section planes (--planes), labelled sketches (--sketches) or "
                              "drawings with landmarks (--drawn)")
     executor = job_executor(jobs, scheduler)
@@ -807,14 +807,14 @@ def contour_benchmark(datasets, out, *, planes=DEFAULT_PLANES, params: dict | No
                                        gt_rows=job.gt_rows, gt_map=job.gt_map, mirror_rows=job.mirror_rows,
                                        picture=picture))
             picture_of.append(picture)
-        for job in drawn:
+        for job in sketched:
             picture = None
             if pictures:
                 picture = str(out / "pictures" / f"{job.sketch.name}__{job.target.stem}.png")
             futures.append(pool.submit(match_sketch_query, job.sketch, str(job.target), str(job.labels), params,
                                        mirror_rows=job.mirror_rows, picture=picture))
             picture_of.append(picture)
-        for job in marked:
+        for job in drawn:
             picture = str(out / "pictures" / f"{job.query.name}-drawn__{job.target.stem}.png") if pictures else None
             futures.append(pool.submit(match_drawn_query, job.query, str(job.target), str(job.landmarks), params,
                                        redraws=redraws, picture=picture))

@@ -40,6 +40,11 @@ LANDMARKS_SUFFIX = ".landmarks"
 REDRAW_JITTER = 0.01
 #: attempts at a redrawn variant that does not cross itself
 REDRAW_ATTEMPTS = 100
+#: farthest a drawing's landmark may lie from its outline, a fraction of the drawing's size: a landmark off the
+#: outline (other units, a typing error) would otherwise be scored silently at whatever outline point is nearest
+LANDMARK_TOLERANCE = 0.05
+#: points of the outline the tolerance is checked against
+OUTLINE_SAMPLES = 4000
 #: most redrawn variants per drawing (each is a full match; more would run for hours and say no more)
 MAX_REDRAWS = 100
 
@@ -58,13 +63,9 @@ def read_landmarks(path, *, n_vertices: int | None = None) -> list[tuple[str, ob
         The file is missing or unreadable, a line has the wrong number of fields or values that are not
         numbers (finite coordinates, whole vertex numbers in range), or no landmark is given.
     """
-    path = Path(path)
-    if not path.is_file():
-        raise FileFormatError(f"{path}: landmark file not found{lost_working_folder(path)}")
-    try:
-        text = path.read_text(encoding="utf-8")
-    except (OSError, UnicodeDecodeError) as exc:
-        raise FileFormatError(f"{path}: cannot read the landmarks ({exc})") from None
+    from corrlib.io import read_text
+
+    text = read_text(path, "landmark")
     expected = "label x y" if n_vertices is None else "label vertex"
     out = []
     for number, line in enumerate(text.splitlines(), 1):
@@ -134,11 +135,25 @@ def drawn_queries(folder) -> list[DrawnQuery]:
         if len(drawings) != 1:
             raise FileFormatError(f"{marks}: expected one drawing {name}.<ext> beside it, found "
                                   f"{len(drawings)}{': ' + ', '.join(p.name for p in drawings) if drawings else ''}")
-        load_contour(drawings[0])
-        found.append(DrawnQuery(name, drawings[0], read_landmarks(marks)))
+        landmarks = read_landmarks(marks)
+        check_on_outline(landmarks, load_contour(drawings[0]), marks)
+        found.append(DrawnQuery(name, drawings[0], landmarks))
     if not found:
         raise FileFormatError(f"{folder}: no drawings with landmarks (NAME{LANDMARKS_SUFFIX} beside NAME.txt)")
     return found
+
+
+def check_on_outline(landmarks: list, contour: Contour2D, path) -> None:
+    """Raise a :class:`FileFormatError` naming the first landmark farther than :data:`LANDMARK_TOLERANCE` of the
+    drawing's size (the larger side of its bounding box) from its outline."""
+    outline = contour.resample(OUTLINE_SAMPLES).points
+    size = float(np.ptp(contour.points, axis=0).max())
+    for label, point in landmarks:
+        gap = float(np.linalg.norm(outline - point, axis=1).min())
+        if gap > LANDMARK_TOLERANCE * size:
+            raise FileFormatError(f"{path}: landmark {label} ({point[0]:g}, {point[1]:g}) lies {gap:.3g} from the "
+                                  f"outline of {contour.name}, more than {LANDMARK_TOLERANCE:.0%} of its size "
+                                  f"({size:.3g}); landmarks are points on the outline, in its coordinates")
 
 
 def redrawn(contour: Contour2D, rng: np.random.Generator) -> Contour2D:

@@ -36,7 +36,7 @@ def test_landmark_files_are_read_and_their_errors_named(tmp_path):
         path.write_text(text)
         with pytest.raises(FileFormatError, match=message):
             read_landmarks(path, n_vertices=n)
-    with pytest.raises(FileFormatError, match="landmark file not found"):
+    with pytest.raises(FileFormatError, match="missing.landmarks: file not found"):
         read_landmarks(tmp_path / "missing.landmarks")
 
 
@@ -102,6 +102,12 @@ def test_drawings_folder_errors(tmp_path):
         drawn_queries(tmp_path)
     (tmp_path / "wolf.landmarks").write_text("nose 12.2 7.05\n")
     with pytest.raises(FileFormatError, match="expected one drawing wolf.<ext> beside it, found 0"):
+        drawn_queries(tmp_path)
+    shutil.copy(DRAWN / "wolf.txt", tmp_path / "wolf.txt")
+    assert drawn_queries(tmp_path)[0].labels == {"nose"}
+    (tmp_path / "wolf.landmarks").write_text("nose 12.2 7.05\npaw 122 70.5\n")  # in other units: off the outline
+    with pytest.raises(FileFormatError, match=r"wolf.landmarks: landmark paw \(122, 70.5\) lies .* from the outline "
+                                              r"of wolf.txt, more than 5% of its size"):
         drawn_queries(tmp_path)
 
 

@@ -580,7 +580,8 @@ def cmd_bench_contour(args) -> int:
 
     summary = contour_benchmark(args.datasets, args.output, planes=planes, params=params, jobs=args.jobs,
                                 scheduler=args.scheduler, pictures=not args.no_pictures, callback=progress,
-                                sketches=args.sketches or (), drawings=args.drawn or (), redraws=args.redraws)
+                                sketches=args.sketches or (), drawings=args.drawn or (), redraws=args.redraws,
+                                method=args.method)
     print((Path(args.output) / "contour_summary.md").read_text(encoding="utf-8"))
     _say_failures(failures, Path(args.output) / "contour_bench.csv")
     failed = summary["all"]["failed"] + summary.get("sketches", {}).get("failed", 0) + \
@@ -1023,8 +1024,10 @@ def _add_bench_parsers(sub) -> None:
     p.add_argument("--redraws", type=int, default=0,
                    help="with --drawn: also match this many redrawn variants of each drawing (every point moved "
                         "by 1 %% of its size) and report their mean and worst landmark error (0-100, default 0)")
-    p.add_argument("--n-contour", dest="n_contour", type=int, help="contour points (default: the method's 200)")
-    p.add_argument("--param", action="append", metavar="KEY=VALUE", help="a contour3d parameter (repeatable)")
+    p.add_argument("--method", default="contour3d",
+                   help="the 2D-to-3D method: contour3d (default) or contour-views (the drawing read as a view)")
+    p.add_argument("--n-contour", dest="n_contour", type=int, help="contour points (default: the method's)")
+    p.add_argument("--param", action="append", metavar="KEY=VALUE", help="a parameter of the method (repeatable)")
     p.add_argument("--no-pictures", action="store_true", help="do not write a picture per query")
     _add_scale_out(p)
     _add_output(p, "contour_bench_output", "output folder")

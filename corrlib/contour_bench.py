@@ -82,7 +82,7 @@ from scipy.spatial import cKDTree
 
 from corrlib.bench import checked_ground_truth, csv_cell, failure_fields, load_dataset, path_search_fields
 from corrlib.errors import InputError, ParameterError
-from corrlib.geometry.sections import SilhouetteProjection
+from corrlib.geometry.sections import SilhouetteProjection, principal_frame
 from corrlib.landmark_bench import MAX_REDRAWS, drawn_jobs, drawn_markdown, drawn_summary, match_drawn_query
 from corrlib.outputs import lost_working_folder
 from corrlib.shapes import Contour2D, TriMesh
@@ -154,17 +154,6 @@ class CutQuery:
         candidates = np.hstack([self.edges[seg], self.edges[nxt]])  # (m, 4)
         d = np.linalg.norm(mesh_vertices[candidates] - surface[:, None, :], axis=2)
         return candidates[np.arange(len(seg)), np.argmin(d, axis=1)]
-
-
-def principal_frame(mesh: TriMesh) -> tuple[np.ndarray, np.ndarray]:
-    """Area-weighted centroid (3,) and principal axes (3, 3), rows by decreasing variance."""
-    from corrlib.geometry.laplacian import mass_matrix
-
-    weights = mass_matrix(mesh.vertices, mesh.faces).diagonal()
-    centre = weights @ mesh.vertices / weights.sum()
-    centred = (mesh.vertices - centre) * np.sqrt(weights / weights.sum())[:, None]
-    _, _, vt = np.linalg.svd(centred, full_matrices=False)
-    return centre, vt
 
 
 def symmetry_normal(mesh: TriMesh) -> np.ndarray:
@@ -310,7 +299,7 @@ def score_curve(map_xy: np.ndarray, path_vertices: np.ndarray, gt: np.ndarray, t
 
 
 def match_cut_query(source_path, target_path, plane: str, params: dict, *, gt_rows=None, gt_map=None,
-                    mirror_rows=None, picture: str | None = None) -> dict:
+                    mirror_rows=None, picture: str | None = None, method: str = "contour3d") -> dict:
     """Cut a query from the source mesh, match it to the target and score it (one benchmark job).
 
     Parameters
@@ -319,7 +308,7 @@ def match_cut_query(source_path, target_path, plane: str, params: dict, *, gt_ro
         Mesh files; equal for the query's own mesh.
     plane : str
     params : dict
-        Parameters of the ``contour3d`` method.
+        Parameters of the 2D-to-3D ``method`` (``contour3d`` unless told).
     gt_rows : (rows_source, rows_target), optional
         Corresponding ``.vts`` rows (0-based).
     gt_map : (n_source,) int, optional
@@ -364,7 +353,7 @@ def match_cut_query(source_path, target_path, plane: str, params: dict, *, gt_ro
             raise InputError(f"no ground truth from {source.name} ({source.n_vertices} vertices) to "
                              f"{target.name} ({target.n_vertices} vertices)")
         start = time.perf_counter()
-        result = solve("contour3d", query.contour, target, **params)
+        result = solve(method, query.contour, target, **params)
         seconds = time.perf_counter() - start
         matched = result.path
         gt = query.ground_truth(matched.contour_points, source.vertices)
@@ -478,7 +467,7 @@ def part_agreement(point_labels: np.ndarray, matched_labels: np.ndarray) -> tupl
 
 
 def match_sketch_query(sketch: SketchQuery, target_path, labels_path, params: dict, *, mirror_rows=None,
-                       picture: str | None = None) -> dict:
+                       picture: str | None = None, method: str = "contour3d") -> dict:
     """Match a labelled sketch to a labelled mesh and score the part agreement (one benchmark job).
 
     Parameters
@@ -487,7 +476,7 @@ def match_sketch_query(sketch: SketchQuery, target_path, labels_path, params: di
     target_path, labels_path : path
         The mesh and its part labels (one per vertex).
     params : dict
-        Parameters of the ``contour3d`` method (the labels are not passed to it).
+        Parameters of the 2D-to-3D ``method`` (``contour3d`` unless told; the labels are not passed to it).
     mirror_rows : (rows_target, rows_target_mirrored), optional
         The target's ``.vts`` and ``.sym.vts`` rows: the mirror-accepted agreement is reported too.
     picture : path, optional
@@ -507,7 +496,7 @@ def match_sketch_query(sketch: SketchQuery, target_path, labels_path, params: di
         target = load_mesh(target_path)
         mesh_labels = load_labels(labels_path, target.n_vertices, "mesh part labels")
         start = time.perf_counter()
-        result = solve("contour3d", load_contour(sketch.contour_path), target, **params)
+        result = solve(method, load_contour(sketch.contour_path), target, **params)
         seconds = time.perf_counter() - start
         matched = result.path
         labels = sketch.point_labels(matched.contour_points)
@@ -745,7 +734,7 @@ COLUMNS = ("query", "target", "plane", "self", "other_class", "status", "n_point
 
 def contour_benchmark(datasets, out, *, planes=DEFAULT_PLANES, params: dict | None = None, jobs: int | None = 1,
                       scheduler: str | None = None, pictures: bool = True, callback=None, sketches=(),
-                      drawings=(), redraws: int = 0) -> dict:
+                      drawings=(), redraws: int = 0, method: str = "contour3d") -> dict:
     """Run the plane-section benchmark; write ``contour_bench.csv``, ``contour_summary.{json,md}``, pictures.
 
     Parameters
@@ -762,8 +751,10 @@ def contour_benchmark(datasets, out, *, planes=DEFAULT_PLANES, params: dict | No
         (:mod:`corrlib.landmark_bench`).
     redraws : int
         Redrawn variants of every drawing (:func:`corrlib.landmark_bench.redrawn`).
+    method : str
+        A registered method that matches a contour to a mesh (``contour3d`` or ``contour-views``).
     params : dict, optional
-        ``contour3d`` parameters (validated before any work).
+        The method's parameters (validated before any work).
     jobs, scheduler
         See :func:`corrlib.parallel.job_executor`.
     pictures : bool
@@ -777,11 +768,15 @@ def contour_benchmark(datasets, out, *, planes=DEFAULT_PLANES, params: dict | No
         ``"drawings"`` when they were given.
     """
     from corrlib.io import atomic_write, ensure_output_folder
-    from corrlib.methods import get_method, make_params
+    from corrlib.methods import all_methods, get_method, make_params
     from corrlib.parallel import job_executor
 
     params = dict(params or {})
-    make_params(get_method("contour3d").params, **params)  # named errors before any work
+    spec = get_method(method)
+    if spec.inputs != ("contour", "mesh"):
+        raise ParameterError(f"method {method!r} does not match a contour to a mesh; the 2D-to-3D methods are "
+                             + ", ".join(m.name for m in all_methods() if m.inputs == ("contour", "mesh")))
+    make_params(spec.params, **params)  # named errors before any work
     if not isinstance(redraws, (int, np.integer)) or isinstance(redraws, bool) or not 0 <= redraws <= MAX_REDRAWS:
         raise ParameterError(f"redraws must be a whole number from 0 to {MAX_REDRAWS}, got {redraws!r}")
     if redraws and not drawings:
@@ -805,19 +800,19 @@ def contour_benchmark(datasets, out, *, planes=DEFAULT_PLANES, params: dict | No
                 picture = str(out / "pictures" / f"{job.source.stem}-{job.plane}__{job.target.stem}.png")
             futures.append(pool.submit(match_cut_query, str(job.source), str(job.target), job.plane, params,
                                        gt_rows=job.gt_rows, gt_map=job.gt_map, mirror_rows=job.mirror_rows,
-                                       picture=picture))
+                                       picture=picture, method=method))
             picture_of.append(picture)
         for job in sketched:
             picture = None
             if pictures:
                 picture = str(out / "pictures" / f"{job.sketch.name}__{job.target.stem}.png")
             futures.append(pool.submit(match_sketch_query, job.sketch, str(job.target), str(job.labels), params,
-                                       mirror_rows=job.mirror_rows, picture=picture))
+                                       mirror_rows=job.mirror_rows, picture=picture, method=method))
             picture_of.append(picture)
         for job in drawn:
             picture = str(out / "pictures" / f"{job.query.name}-drawn__{job.target.stem}.png") if pictures else None
             futures.append(pool.submit(match_drawn_query, job.query, str(job.target), str(job.landmarks), params,
-                                       redraws=redraws, picture=picture))
+                                       redraws=redraws, picture=picture, method=method))
             picture_of.append(picture)
         for number, future in enumerate(futures, 1):
             rows.append(future.result())
@@ -837,7 +832,7 @@ def contour_benchmark(datasets, out, *, planes=DEFAULT_PLANES, params: dict | No
         for r in rows + sketch_rows + drawn_rows:
             fh.write(",".join(csv_cell(r.get(c, "")) for c in COLUMNS) + "\n")
     with atomic_write(out / "contour_summary.json") as fh:
-        json.dump({"summary": summary, "params": params, "planes": list(planes), "rows": rows,
+        json.dump({"summary": summary, "method": method, "params": params, "planes": list(planes), "rows": rows,
                    "sketch_rows": sketch_rows, "drawn_rows": drawn_rows, "redraws": redraws}, fh, indent=1)
     with atomic_write(out / "contour_summary.md") as fh:
         tables = [_markdown({k: v for k, v in summary.items() if k not in ("sketches", "drawings")}, rows)] if rows \

@@ -198,22 +198,23 @@ def landmark_errors(result, target, drawn: list, truth: dict, solver) -> list[tu
 
 
 def redrawn_errors(contour: Contour2D, target, drawn: list, truth: dict, solver, params: dict, redraws: int,
-                   seed: int) -> list[float]:
+                   seed: int, method: str = "contour3d") -> list[float]:
     """The mean landmark error of each of ``redraws`` redrawn variants of ``contour`` (:func:`redrawn`, from
-    the seed ``seed``) matched to ``target`` with the ``contour3d`` parameters ``params``."""
+    the seed ``seed``) matched to ``target`` by the 2D-to-3D ``method`` with its parameters ``params``."""
     from corrlib.methods import solve
 
     rng = np.random.default_rng(seed)
     out = []
     for _ in range(redraws):
-        result = solve("contour3d", redrawn(contour, rng), target, **params)
+        result = solve(method, redrawn(contour, rng), target, **params)
         out.append(float(np.mean([e for _, e in landmark_errors(result, target, drawn, truth, solver)])))
     return out
 
 
 def match_drawn_query(query: DrawnQuery, target_path, landmarks_path, params: dict, *, redraws: int = 0,
-                      seed: int = 0, picture: str | None = None) -> dict:
-    """Match a drawing (and ``redraws`` redrawn variants) to a mesh with landmarks; one benchmark row.
+                      seed: int = 0, picture: str | None = None, method: str = "contour3d") -> dict:
+    """Match a drawing (and ``redraws`` redrawn variants) to a mesh with landmarks by the 2D-to-3D ``method``
+    (its parameters ``params``); one benchmark row.
 
     Returns
     -------
@@ -238,14 +239,14 @@ def match_drawn_query(query: DrawnQuery, target_path, landmarks_path, params: di
         solver = GeodesicSolver(target)
         contour = load_contour(query.contour_path)
         start = time.perf_counter()
-        result = solve("contour3d", contour, target, **params)
+        result = solve(method, contour, target, **params)
         seconds = time.perf_counter() - start
         errors = landmark_errors(result, target, query.landmarks, truth, solver)
         if not errors:
             raise InputError(f"{query.name} and {row['target']} name no landmark in common")
         values = np.array([e for _, e in errors])
         worst = errors[int(values.argmax())]
-        variants = redrawn_errors(contour, target, query.landmarks, truth, solver, params, redraws, seed)
+        variants = redrawn_errors(contour, target, query.landmarks, truth, solver, params, redraws, seed, method)
         path = np.asarray(result.path.vertices)
         row.update(landmark_error=float(values.mean()), landmark_within_01=float(np.mean(values <= 0.1)),
                    worst_landmark=f"{worst[0]} {worst[1]:.3f}", scored_landmarks=len(errors),

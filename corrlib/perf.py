@@ -136,7 +136,7 @@ def suite_contour3d(repeat: int, quick: bool = False) -> None:
     """Issue 3 targets: global optimum 200 x 5k, time per layered Dijkstra, retrieval over 20 meshes."""
     from corrlib.geometry.cyclic_paths import ProductGraph
     from corrlib.geometry.sections import render_silhouette
-    from corrlib.io import load_mesh, save_mesh
+    from corrlib.io import load_contour, load_mesh, save_mesh
     from corrlib.methods.contour3d import Contour3DParams, node_costs, prepare_mesh, prepare_query
     from corrlib.methods import solve
     from corrlib.progress import run
@@ -172,6 +172,10 @@ def suite_contour3d(repeat: int, quick: bool = False) -> None:
               + ("  [target <= 2 s]" if eps == 0 else ""), t,
               f"energy {result.energy:.5g}, lower bound {search.lower_bound:.5g}, {search.iterations} B&B "
               f"iterations, {search.dijkstra_runs} Dijkstra runs of {search.seconds_per_dijkstra:.3f} s")
+    drawing = load_contour(resource("data/silhouettes/drawn/wolf.txt"))
+    t, result = _best_time(lambda: solve("contour-views", drawing, wolf0), repeat)
+    _line(f"contour-views: the drawn wolf to wolf0 ({wolf0.n_vertices} v), {result.extras['views']} views", t,
+          ", ".join(f"{stage} {seconds:.2f} s" for stage, seconds in result.timings.items() if stage != "total"))
     if quick:
         return
     with tempfile.TemporaryDirectory() as tmp:

@@ -53,7 +53,7 @@ def view_direction(axes: np.ndarray, vertical: int, azimuth: float, elevation: f
 
 
 def main(out: Path) -> None:
-    from corrlib.contour_bench import principal_frame
+    from corrlib.geometry.sections import principal_frame
     from corrlib.geometry.sections import render_silhouette
     from corrlib.io import load_mesh, save_contour
     from corrlib.retrieval import class_of

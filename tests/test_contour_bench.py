@@ -12,9 +12,9 @@ from scipy.sparse.csgraph import dijkstra
 from _data import ROOT, TOSCA
 from corrlib.cli import main
 from corrlib.contour_bench import (_vts_transfer, contour_benchmark, contour_jobs, cut_query, match_cut_query,
-                                   principal_frame, score_curve, silhouette_query, symmetry_normal)
+                                   score_curve, silhouette_query, symmetry_normal)
 from corrlib.errors import InputError, ParameterError
-from corrlib.geometry.sections import plane_basis
+from corrlib.geometry.sections import plane_basis, principal_frame
 from corrlib.io import load_mesh, load_vts
 from corrlib.shapes import Contour2D, TriMesh
 

@@ -107,6 +107,42 @@ def _astar_paths(vertices, indptr, indices, weights, starts, ends):
     return lengths, offsets, flat
 
 
+def edge_paths(mesh, starts, ends) -> list[np.ndarray]:
+    """Shortest edge paths of a mesh between vertex pairs (A* on the edge graph).
+
+    Parameters
+    ----------
+    mesh : TriMesh
+    starts, ends : (p,) int
+        Vertex pairs.
+
+    Returns
+    -------
+    list of (k_i,) int
+        Path ``i`` from ``starts[i]`` to ``ends[i]``, both included (one vertex where they are equal).
+
+    Raises
+    ------
+    InputError
+        A pair lies on different connected components of the mesh.
+    """
+    from scipy.sparse.csgraph import connected_components
+
+    starts = _check_sources(starts, mesh.n_vertices, f"{mesh.name}: path starts")
+    ends = _check_sources(ends, mesh.n_vertices, f"{mesh.name}: path ends")
+    if starts.shape != ends.shape:
+        raise InputError(f"{mesh.name}: {starts.size} path starts but {ends.size} ends")
+    adj = mesh.adjacency
+    _, component = connected_components(adj, directed=False)
+    if np.any(component[starts] != component[ends]):
+        raise InputError(f"{mesh.name}: some vertex pairs lie on different connected components (no path between "
+                         "them)")
+    vertices = np.ascontiguousarray(mesh.vertices, dtype=np.float64)
+    _, offsets, flat = _astar_paths(vertices, adj.indptr.astype(np.int64), adj.indices.astype(np.int64),
+                                    adj.data.astype(np.float64), starts, ends)
+    return [flat[offsets[i]:offsets[i + 1]] for i in range(starts.size)]
+
+
 class GeodesicSolver:
     """Geodesic distance queries on one mesh, with prefactorised solvers.
 

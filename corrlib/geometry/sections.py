@@ -15,6 +15,7 @@ from __future__ import annotations
 
 from dataclasses import dataclass
 
+import numba
 import numpy as np
 
 from corrlib.errors import InputError
@@ -41,6 +42,17 @@ class SectionLoop:
     points_2d: np.ndarray
     edges: np.ndarray
     weights: np.ndarray
+
+def principal_frame(mesh) -> tuple[np.ndarray, np.ndarray]:
+    """Area-weighted centroid (3,) and principal axes (3, 3) of a mesh, rows by decreasing variance."""
+    from corrlib.geometry.laplacian import mass_matrix
+
+    weights = mass_matrix(mesh.vertices, mesh.faces).diagonal()
+    centre = weights @ mesh.vertices / weights.sum()
+    centred = (mesh.vertices - centre) * np.sqrt(weights / weights.sum())[:, None]
+    _, _, vt = np.linalg.svd(centred, full_matrices=False)
+    return centre, vt
+
 
 def plane_basis(normal) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Unit normal and two in-plane axes (u, v) forming a right-handed frame."""
@@ -160,6 +172,28 @@ def project_for_silhouette(mesh, direction, resolution: int = 256, *, up=None) -
     return SilhouetteProjection(np.column_stack([cols, -rows]), mesh.vertices @ nrm, shape, float(pix))
 
 
+@numba.njit(cache=True, nogil=True)
+def _fill_triangles(rows, cols, faces, mask):
+    """Set the pixels of ``mask`` whose centres (integer row, column) lie in a triangle (edges included)."""
+    height, width = mask.shape
+    for f in range(faces.shape[0]):
+        a, b, c = faces[f, 0], faces[f, 1], faces[f, 2]
+        ra, rb, rc, ca, cb, cc = rows[a], rows[b], rows[c], cols[a], cols[b], cols[c]
+        area = (cb - ca) * (rc - ra) - (cc - ca) * (rb - ra)
+        if area == 0.0:
+            continue
+        sign = 1.0 if area > 0 else -1.0
+        r0, r1 = max(int(np.ceil(min(ra, rb, rc))), 0), min(int(np.floor(max(ra, rb, rc))), height - 1)
+        c0, c1 = max(int(np.ceil(min(ca, cb, cc))), 0), min(int(np.floor(max(ca, cb, cc))), width - 1)
+        for r in range(r0, r1 + 1):
+            for col in range(c0, c1 + 1):
+                # the three edge functions, each >= 0 on the triangle's side of its edge
+                if (sign * ((cb - ca) * (r - ra) - (col - ca) * (rb - ra)) >= 0.0
+                        and sign * ((cc - cb) * (r - rb) - (col - cb) * (rc - rb)) >= 0.0
+                        and sign * ((ca - cc) * (r - rc) - (col - cc) * (ra - rc)) >= 0.0):
+                    mask[r, col] = True
+
+
 def render_silhouette(mesh, direction, resolution: int = 256, *, up=None) -> Contour2D:
     """Outline of the orthographic projection of a mesh seen along ``direction``.
 
@@ -182,16 +216,13 @@ def render_silhouette(mesh, direction, resolution: int = 256, *, up=None) -> Con
         same units.
     """
     from scipy.ndimage import binary_closing, binary_fill_holes
-    from skimage.draw import polygon as draw_polygon
 
     from corrlib.io import contour_from_mask
 
     projection = project_for_silhouette(mesh, direction, resolution, up=up)
-    cols, rows = projection.pixels[:, 0], -projection.pixels[:, 1]
-    mask = np.zeros(projection.shape, dtype=bool)
-    for face in mesh.faces:
-        rr, cc = draw_polygon(rows[face], cols[face], projection.shape)
-        mask[rr, cc] = True
+    mask = np.zeros(projection.shape, dtype=np.bool_)
+    _fill_triangles(np.ascontiguousarray(-projection.pixels[:, 1]), np.ascontiguousarray(projection.pixels[:, 0]),
+                    np.ascontiguousarray(mesh.faces, dtype=np.int64), mask)
     # thin slivers can leave single-pixel gaps between faces: one dilation/erosion pass closes them
     mask = binary_fill_holes(binary_closing(mask, iterations=1))
     return Contour2D(contour_from_mask(mask, name=f"{mesh.name} silhouette"), name=f"{mesh.name} silhouette").ccw()

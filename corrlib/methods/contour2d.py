@@ -24,14 +24,14 @@ Map convention: ``map_xy[i]`` = point of (resampled) B matched to point i of
 
 from __future__ import annotations
 
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 import scipy.sparse as sp
 
 from corrlib.geometry.cyclic_paths import ProductGraph, branch_and_bound
 from corrlib.methods.base import ContourPath, MatchResult, SearchCertificate, param
-from corrlib.methods.contour3d import Contour3DParams, node_costs, prepare_query
+from corrlib.methods.contour3d import Contour3DParams, PreparedQuery, node_costs, prepare_query
 from corrlib.methods.registry import MethodSpec, register
 from corrlib.progress import Progress, Stopwatch
 
@@ -63,31 +63,70 @@ def forward_path_adjacency(n: int) -> sp.csr_matrix:
     return sp.coo_matrix((np.ones(n - 1), (i, i + 1)), shape=(n, n)).tocsr()
 
 
+def prepared_outline(contour, n_points: int, k: int, n_scales: int, finer: str) -> PreparedQuery:
+    """A contour resampled to ``n_points`` with the features of the module docstring (its filled outline at unit
+    area, ``k`` eigenpairs, ``n_scales`` scales); ``finer``: how the user makes the filled outline finer."""
+    params = Contour3DParams(k=k, n_scales=n_scales, area_ratio=1.0, features="paper", model="half",
+                             n_contour=n_points)
+    return prepare_query(contour, params, finer=finer, view_measures=False)
+
+
+def torus_graph(cost: np.ndarray, points_a: np.ndarray, points_b: np.ndarray) -> ProductGraph:
+    """The product torus of two resampled closed contours as a product graph.
+
+    B is unrolled twice with forward moves only: a path from ``(0, s)`` to ``(m, s + n)`` runs once around B in
+    its orientation, i.e. it is an orientation-preserving bijection of the two closed curves. Its vertices are
+    points of the unrolled B (``% n`` gives B's point).
+
+    Parameters
+    ----------
+    cost : (m, n) float
+        Node cost of (point of A, point of B).
+    points_a : (m, 2) float
+    points_b : (n, 2) float
+    """
+    n = len(points_b)
+    return ProductGraph(np.hstack([cost, cost]), points_a, np.vstack([points_b, points_b]),
+                        forward_path_adjacency(2 * n), directed=True, closing_shift=n, n_starts=n)
+
+
+def torus_maps(path, m: int, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """The maps of a closed path on :func:`torus_graph` (``m`` points of A, ``n`` of B).
+
+    Returns
+    -------
+    vertices : (k,) int
+        Point of B at every step of the path.
+    map_xy : (m,) int
+        Point of B of every point of A (its first visit).
+    map_yx : (n,) int
+        Point of A of every point of B (its first visit).
+    """
+    vertices = path.vertices % n  # back from the unrolled copy of B
+    map_xy = np.full(m, -1, dtype=np.int64)
+    map_yx = np.full(n, -1, dtype=np.int64)
+    for layer, vertex in zip(path.layers[::-1], vertices[::-1]):  # first visits win
+        if layer < m:
+            map_xy[layer] = vertex
+        map_yx[vertex] = layer % m
+    return vertices, map_xy, map_yx
+
+
 def solve_contour2d(source, target, params: Contour2DParams, token):
     watch = Stopwatch()
-    base = Contour3DParams(k=params.k, n_scales=params.n_scales, area_ratio=1.0, features="paper")
     yield Progress("features", 0.0)
     with watch("features"):
-        qa = prepare_query(source, replace(base, n_contour=params.n_source), finer="raise n_source")
-        qb = prepare_query(target, replace(base, n_contour=params.n_target), finer="raise n_target")
+        qa = prepared_outline(source, params.n_source, params.k, params.n_scales, finer="raise n_source")
+        qb = prepared_outline(target, params.n_target, params.k, params.n_scales, finer="raise n_target")
         cost = node_costs(qa.features, qb.features)
     token.raise_if_cancelled()
-    # B unrolled twice with forward moves only: a path from (0, s) to (m, s + n) runs once around B in
-    # its orientation, i.e. it is an orientation-preserving bijection of the two closed curves
     n = params.n_target
-    graph = ProductGraph(np.hstack([cost, cost]), qa.points, np.vstack([qb.points, qb.points]),
-                         forward_path_adjacency(2 * n), directed=True, closing_shift=n, n_starts=n)
+    graph = torus_graph(cost, qa.points, qb.points)
     yield Progress("branch and bound", 0.1, f"{graph.m} x {graph.n} torus")
     with watch("search"):
         bb = yield from branch_and_bound(graph, eps=params.eps, token=token)
     path = bb.path
-    vertices = path.vertices % n  # back from the unrolled copy of B
-    map_xy = np.full(graph.m, -1, dtype=np.int64)
-    map_yx = np.full(n, -1, dtype=np.int64)
-    for layer, vertex in zip(path.layers[::-1], vertices[::-1]):  # first visits win
-        if layer < graph.m:
-            map_xy[layer] = vertex
-        map_yx[vertex] = layer % graph.m
+    vertices, map_xy, map_yx = torus_maps(path, graph.m, n)
     functions = {"cost": cost.astype(np.float32)}
     extras = {}
     if params.refine:

@@ -519,12 +519,14 @@ class PreparedMesh:
 
 
 def prepare_query(contour: Contour2D, params: Contour3DParams,
-                  finer: str = "raise n_contour or fill_density") -> PreparedQuery:
+                  finer: str = "raise n_contour or fill_density", *, view_measures: bool = True) -> PreparedQuery:
     """Resample, normalise and compute features of a query contour.
 
     Part labels of the contour (``contour.labels``), if any, follow the
     resampling (label of the segment each new point falls on). ``finer`` tells the user how to make the
     filled outline finer, in the parameters of the method that asks (contour2d has its own).
+    ``view_measures=False`` skips the outline's intrinsic asymmetry (left at 0), which only the choice of a
+    view reads (:meth:`PreparedQuery.is_side_view`): 2D-to-2D matching does not.
     """
     if not isinstance(contour, Contour2D):
         raise InputError(f"the query must be a Contour2D, got {type(contour).__name__}")
@@ -550,7 +552,9 @@ def prepare_query(contour: Contour2D, params: Contour3DParams,
     parts = None
     if params.parts == "auto":
         parts = protrusion_parts(evals, evecs, filled.adjacency, params.area_ratio).labels[:m]
-    if (m, params.k, params.fill_density) == (VIEW_POINTS, VIEW_K, 1.0):  # the view's own setting: reuse
+    if not view_measures:
+        intrinsic = 0.0
+    elif (m, params.k, params.fill_density) == (VIEW_POINTS, VIEW_K, 1.0):  # the view's own setting: reuse
         intrinsic = intrinsic_asymmetry(row_normalised_wks(evals, evecs)[:m])
     else:
         intrinsic = outline_intrinsic_asymmetry(contour, params.area_ratio)

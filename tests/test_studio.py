@@ -97,6 +97,18 @@ def test_contour_to_mesh_draws_the_curve(qtbot, window):
     assert bar.value() == 0
 
 
+def test_a_drawing_matched_through_views_draws_the_curve(qtbot, window):
+    from corrlib.resources import resource
+
+    assert load_file(qtbot, window, resource("data/silhouettes/drawn/wolf.txt"), "source")
+    assert load_file(qtbot, window, TOSCA / "wolf0.off", "target")
+    assert [window.method_box.itemData(i) for i in range(window.method_box.count())] == ["contour3d", "contour-views"]
+    result = run_and_wait(qtbot, window, "contour-views")
+    curve = window.product_view.curve
+    assert curve is not None and curve.n_points == len(result.path.vertices)
+    assert "outline seen along" in window.job_panel.log.toPlainText()  # which view won
+
+
 def test_sketch_becomes_a_query(qtbot, window):
     t = np.linspace(0, 2 * np.pi, 80, endpoint=False)
     window.sketch.area.set_points(np.column_stack([120 + 80 * np.cos(t), 100 + 50 * np.sin(3 * t) / 3 + 40 * np.sin(t)]))

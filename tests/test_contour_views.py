@@ -17,7 +17,8 @@ from corrlib.landmark_bench import DrawnQuery, match_drawn_query, read_landmarks
 from corrlib.methods import solve
 from corrlib.methods.contour2d import prepared_outline, torus_graph
 from corrlib.methods.contour3d import node_costs
-from corrlib.methods.contour_views import ContourViewsParams, mirror_image, render_view, view_directions
+from corrlib.methods.contour_views import (ContourViewsParams, diagonal_length, mirror_image, render_view,
+                                           view_directions)
 from corrlib.progress import run
 from corrlib.resources import resource
 from corrlib.shapes import Contour2D, TriMesh
@@ -38,6 +39,14 @@ def test_the_box_directions_are_thirteen_distinct_views():
     assert cosines.max() < 1 - 1e-6  # no direction twice, nor its opposite (the mirror image)
     assert np.allclose(np.abs(directions[:3] @ axes.T), np.eye(3))  # the principal axes first
     assert np.allclose(view_directions(axes, "axes"), directions[:3])
+
+
+def test_the_diagonal_length_of_a_torus():
+    square = np.array([[0.0, 0.0], [1.0, 0.0], [1.0, 1.0], [0.0, 1.0]])
+    assert diagonal_length(square, 2.0 * square) == pytest.approx(np.hypot(4.0, 8.0))
+    circle = np.column_stack([np.cos(np.linspace(0, 2 * np.pi, 2000, endpoint=False)),
+                              np.sin(np.linspace(0, 2 * np.pi, 2000, endpoint=False))])
+    assert diagonal_length(circle, circle[::7]) == pytest.approx(np.hypot(2 * np.pi, 2 * np.pi), rel=1e-4)
 
 
 def test_the_triangle_fill_is_the_polygon_rasteriser(wolf):
@@ -83,7 +92,8 @@ def test_the_search_over_every_view_is_the_best_single_view(wolf):
         view = render_view(wolf, direction, params)
         for query in (contour, mirror_image(contour)):
             outline = prepared_outline(query, 40, params.k, params.n_scales, finer="")
-            graph = torus_graph(node_costs(outline.features, view.outline.features), outline.points,
+            cost = node_costs(outline.features, view.outline.features)
+            graph = torus_graph(cost / diagonal_length(outline.points, view.outline.points), outline.points,
                                 view.outline.points)
             energies.append(run(branch_and_bound(graph)).energy)
     assert result.energy == pytest.approx(min(energies), rel=1e-9)

@@ -10,7 +10,8 @@ This method compares like with like, as view-based sketch retrieval does. The me
 orthographically from the 13 directions of its principal box (:func:`view_directions`; the opposite
 direction gives the mirror image, which the mirrored reading below covers). Every outline is matched to the
 query on their product torus with the 2D-to-2D energy of :mod:`.contour2d` (both filled outlines at unit
-area), for the query as drawn and for its mirror image (a drawing has no front or back), and **one
+area), per unit length of the torus' diagonal so that views with longer outlines are not handicapped
+(:func:`diagonal_length`), for the query as drawn and for its mirror image (a drawing has no front or back), and **one
 branch-and-bound over all these graphs** gives the global optimum over every view and both readings (or a
 ``1 + eps`` approximation). Each matched point of the winning view's outline is taken to the vertex nearest
 the viewer among those that project onto it (:func:`~corrlib.geometry.sections.rim_vertices`), and
@@ -127,6 +128,26 @@ def render_view(mesh: TriMesh, direction: np.ndarray, params: ContourViewsParams
     return MeshView(direction, prepared, project_for_silhouette(mesh, direction, params.resolution, up=up))
 
 
+def diagonal_length(points_a: np.ndarray, points_b: np.ndarray) -> float:
+    """``sqrt(L_a² + L_b²)``: the length of the shortest closed path around the product torus of two closed
+    polygons of lengths ``L_a`` and ``L_b`` (one at uniform speed along both, Euclidean product metric).
+
+    A path's energy integrates the node cost along its length, so a view with a longer outline (legs and
+    ears seen from the side) pays for more length than a compact one (the shape seen end-on) at the same
+    feature agreement. Dividing each view's costs by this length compares the views by their cost per unit
+    length; within a view it is a constant factor and leaves the optimal path unchanged.
+
+    Parameters
+    ----------
+    points_a : (m, 2) float
+    points_b : (n, 2) float
+    """
+    def perimeter(points):
+        return float(np.linalg.norm(np.roll(points, -1, axis=0) - points, axis=1).sum())
+
+    return float(np.hypot(perimeter(points_a), perimeter(points_b)))
+
+
 def mirror_image(contour: Contour2D) -> Contour2D:
     """The contour reflected across its y axis (the same drawing seen from behind the paper)."""
     return Contour2D(contour.points * np.array([-1.0, 1.0]), name=contour.name, validate=False)
@@ -180,7 +201,8 @@ def solve_contour_views(source: Contour2D, target: TriMesh, params: ContourViews
                          f"is too thin to fill for k={params.k} eigenpairs); raise resolution or lower k")
     pairs = [(view, mirrored) for view in views for mirrored in (False, True)]
     with watch("features"):
-        graphs = [torus_graph(node_costs(readings[mirrored].features, view.outline.features),
+        graphs = [torus_graph(node_costs(readings[mirrored].features, view.outline.features)
+                              / diagonal_length(readings[mirrored].points, view.outline.points),
                               readings[mirrored].points, view.outline.points) for view, mirrored in pairs]
     yield Progress("branch and bound", 0.7, f"{len(graphs)} tori ({len(views)} views, both readings of the query)")
     with watch("search"):
@@ -201,7 +223,8 @@ def solve_contour_views(source: Contour2D, target: TriMesh, params: ContourViews
                        extras={"view_direction": [float(x) for x in view.direction], "mirrored": bool(mirrored),
                                "views": len(views), "views_skipped": len(directions) - len(views)},
                        energy_meaning=f"2D-to-2D path energy on the product torus of the query and the mesh's "
-                                      f"outline seen along ({direction}) (unit areas)")
+                                      f"outline seen along ({direction}), per unit length of the torus' diagonal "
+                                      "(unit areas)")
 
 
 register(MethodSpec(

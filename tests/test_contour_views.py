@@ -217,6 +217,8 @@ def test_bad_input_is_named(wolf, tmp_path, capsys):
     code = main(["bench-contour", str(resource("data/tosca")), "--planes", "main", "--method", "contour-viewz",
                  "-o", str(tmp_path / "out")])
     assert code != 0 and "unknown method 'contour-viewz'" in capsys.readouterr().err
+    with pytest.raises(InputError, match="wolf0.off: no view of the mesh has an outline that can be matched .*k=60"):
+        solve("contour-views", contour, wolf, n_contour=400, n_view=10, k=60)  # views of 10 points fill too coarsely
     code = main(["match", str(DRAWN / "wolf.txt"), str(resource("data/tosca/wolf0.off")), "--method",
                  "contour-views", "--param", "k=400", "-o", str(tmp_path / "r")])
     assert code != 0 and "k=400" in capsys.readouterr().err

@@ -43,6 +43,7 @@ class SectionLoop:
     edges: np.ndarray
     weights: np.ndarray
 
+
 def principal_frame(mesh) -> tuple[np.ndarray, np.ndarray]:
     """Area-weighted centroid (3,) and principal axes (3, 3) of a mesh, rows by decreasing variance."""
     from corrlib.geometry.laplacian import mass_matrix

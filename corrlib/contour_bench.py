@@ -237,14 +237,13 @@ def silhouette_query(mesh: TriMesh, resolution: int = SILHOUETTE_RESOLUTION, vie
                      ) -> SilhouetteQuery:
     """The outline of ``mesh`` seen along its axis of least variance (up: the second axis), or for
     ``view="top"`` along its axis of middle variance (up: the first axis)."""
-    from corrlib.geometry.sections import project_for_silhouette, render_silhouette
+    from corrlib.geometry.sections import rendered_view
 
     if view not in SILHOUETTES:
         raise ParameterError(f"unknown silhouette view {view!r}; expected one of {', '.join(SILHOUETTES)}")
     _, axes = principal_frame(mesh)
     direction, up = (axes[2], axes[1]) if view == "silhouette" else (axes[1], axes[0])
-    contour = render_silhouette(mesh, direction, resolution, up=up)
-    projection = project_for_silhouette(mesh, direction, resolution, up=up)
+    contour, projection = rendered_view(mesh, direction, resolution, up=up)
     length = contour.length / projection.pixels_per_unit
     return SilhouetteQuery(mesh.name, view, Contour2D(contour.points, name=f"{mesh.name}-{view}", validate=False),
                            projection, length)

@@ -10,7 +10,7 @@ from corrlib.contour_bench import contour_benchmark
 from corrlib.errors import InputError, ParameterError
 from corrlib.geometry.cyclic_paths import branch_and_bound
 from corrlib.geometry.geodesics import GeodesicSolver, edge_paths
-from corrlib.geometry.sections import (_fill_triangles, principal_frame, project_for_silhouette, render_silhouette,
+from corrlib.geometry.sections import (_fill_triangles, principal_frame, project_for_silhouette, rendered_view,
                                        rim_vertices)
 from corrlib.io import load_contour, load_mesh
 from corrlib.landmark_bench import DrawnQuery, match_drawn_query, read_landmarks
@@ -115,8 +115,7 @@ def _rim_error(result, mesh, ground_truth_of):
 
 def test_a_mesh_seen_from_the_side_is_matched_on_its_rim(wolf):
     _, axes = principal_frame(wolf)
-    outline = render_silhouette(wolf, axes[2])
-    projection = project_for_silhouette(wolf, axes[2])
+    outline, projection = rendered_view(wolf, axes[2])
     result = solve("contour-views", outline, wolf)
     assert abs(np.dot(result.extras["view_direction"], axes[2])) > 0.99
     assert _rim_error(result, wolf, lambda points: rim_vertices(points, projection)) < 0.5 * _outline_step(
@@ -135,8 +134,7 @@ def test_how_the_outline_is_given_does_not_matter(wolf):
     """Rotated, scaled, mirrored, reversed and started elsewhere: the same outline, the same curve (within one
     step of the resampled outlines, whose points fall elsewhere)."""
     _, axes = principal_frame(wolf)
-    outline = render_silhouette(wolf, axes[2])
-    projection = project_for_silhouette(wolf, axes[2])
+    outline, projection = rendered_view(wolf, axes[2])
     angle = np.deg2rad(37.0)
     rotation = np.array([[np.cos(angle), -np.sin(angle)], [np.sin(angle), np.cos(angle)]])
     centre = outline.points.mean(axis=0)

@@ -196,7 +196,13 @@ def _fill_triangles(rows, cols, faces, mask):
 
 
 def render_silhouette(mesh, direction, resolution: int = 256, *, up=None) -> Contour2D:
-    """Outline of the orthographic projection of a mesh seen along ``direction``.
+    """Outline of the orthographic projection of a mesh seen along ``direction`` (the outline of
+    :func:`rendered_view`, without the projection of the vertices)."""
+    return rendered_view(mesh, direction, resolution, up=up)[0]
+
+
+def rendered_view(mesh, direction, resolution: int = 256, *, up=None) -> tuple[Contour2D, SilhouetteProjection]:
+    """Outline of the orthographic projection of a mesh seen along ``direction``, and where its vertices land.
 
     Parameters
     ----------
@@ -211,10 +217,11 @@ def render_silhouette(mesh, direction, resolution: int = 256, *, up=None) -> Con
 
     Returns
     -------
-    Contour2D
+    outline : Contour2D
         Counter-clockwise, in pixel units (x = column, y = −row), not
-        resampled; :func:`project_for_silhouette` gives the vertices in the
-        same units.
+        resampled.
+    projection : SilhouetteProjection
+        The vertices in the same units (:func:`project_for_silhouette`).
     """
     from scipy.ndimage import binary_closing, binary_fill_holes
 
@@ -226,7 +233,8 @@ def render_silhouette(mesh, direction, resolution: int = 256, *, up=None) -> Con
                     np.ascontiguousarray(mesh.faces, dtype=np.int64), mask)
     # thin slivers can leave single-pixel gaps between faces: one dilation/erosion pass closes them
     mask = binary_fill_holes(binary_closing(mask, iterations=1))
-    return Contour2D(contour_from_mask(mask, name=f"{mesh.name} silhouette"), name=f"{mesh.name} silhouette").ccw()
+    outline = Contour2D(contour_from_mask(mask, name=f"{mesh.name} silhouette"), name=f"{mesh.name} silhouette")
+    return outline.ccw(), projection
 
 
 def rim_vertices(points: np.ndarray, projection: SilhouetteProjection, radius: float = 3.0) -> np.ndarray:

@@ -36,8 +36,7 @@ import numpy as np
 from corrlib.errors import ContourError, InputError
 from corrlib.geometry.cyclic_paths import branch_and_bound_union
 from corrlib.geometry.geodesics import edge_paths
-from corrlib.geometry.sections import (SilhouetteProjection, principal_frame, project_for_silhouette,
-                                       render_silhouette, rim_vertices)
+from corrlib.geometry.sections import SilhouetteProjection, principal_frame, rendered_view, rim_vertices
 from corrlib.methods.base import ContourPath, MatchResult, SearchCertificate, param
 from corrlib.methods.contour2d import prepared_outline, torus_graph, torus_maps
 from corrlib.methods.contour3d import PreparedQuery, node_costs
@@ -120,12 +119,12 @@ def render_view(mesh: TriMesh, direction: np.ndarray, params: ContourViewsParams
     helper = np.eye(3)[int(np.argmin(np.abs(direction)))]
     up = np.cross(direction, helper)
     try:
-        outline = render_silhouette(mesh, direction, params.resolution, up=up)
+        outline, projection = rendered_view(mesh, direction, params.resolution, up=up)
         prepared = prepared_outline(Contour2D(outline.points, name=f"{mesh.name} view", validate=False),
                                     params.n_view, params.k, params.n_scales, finer="raise resolution or n_view")
     except ContourError:
         return None
-    return MeshView(direction, prepared, project_for_silhouette(mesh, direction, params.resolution, up=up))
+    return MeshView(direction, prepared, projection)
 
 
 def diagonal_length(points_a: np.ndarray, points_b: np.ndarray) -> float:

@@ -396,15 +396,29 @@ def _nonisometric_main(argv: list[str]) -> None:
     print(write_nonisometric_battery(args.out))
 
 
+def _dataset_main(argv: list[str]) -> None:
+    """``OUT`` (default ``humanoid``): :func:`write_dataset`; ``--people OUT``: :func:`write_retrieval_people`. The
+    other modes (``--kernel-battery``, ``--nonisometric``) have their own options."""
+    import argparse
+
+    parser = argparse.ArgumentParser(
+        prog="python tests/_humanoid.py",
+        description="the synthetic people as a corr bench-contour dataset (OUT), or the retrieval people "
+                    "(--people OUT); other modes: --kernel-battery OUT [NOISE [SUBDIVISIONS]] [--remesh N], "
+                    "--nonisometric OUT")
+    parser.add_argument("--people", action="store_true", help="write the bundled retrieval people instead")
+    parser.add_argument("out", type=Path, nargs="?", default=Path("humanoid"), help="output folder")
+    args = parser.parse_args(argv)
+    print(write_retrieval_people(args.out) if args.people else write_dataset(args.out))
+
+
 if __name__ == "__main__":
     # python tests/_humanoid.py OUT: the ground-truth dataset; --people OUT: the bundled retrieval people;
     # --kernel-battery OUT [NOISE [SUBDIVISIONS]] [--remesh N]: kernel matching's people pairs (write_kernel_battery);
     # --nonisometric OUT: people and a gorilla (write_nonisometric_battery)
-    if len(sys.argv) > 2 and sys.argv[1] == "--people":
-        print(write_retrieval_people(sys.argv[2]))
-    elif len(sys.argv) > 1 and sys.argv[1] == "--kernel-battery":
+    if len(sys.argv) > 1 and sys.argv[1] == "--kernel-battery":
         _kernel_battery_main(sys.argv[2:])
     elif len(sys.argv) > 1 and sys.argv[1] == "--nonisometric":
         _nonisometric_main(sys.argv[2:])
     else:
-        print(write_dataset(sys.argv[1] if len(sys.argv) > 1 else "humanoid"))
+        _dataset_main(sys.argv[1:])

@@ -2,7 +2,7 @@
 
 The first-order product graph (:mod:`corrlib.geometry.cyclic_paths`) cannot
 tell a curve of the query's shape from one that runs back and forth over a
-few vertices, so its optimum collapses (measured: README, ``corr
+few vertices, so its optimum collapses (measured: docs/methods.md, ``corr
 bench-contour``). Following the conjugate product graph of Roetzer, Lähner
 and Bernard (*Conjugate Product Graphs for Globally Optimal 2D-3D Shape
 Matching*, CVPR 2023), whose nodes are the edges of the product graph, a

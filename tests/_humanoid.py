@@ -407,8 +407,9 @@ def _dataset_main(argv: list[str]) -> None:
                     "(--people OUT); other modes: --kernel-battery OUT [NOISE [SUBDIVISIONS]] [--remesh N], "
                     "--nonisometric OUT")
     parser.add_argument("--people", action="store_true", help="write the bundled retrieval people instead")
-    parser.add_argument("out", type=Path, nargs="?", default=Path("humanoid"), help="output folder")
+    parser.add_argument("out", type=Path, nargs="?", default=Path("humanoid"), help="output folder (new or empty)")
     args = parser.parse_args(argv)
+    _new_output_folders(parser, [args.out])
     print(write_retrieval_people(args.out) if args.people else write_dataset(args.out))
 
 

@@ -13,7 +13,7 @@ from corrlib.geometry.cyclic_paths import (GraphTopology, ProductGraph, Relaxati
                                            minimum_ratio_union)
 from corrlib.geometry.elastic_paths import ElasticProductGraph
 from corrlib.geometry.geodesics import GeodesicSolver
-from corrlib.geometry.sections import plane_section, project_for_silhouette, render_silhouette, rim_vertices
+from corrlib.geometry.sections import plane_section, rendered_view, rim_vertices
 from corrlib.io import load_mesh
 from corrlib.methods import solve
 from corrlib.methods.contour3d import feature_distances, mean_feature_distance, node_costs
@@ -452,7 +452,7 @@ def silhouette_with_ground_truth(mesh, resolution=400):
     centred = mesh.vertices - mesh.vertices.mean(axis=0)
     _, _, vt = np.linalg.svd(centred, full_matrices=False)
     view, up = vt[2], vt[1]
-    return render_silhouette(mesh, view, resolution, up=up), project_for_silhouette(mesh, view, resolution, up=up)
+    return rendered_view(mesh, view, resolution, up=up)
 
 
 @pytest.fixture(scope="module")

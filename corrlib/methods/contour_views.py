@@ -141,10 +141,7 @@ def diagonal_length(points_a: np.ndarray, points_b: np.ndarray) -> float:
     points_a : (m, 2) float
     points_b : (n, 2) float
     """
-    def perimeter(points):
-        return float(np.linalg.norm(np.roll(points, -1, axis=0) - points, axis=1).sum())
-
-    return float(np.hypot(perimeter(points_a), perimeter(points_b)))
+    return float(np.hypot(Contour2D(points_a, validate=False).length, Contour2D(points_b, validate=False).length))
 
 
 def mirror_image(contour: Contour2D) -> Contour2D:

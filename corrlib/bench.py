@@ -600,7 +600,7 @@ def _checked_retrieval_run(queries, out, jobs: int | None, scheduler: str | None
 
 
 def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | None = None,
-                        scheduler: str | None = None, callback=None) -> dict:
+                        scheduler: str | None = None, callback=None, ranking: str = "fused") -> dict:
     """Rank a collection against every query; average precision per query and class, and their mean.
 
     Parameters
@@ -617,11 +617,13 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
         Writes ``retrieval.csv`` (query, class, AP, rank of the first relevant
         mesh, class margin (:func:`~corrlib.retrieval.class_margin`), top hits),
         ``retrieval_ranking.csv`` (every query's whole ranking: rank, mesh, its
-        class, matching energy, seconds, why a mesh failed),
+        class, ranking score, matching energy, view dissimilarity, seconds, why a mesh failed),
         ``retrieval_summary.json`` and ``retrieval_summary.md``.
     params : Contour3DParams, optional
     jobs, scheduler
         Local processes or a Dask scheduler (see :func:`corrlib.parallel.job_executor`).
+    ranking : {"fused", "energy"}
+        :func:`~corrlib.retrieval.retrieve`'s ranking.
 
     Returns
     -------
@@ -638,15 +640,17 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
     query_paths = files_under(queries, CONTOUR_SUFFIXES, "query silhouettes or contour files")
     meshes = mesh_files(collection)
     out = _checked_retrieval_run(queries, out, jobs, scheduler)
-    rows, ranking, failed_meshes = [], [], set()
+    rows, ranked, failed_meshes = [], [], set()
     for number, q in enumerate(query_paths, 1):
         name = collection_name(q, queries)
         row = {"query": name, "class": class_of(q, queries), "ap": float("nan"), "first_relevant": "",
                "margin": float("nan"), "top": "", "error": ""}
         try:
-            hits = run(retrieve(load_contour(q), meshes, params, jobs=jobs, scheduler=scheduler, root=collection))
-            ranking += [{"query": name, "rank": rank, "mesh": h.name, "class": h.label, "energy": h.energy,
-                         "seconds": h.seconds, "error": h.error} for rank, h in enumerate(hits, 1)]
+            hits = run(retrieve(load_contour(q), meshes, params, jobs=jobs, scheduler=scheduler, root=collection,
+                                ranking=ranking))
+            ranked += [{"query": name, "rank": rank, "mesh": h.name, "class": h.label, "score": h.score,
+                        "energy": h.energy, "view_distance": h.view_distance, "seconds": h.seconds, "error": h.error}
+                       for rank, h in enumerate(hits, 1)]
             labels = [h.label for h in hits]
             broken = [h for h in hits if h.error]
             if len(broken) == len(hits):
@@ -657,7 +661,7 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
                 raise InputError(f"no mesh of class {row['class']!r} in the collection")
             row["ap"] = average_precision(labels, row["class"])
             row["first_relevant"] = labels.index(row["class"]) + 1
-            row["margin"] = class_margin(labels, [h.energy for h in hits], row["class"])
+            row["margin"] = class_margin(labels, [h.score for h in hits], row["class"])
             row["top"] = " ".join(h.name for h in hits[:5])
         except Exception as exc:  # a failing query is recorded, the others go on
             row["error"] = f"{type(exc).__name__}: {exc}"
@@ -668,10 +672,10 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
         columns = ("query", "class", "ap", "first_relevant", "margin", "top", "error")
         fh.write(",".join(columns) + "\n")
         fh.writelines(",".join(csv_cell(r[c]) for c in columns) + "\n" for r in rows)
-    columns = ("query", "rank", "mesh", "class", "energy", "seconds", "error")
+    columns = ("query", "rank", "mesh", "class", "score", "energy", "view_distance", "seconds", "error")
     with atomic_write(out / "retrieval_ranking.csv") as fh:
         fh.write(",".join(columns) + "\n")
-        fh.writelines(",".join(csv_cell(r[c]) for c in columns) + "\n" for r in ranking)
+        fh.writelines(",".join(csv_cell(r[c]) for c in columns) + "\n" for r in ranked)
     ok = [r for r in rows if not r["error"]]
     per_class = {}
     for r in ok:
@@ -695,7 +699,8 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
             fh.write(f"95 % bootstrap interval over the queries: {low:.3f}–{high:.3f} (how much the MAP depends on "
                      f"which queries the set holds)\n")
         if margins:
-            fh.write(f"class margin (best other class's energy against the query class's, relative; retrieval.csv "
+            fh.write(f"class margin (best other class's {'energy' if ranking == 'energy' else 'score'} against the "
+                     f"query class's, relative; retrieval.csv "
                      f"per query): median {summary['median_margin']:+.3f}, the query's class first on "
                      f"{summary['right_class_first']} of {len(margins)} queries\n")
         if failed_meshes:

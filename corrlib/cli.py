@@ -547,7 +547,7 @@ def cmd_bench_retrieval(args) -> int:
             print(f"  [{done}/{total}] {row['query']} ({row['class']}): {what}", file=sys.stderr)
 
     summary = retrieval_benchmark(args.queries, args.collection, args.output, params=params, jobs=args.jobs,
-                                  scheduler=args.scheduler, callback=progress)
+                                  scheduler=args.scheduler, callback=progress, ranking=args.ranking)
     print((Path(args.output) / "retrieval_summary.md").read_text(encoding="utf-8"))
     _say_failures(failures, Path(args.output) / "retrieval.csv")
     return 0 if summary["failed"] == 0 and not summary["failed_meshes"] else 1
@@ -790,13 +790,14 @@ def cmd_retrieve(args) -> int:
             check_picture_names(Path(args.output), files, args.top, args.folder)
     contour = _query_contour(args.query)
     params = _contour3d_params(args, retrieval=True)
-    hits = run(retrieve(contour, files, params, jobs=args.jobs, scheduler=args.scheduler, root=args.folder),
-               callback=_progress_printer(args.quiet))
+    hits = run(retrieve(contour, files, params, jobs=args.jobs, scheduler=args.scheduler, root=args.folder,
+                        ranking=args.ranking), callback=_progress_printer(args.quiet))
     written = write_ranking(hits, Path(args.output), args.top if args.pictures else 0) if args.output else []
-    print(f"{'rank':>4}  {'energy':>12}  {'seconds':>7}  mesh")
+    print(f"{'rank':>4}  {'score':>8}  {'energy':>12}  {'views':>7}  {'seconds':>7}  mesh")
     for rank, hit in enumerate(hits[: args.top], 1):
         extra = f"  ({hit.error})" if hit.error else ""
-        print(f"{rank:>4}  {hit.energy:>12.6g}  {hit.seconds:>7.2f}  {hit.name}{extra}")
+        print(f"{rank:>4}  {hit.score:>8.4g}  {hit.energy:>12.6g}  {hit.view_distance:>7.4f}  {hit.seconds:>7.2f}  "
+              f"{hit.name}{extra}")
     query_class = class_of(args.query)
     labels = [h.label for h in hits]
     if query_class in labels:
@@ -856,6 +857,13 @@ def _add_scale_out(p: argparse.ArgumentParser) -> None:
     """``--jobs`` / ``--scheduler`` of the commands that run independent jobs (see corrlib.parallel.job_executor)."""
     p.add_argument("--jobs", type=_jobs_option, help="local worker processes (default: all cores)")
     p.add_argument("--scheduler", help="Dask scheduler address (tcp://host:8786) instead of local processes")
+
+
+def _add_ranking(p: argparse.ArgumentParser) -> None:
+    """``--ranking`` of the retrieval commands (corrlib.retrieval.retrieve)."""
+    p.add_argument("--ranking", choices=["fused", "energy"], default="fused",
+                   help="fused (default): the matching energy times the drawing's dissimilarity to the mesh's "
+                        "rendered views; energy: the matching energy alone (the thesis' ranking)")
 
 
 def _command(sub, name: str, help: str, description: str | None = None, **defaults) -> argparse.ArgumentParser:
@@ -956,7 +964,8 @@ def _add_match_parsers(sub) -> None:
 
 def _add_retrieve_parser(sub) -> None:
     p = _command(sub, "retrieve", "rank the meshes of a folder against a query contour",
-                 "Rank the meshes of a folder by matching energy to a query contour.", func=cmd_retrieve)
+                 "Rank the meshes of a folder for a query contour: by its matching energy and its likeness to "
+                 "each mesh's rendered views (--ranking).", func=cmd_retrieve)
     p.add_argument("query")
     p.add_argument("folder", help="the collection: meshes in it and its subfolders; a subfolder per class "
                                   "(cat/0.off) or class names in the file names (cat0.off)")
@@ -967,6 +976,7 @@ def _add_retrieve_parser(sub) -> None:
     p.add_argument("--k", type=int)
     p.add_argument("--n-contour", dest="n_contour", type=int, help=RETRIEVAL_N_CONTOUR_HELP)
     p.add_argument("--param", action="append", metavar="NAME=VALUE")
+    _add_ranking(p)
     p.add_argument("--pictures", action="store_true",
                    help="also write, beside the ranking (-o), the query and its matched curve on each of the --top "
                         "meshes (STEM.RANK-MESH.png)")
@@ -1003,6 +1013,7 @@ def _add_bench_parsers(sub) -> None:
                    help="approximation factor (default 0: rank by the exact optima)")
     p.add_argument("--n-contour", dest="n_contour", type=int, help=RETRIEVAL_N_CONTOUR_HELP)
     p.add_argument("--param", action="append", metavar="KEY=VALUE", help="another contour3d parameter (repeatable)")
+    _add_ranking(p)
     _add_output(p, "retrieval_output", "output folder")
 
     p = _command(sub, "bench-contour", "2D-to-3D benchmark with plane-section queries",

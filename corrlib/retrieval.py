@@ -1,11 +1,24 @@
-"""Sketch-based shape retrieval: rank a collection of meshes by 2D-to-3D matching energy.
+"""Sketch-based shape retrieval: rank a collection of meshes for a drawn outline.
 
 The query contour is prepared once (resampling, filling, features); every
 mesh is matched independently (:func:`corrlib.methods.contour3d.match_prepared`)
-in a process pool, and the meshes are ranked by increasing energy (energies
-are comparable across meshes because both shapes are scale-normalised, see
-:mod:`corrlib.methods.contour3d`). Mesh spectra are cached on disk by file
-content, so a collection is decomposed once.
+in a process pool. Mesh spectra are cached on disk by file content, so a
+collection is decomposed once.
+
+Two measures, and how they are combined (:func:`retrieve`'s ``ranking``):
+
+* the 2D-to-3D matching **energy** of ``contour3d`` (thesis ch. 7; comparable
+  across meshes because both shapes are scale-normalised, see
+  :mod:`corrlib.methods.contour3d`): intrinsic, so it holds across poses, but
+  it asks the drawing to have the proportions of a curve of the surface;
+* the **view dissimilarity** (:mod:`corrlib.outline_views`): the drawing
+  against the mesh's rendered outlines, 2D to 2D, by the inner-distance shape
+  context; it takes a drawing as a view of the mesh, and forgives the
+  proportions the energy does not.
+
+``ranking="fused"`` (the default) ranks by the product of the two measures
+(:func:`fused_scores`), ``"energy"`` by the energy alone (the thesis'
+ranking).
 
 A collection is a folder of meshes, searched with its subfolders. Class labels
 come from the layout: a mesh in a subfolder belongs to the class named by the
@@ -30,12 +43,16 @@ from corrlib.errors import CorrError, InputError, ParameterError
 from corrlib.io import MESH_SUFFIXES, load_mesh, lost_working_folder
 from corrlib.parallel import check_jobs, job_executor
 from corrlib.methods.contour3d import Contour3DParams, PreparedQuery, match_prepared, prepare_query
+from corrlib.outline_views import QueryOutline, query_outline, view_dissimilarity
 from corrlib.progress import CancelToken, Progress, run
 
 #: contour points of a retrieval query (the method's default is 200): a ranking matches the query to every mesh
 #: of a collection, and half the points halve the time of each match. The command line, the studio and
 #: ``corr bench-retrieval`` share it, so that they rank alike.
 RETRIEVAL_N_CONTOUR = 100
+
+#: how :func:`retrieve` ranks: by the product of the two measures, or by the matching energy alone
+RANKINGS = ("fused", "energy")
 
 
 def retrieval_params(**overrides) -> Contour3DParams:
@@ -106,6 +123,12 @@ class RetrievalHit:
         the budget; a coarser mesh may have been matched with fewer points).
     root : Path or None
         The collection's folder, which names the mesh and its class (:attr:`name`, :attr:`label`).
+    view_distance : float
+        :func:`~corrlib.outline_views.view_dissimilarity` (NaN where not measured: ``ranking="energy"``, or no
+        view of the mesh has an outline).
+    score : float
+        What the ranking sorts by (lower first): :func:`fused_scores` (energy times view dissimilarity) or the
+        energy (``inf`` for a failed hit).
     """
 
     path: Path
@@ -116,6 +139,13 @@ class RetrievalHit:
     seconds: float = 0.0
     contour_points: np.ndarray | None = None
     root: Path | None = None
+    view_distance: float = float("nan")
+    score: float = float("nan")
+
+    def measured(self) -> str:
+        """One line for a progress report: the mesh and what was measured on it."""
+        views = f", view dissimilarity {self.view_distance:.3f}" if np.isfinite(self.view_distance) else ""
+        return f"{self.name}: energy {self.energy:.6g}{views}"
 
     @property
     def name(self) -> str:
@@ -128,8 +158,10 @@ class RetrievalHit:
         return class_of(self.path, self.root)
 
 
-def _match_one(query: PreparedQuery, path: str, params: Contour3DParams) -> RetrievalHit:
-    """Worker: match the prepared query to one mesh file (errors become a failed hit)."""
+def _match_one(query: PreparedQuery, path: str, params: Contour3DParams,
+               outline: QueryOutline | None) -> RetrievalHit:
+    """Worker: match the prepared query to one mesh file and, given the query's ``outline``, compare it with the
+    mesh's views (errors become a failed hit)."""
     import time
 
     start = time.perf_counter()
@@ -137,10 +169,45 @@ def _match_one(query: PreparedQuery, path: str, params: Contour3DParams) -> Retr
         mesh = load_mesh(path)
         # a mesh that cannot be remeshed is not matched as given: its energy would not compare with the others'
         result = run(match_prepared(query, mesh, params, CancelToken(), as_given_if_unremeshable=False))
+        view_distance = float("nan") if outline is None else view_dissimilarity(outline, mesh)
     except CorrError as exc:
-        return RetrievalHit(Path(path), np.inf, str(exc), seconds=time.perf_counter() - start)
+        return RetrievalHit(Path(path), np.inf, str(exc), seconds=time.perf_counter() - start, score=np.inf)
     return RetrievalHit(Path(path), float(result.energy), "", result.path.vertices, result.path.contour_index,
-                        time.perf_counter() - start, result.path.contour_points)
+                        time.perf_counter() - start, result.path.contour_points, view_distance=view_distance)
+
+
+def fused_scores(energies, view_distances) -> np.ndarray:
+    """The ranking score of every mesh: ``E · D``, the matching energy times the view dissimilarity.
+
+    The two measures have different units and spreads, and both vary with the query (a long, wiggly drawing
+    costs more on every mesh), so neither can be added to the other as it is. Their product (the sum of their
+    logarithms) is unchanged by any factor on either measure, so a relative difference counts the same in
+    both: a mesh 10 % cheaper by energy and 10 % less alike by its views ties. There is no weight to choose,
+    and a mesh's score depends on the query and that mesh alone, so that adding a mesh to a collection never
+    reorders the others (standard scores over the collection, measured as well, do not have this property and
+    tie every disagreement between two meshes; ``docs/decisions.md``). Both measures are non-negative costs,
+    zero for a perfect fit. A mesh without a view dissimilarity (NaN: no view of it has an outline) takes
+    the median of the others', as a typical mesh on that measure.
+
+    Parameters
+    ----------
+    energies : (n,) float
+        ``inf`` for a mesh that could not be matched.
+    view_distances : (n,) float
+
+    Returns
+    -------
+    (n,) float
+        Lower ranks first; ``inf`` where the energy is not finite.
+    """
+    energies = np.asarray(energies, dtype=np.float64)
+    views = np.asarray(view_distances, dtype=np.float64).copy()
+    measured = np.isfinite(energies) & np.isfinite(views)
+    views[~np.isfinite(views)] = np.median(views[measured]) if measured.any() else 1.0
+    matched = np.isfinite(energies)
+    scores = np.full(energies.shape, np.inf)
+    scores[matched] = energies[matched] * views[matched]
+    return scores
 
 
 def mesh_files(folder) -> list[Path]:
@@ -149,7 +216,7 @@ def mesh_files(folder) -> list[Path]:
 
 
 def retrieve(query_contour, meshes: Iterable, params: Contour3DParams | None = None, *, jobs: int | None = None,
-             token: CancelToken | None = None, scheduler: str | None = None, root=None):
+             token: CancelToken | None = None, scheduler: str | None = None, root=None, ranking: str = "fused"):
     """Rank meshes by matching energy to a query contour (solver generator).
 
     Parameters
@@ -168,6 +235,9 @@ def retrieve(query_contour, meshes: Iterable, params: Contour3DParams | None = N
         (:func:`corrlib.parallel.job_executor`) instead of local processes.
     root : path, optional
         The collection's folder (:func:`mesh_files`): the hits' names and classes are read within it.
+    ranking : {"fused", "energy"}
+        ``"fused"``: by :func:`fused_scores` of the energy and the view dissimilarity; ``"energy"``: by the
+        matching energy alone (no views are rendered).
 
     Yields
     ------
@@ -177,8 +247,10 @@ def retrieve(query_contour, meshes: Iterable, params: Contour3DParams | None = N
     Returns
     -------
     list of RetrievalHit
-        Sorted by increasing energy (failed meshes last, with their error).
+        Sorted by increasing :attr:`RetrievalHit.score` (failed meshes last, with their error).
     """
+    if ranking not in RANKINGS:
+        raise ParameterError(f"ranking must be one of {', '.join(RANKINGS)}, got {ranking!r}")
     params = params or retrieval_params()
     if not isinstance(params, Contour3DParams):
         raise ParameterError(f"params must be contour3d's parameters (Contour3DParams, e.g. retrieval_params()), "
@@ -194,16 +266,17 @@ def retrieve(query_contour, meshes: Iterable, params: Contour3DParams | None = N
     jobs = jobs or os.cpu_count() or 1
     yield Progress("query features", 0.0)
     query = prepare_query(query_contour, params)
+    outline = query_outline(query_contour) if ranking == "fused" else None
     hits: list[RetrievalHit] = []
     if jobs == 1 and scheduler is None:
         for path in paths:
             token.raise_if_cancelled()
-            hits.append(_match_one(query, path, params))
+            hits.append(_match_one(query, path, params, outline))
             hits[-1].root = root
-            yield Progress("matching", len(hits) / len(paths), f"{hits[-1].name}: {hits[-1].energy:.6g}")
+            yield Progress("matching", len(hits) / len(paths), hits[-1].measured())
     else:
         with job_executor(min(jobs, len(paths)), scheduler) as pool:
-            pending = {pool.submit(_match_one, query, path, params) for path in paths}
+            pending = {pool.submit(_match_one, query, path, params, outline) for path in paths}
             try:
                 while pending:
                     done, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
@@ -211,11 +284,15 @@ def retrieve(query_contour, meshes: Iterable, params: Contour3DParams | None = N
                     for fut in done:
                         hits.append(fut.result())
                         hits[-1].root = root
-                        yield Progress("matching", len(hits) / len(paths), f"{hits[-1].name}: {hits[-1].energy:.6g}")
+                        yield Progress("matching", len(hits) / len(paths), hits[-1].measured())
             finally:
                 for fut in pending:
                     fut.cancel()
-    hits.sort(key=lambda h: (h.energy, h.name))
+    energies = [h.energy for h in hits]
+    scores = fused_scores(energies, [h.view_distance for h in hits]) if ranking == "fused" else energies
+    for hit, score in zip(hits, scores):
+        hit.score = float(score)
+    hits.sort(key=lambda h: (h.score, h.name))
     return hits
 
 
@@ -268,27 +345,27 @@ def map_interval(aps, level: float = 0.95, resamples: int = BOOTSTRAP_RESAMPLES,
     return float(low), float(high)
 
 
-def class_margin(labels: list[str], energies, relevant: str) -> float:
-    """Relative margin of a ranking: ``(E_o − E_r) / ((E_o + E_r) / 2)``.
+def class_margin(labels: list[str], scores, relevant: str) -> float:
+    """Relative margin of a ranking: ``(S_o − S_r) / ((S_o + S_r) / 2)``.
 
-    ``E_r`` is the lowest energy of a mesh of the query's class, ``E_o`` the lowest of any other class
-    (meshes that could not be matched, at infinite energy, do not count). Positive: the query's class
-    comes first, by that fraction of the energy; negative: another class does. It tells a decisive
-    ranking from a near-tie that the AP alone does not show.
+    ``S_r`` is the lowest score (:attr:`RetrievalHit.score`: energy, or energy times view dissimilarity) of a
+    mesh of the query's class, ``S_o`` the lowest of any other class (meshes that could not be matched, at
+    infinite score, do not count). Positive: the query's class comes first, by that fraction of the score;
+    negative: another class does. It tells a decisive ranking from a near-tie that the AP alone does not show.
 
     Returns
     -------
     float
         In ``(−2, 2)``; NaN where either class has no matched mesh.
     """
-    energies = np.asarray(energies, dtype=float)
+    scores = np.asarray(scores, dtype=float)
     mine = np.array([label == relevant for label in labels], dtype=bool)
-    finite = np.isfinite(energies)
+    finite = np.isfinite(scores)
     if not (np.any(mine & finite) and np.any(~mine & finite)):
         return float("nan")
-    e_r, e_o = float(energies[mine & finite].min()), float(energies[~mine & finite].min())
-    mean = (e_o + e_r) / 2.0
-    return (e_o - e_r) / mean if mean > 0 else 0.0
+    s_r, s_o = float(scores[mine & finite].min()), float(scores[~mine & finite].min())
+    mean = (s_o + s_r) / 2.0
+    return (s_o - s_r) / mean if mean > 0 else 0.0
 
 
 def mean_average_precision(rankings: list[tuple[str, list[str]]]) -> float:
@@ -318,9 +395,10 @@ def write_ranking(hits, out: Path, pictures: int) -> list[Path]:
         written = [stage / out.name]
         with open(written[0], "w", encoding="utf-8", errors="surrogateescape", newline="") as fh:
             table = csv.writer(fh, delimiter="\t", lineterminator="\n")  # quotes a name with a tab or line break
-            table.writerow(["rank", "energy", "mesh", "error", "name"])
+            table.writerow(["rank", "energy", "mesh", "error", "name", "score", "view_distance"])
             for rank, hit in enumerate(hits, 1):
-                table.writerow([rank, f"{hit.energy:.9g}", hit.path, hit.error, hit.name])
+                table.writerow([rank, f"{hit.energy:.9g}", hit.path, hit.error, hit.name, f"{hit.score:.9g}",
+                                f"{hit.view_distance:.9g}"])
         for rank, hit in enumerate(hits[:pictures], 1):
             if hit.error:
                 continue

@@ -290,14 +290,14 @@ def test_retrieval_benchmark_local_and_on_dask(tmp_path):
     assert min(aps.values()) <= low <= summary["map"] <= high <= max(aps.values())
     assert summary["right_class_first"] == sum(float(r["margin"]) > 0 for r in rows if r["query"] in aps)
     assert set(summary["per_class"]) == {"cat", "wolf"}
-    # the whole ranking of every answered query, in increasing energy, gives the same AP
+    # the whole ranking of every answered query, in increasing score, gives the same AP
     ranking = [r.split(",") for r in (out / "retrieval_ranking.csv").read_text().splitlines()[1:]]
     assert {r[0] for r in ranking} == set(aps)
     for query, ap in aps.items():
         mine = [r for r in ranking if r[0] == query]
         assert [int(r[1]) for r in mine] == [1, 2] and {r[2] for r in mine} == {"cat1.off", "wolf1.off"}
-        energies = [float(r[4]) for r in mine]
-        assert energies == sorted(energies) and all(np.isfinite(energies))
+        scores = [float(r[4]) for r in mine]
+        assert scores == sorted(scores) and all(np.isfinite(scores))
         assert average_precision([r[3] for r in mine], class_of(query)) == pytest.approx(ap)
     from dataclasses import replace
 

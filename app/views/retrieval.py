@@ -174,13 +174,14 @@ class RetrievalView(QWidget):
         self.gallery.clear()
         for rank, (hit, mesh) in enumerate(zip(hits, meshes), 1):
             png = b"" if mesh is None else self.thumbnails.png(mesh, hit.path_vertices, self.up, matched_outline(hit))
-            text = f"{rank}. {hit.name}\n" + (f"E = {hit.energy:.4g}" if not hit.error else "failed")
+            text = f"{rank}. {hit.name}\n" + (f"score {hit.score:.4g}" if not hit.error else "failed")
             item = QListWidgetItem(text)
             if png:
                 pix = QPixmap()
                 pix.loadFromData(png)
                 item.setIcon(QIcon(pix))
-            item.setToolTip(hit.error or f"{hit.path}\nenergy {hit.energy:.6g}, {hit.seconds:.2f} s")
+            item.setToolTip(hit.error or f"{hit.path}\nscore {hit.score:.6g} (matching energy {hit.energy:.6g}, "
+                                         f"view dissimilarity {hit.view_distance:.3f}), {hit.seconds:.2f} s")
             item.setData(Qt.UserRole, str(hit.path))
             self.gallery.addItem(item)
 

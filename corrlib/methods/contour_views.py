@@ -112,14 +112,18 @@ def view_directions(axes: np.ndarray, which: str = "box") -> np.ndarray:
     return directions / np.linalg.norm(directions, axis=1, keepdims=True)
 
 
+def outline_along(mesh: TriMesh, direction: np.ndarray, resolution: int) -> tuple[Contour2D, SilhouetteProjection]:
+    """:func:`~corrlib.geometry.sections.rendered_view` with any axis across the view as its up direction
+    (whatever reads the outline does not depend on its rotation in the image)."""
+    helper = np.eye(3)[int(np.argmin(np.abs(direction)))]
+    return rendered_view(mesh, direction, resolution, up=np.cross(direction, helper))
+
+
 def render_view(mesh: TriMesh, direction: np.ndarray, params: ContourViewsParams) -> MeshView | None:
     """The view of ``mesh`` along ``direction``, or None where its outline cannot be matched (a projection
     too thin to fill with enough vertices for ``k`` eigenpairs)."""
-    # up: any axis across the view (the features do not depend on the outline's rotation in the image)
-    helper = np.eye(3)[int(np.argmin(np.abs(direction)))]
-    up = np.cross(direction, helper)
     try:
-        outline, projection = rendered_view(mesh, direction, params.resolution, up=up)
+        outline, projection = outline_along(mesh, direction, params.resolution)
         prepared = prepared_outline(Contour2D(outline.points, name=f"{mesh.name} view", validate=False),
                                     params.n_view, params.k, params.n_scales, finer="raise resolution or n_view")
     except ContourError:

@@ -771,6 +771,8 @@ def cmd_match_contour(args) -> int:
 
 
 def cmd_retrieve(args) -> int:
+    import numpy as np
+
     from corrlib.progress import run
     from corrlib.retrieval import (check_picture_names, class_of, mean_average_precision, mesh_files, retrieve,
                                    write_ranking)
@@ -796,8 +798,8 @@ def cmd_retrieve(args) -> int:
     print(f"{'rank':>4}  {'score':>8}  {'energy':>12}  {'views':>7}  {'seconds':>7}  mesh")
     for rank, hit in enumerate(hits[: args.top], 1):
         extra = f"  ({hit.error})" if hit.error else ""
-        print(f"{rank:>4}  {hit.score:>8.4g}  {hit.energy:>12.6g}  {hit.view_distance:>7.4f}  {hit.seconds:>7.2f}  "
-              f"{hit.name}{extra}")
+        views = f"{hit.view_distance:.4f}" if np.isfinite(hit.view_distance) else "-"  # not measured
+        print(f"{rank:>4}  {hit.score:>8.4g}  {hit.energy:>12.6g}  {views:>7}  {hit.seconds:>7.2f}  {hit.name}{extra}")
     query_class = class_of(args.query)
     labels = [h.label for h in hits]
     if query_class in labels:

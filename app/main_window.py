@@ -926,7 +926,7 @@ class MainWindow(QMainWindow):
             return
         view.clear_results()
         self.job_panel.started(f"ranking {view.folder}")
-        self.runner.start(RETRIEVAL_KEY, retrieval_job(view.query, view.folder))
+        self.runner.start(RETRIEVAL_KEY, retrieval_job(view.query, view.folder, ranking=view.ranking.currentText()))
 
     def open_retrieved_pair(self, query, mesh_path: str) -> None:
         """The query as source, ``mesh_path`` as target (loaded in the worker), then the 2D-to-3D match."""

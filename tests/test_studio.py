@@ -160,6 +160,14 @@ def test_retrieval_gallery_order(qtbot, window, tmp_path):
     assert window.job_panel.stage.text() == "ranked 3 meshes; 1 could not be matched (see the log)"
     assert "not ranked: empty.off: " in window.job_panel.log.toPlainText()
     assert window.retrieval_view.gallery.item(0).icon().isNull() is False
+    assert window.retrieval_view.ranking.currentText() == "fused"
+    assert all(np.isfinite(hit.view_distance) for hit in window.retrieval_view.hits if not hit.error)
+    # the thesis' ranking, chosen in the tab: by energy, no views rendered
+    window.retrieval_view.ranking.setCurrentText("energy")
+    with qtbot.waitSignal(window.result_ready, timeout=180_000):
+        window.run_retrieval()
+    hits = [hit for hit in window.retrieval_view.hits if not hit.error]
+    assert [h.energy for h in hits] == sorted(h.energy for h in hits) and all(np.isnan(h.view_distance) for h in hits)
     # a ranking that fails (an empty folder) leaves no gallery of the last folder standing for it
     empty = tmp_path / "empty"
     empty.mkdir()

@@ -9,6 +9,7 @@ import numpy as np
 from PySide6.QtCore import QSize, Qt, Signal
 from PySide6.QtGui import QIcon, QPixmap
 from PySide6.QtWidgets import (
+    QComboBox,
     QFileDialog,
     QHBoxLayout,
     QLabel,
@@ -89,16 +90,16 @@ def matched_outline(hit) -> np.ndarray | None:
     return np.asarray(hit.contour_points)[np.asarray(hit.path_contour_index)]
 
 
-def retrieval_job(query, folder: str, params=None):
-    """Job factory for the worker: the ranking and every ranked mesh (numpy only; thumbnails are drawn by
-    the view)."""
+def retrieval_job(query, folder: str, params=None, ranking: str = "fused"):
+    """Job factory for the worker: the ranking (:func:`corrlib.retrieval.retrieve`'s ``ranking``) and every
+    ranked mesh (numpy only; thumbnails are drawn by the view)."""
     from corrlib.errors import CorrError
     from corrlib.io import load_mesh
     from corrlib.retrieval import mesh_files, retrieve
 
     def factory(token):
         files = mesh_files(folder)
-        hits = yield from retrieve(query, files, params, token=token, root=folder)
+        hits = yield from retrieve(query, files, params, token=token, root=folder, ranking=ranking)
         meshes = []
         for hit in hits:
             token.raise_if_cancelled()
@@ -125,6 +126,12 @@ class RetrievalView(QWidget):
         self.folder_label = QLabel("folder: none")
         choose = QPushButton("Choose folder…")
         choose.clicked.connect(self.choose_folder)
+        from corrlib.retrieval import RANKINGS
+
+        self.ranking = QComboBox()
+        self.ranking.addItems(list(RANKINGS))
+        self.ranking.setToolTip("fused: the matching energy times the sketch's dissimilarity to each mesh's rendered "
+                                "outlines; energy: the matching energy alone (the thesis' ranking)")
         self.run_button = QPushButton("Rank")
         self.run_button.clicked.connect(self.run_requested)
         self.gallery = QListWidget()
@@ -139,6 +146,8 @@ class RetrievalView(QWidget):
         top.addWidget(self.query_label, 1)
         top.addWidget(self.folder_label, 1)
         top.addWidget(choose)
+        top.addWidget(QLabel("ranking"))
+        top.addWidget(self.ranking)
         top.addWidget(self.run_button)
         layout = QVBoxLayout(self)
         layout.addLayout(top)

@@ -861,9 +861,13 @@ def _add_scale_out(p: argparse.ArgumentParser) -> None:
     p.add_argument("--scheduler", help="Dask scheduler address (tcp://host:8786) instead of local processes")
 
 
+#: corrlib.retrieval.RANKINGS, named here so that building the parser does not import the retrieval module
+RANKING_CHOICES = ("fused", "energy")
+
+
 def _add_ranking(p: argparse.ArgumentParser) -> None:
     """``--ranking`` of the retrieval commands (corrlib.retrieval.retrieve)."""
-    p.add_argument("--ranking", choices=["fused", "energy"], default="fused",
+    p.add_argument("--ranking", choices=RANKING_CHOICES, default=RANKING_CHOICES[0],
                    help="fused (default): the matching energy times the drawing's dissimilarity to the mesh's "
                         "rendered views; energy: the matching energy alone (the thesis' ranking)")
 

@@ -204,3 +204,9 @@ def test_retrieve_ranks_by_the_chosen_measure():
     assert [h.score for h in fused] == sorted(h.score for h in fused)
     with pytest.raises(ParameterError, match="ranking must be one of fused, energy"):
         run(retrieve(query, meshes, params, jobs=1, ranking="views"))
+    # the command line offers the same rankings (named there without importing the retrieval module)
+    from corrlib.cli import RANKING_CHOICES, build_parser
+    from corrlib.retrieval import RANKINGS
+
+    assert RANKING_CHOICES == RANKINGS
+    assert build_parser().parse_args(["retrieve", "q", "f"]).ranking == RANKINGS[0]

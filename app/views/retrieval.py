@@ -189,8 +189,9 @@ class RetrievalView(QWidget):
                 pix = QPixmap()
                 pix.loadFromData(png)
                 item.setIcon(QIcon(pix))
+            views = f"{hit.view_distance:.3f}" if np.isfinite(hit.view_distance) else "not measured"
             item.setToolTip(hit.error or f"{hit.path}\nscore {hit.score:.6g} (matching energy {hit.energy:.6g}, "
-                                         f"view dissimilarity {hit.view_distance:.3f}), {hit.seconds:.2f} s")
+                                         f"view dissimilarity {views}), {hit.seconds:.2f} s")
             item.setData(Qt.UserRole, str(hit.path))
             self.gallery.addItem(item)
 

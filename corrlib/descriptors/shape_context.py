@@ -21,8 +21,6 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
-from corrlib.errors import ContourError
-
 #: histogram bins (the paper's choice for the MPEG-7 shapes: 5 inner-distance bins, 12 inner-angle bins)
 N_DISTANCE_BINS, N_ANGLE_BINS = 5, 12
 #: log2 of the innermost and outermost inner-distance bin edges, relative to the mean inner distance
@@ -144,8 +142,6 @@ def inner_distances(points: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     lengths = np.linalg.norm(p[:, None, :] - p[None, :, :], axis=2)
     graph = np.where(visibility(p), lengths, 0.0)
     distances, predecessors = shortest_path(graph, method="D", directed=False, return_predecessors=True)
-    if not np.all(np.isfinite(distances)):
-        raise ContourError("the outline's visibility graph is not connected: the polygon is not simple")
     # the path from j to i ends with (predecessor of i, i): read backwards, that is the first step from i to j
     first_step = predecessors.T.copy()
     np.fill_diagonal(first_step, np.arange(len(p)))

@@ -17,11 +17,10 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from corrlib.descriptors.shape_context import (N_ANGLE_BINS, N_DISTANCE_BINS, ccw_points, inner_shape_context,
-                                               mirrored_outline, outline_dissimilarity)
+from corrlib.descriptors.shape_context import N_ANGLE_BINS, N_DISTANCE_BINS, inner_shape_context, outline_dissimilarity
 from corrlib.errors import ContourError
 from corrlib.geometry.sections import principal_frame
-from corrlib.methods.contour_views import outline_along, view_directions
+from corrlib.methods.contour_views import mirror_image, outline_along, view_directions
 from corrlib.shapes import Contour2D
 
 #: points of the drawing and of every view's outline (the paper's 100 for the MPEG-7 shapes)
@@ -46,13 +45,15 @@ class QueryOutline:
 
 def resampled_points(contour: Contour2D) -> np.ndarray:
     """(n, 2) float: the outline resampled by arc length to :data:`OUTLINE_POINTS` points, counter-clockwise."""
-    return ccw_points(contour.resample(OUTLINE_POINTS).points)
+    return contour.resample(OUTLINE_POINTS).ccw().points
 
 
 def query_outline(contour: Contour2D) -> QueryOutline:
-    """The drawing's shape contexts, as drawn and mirrored."""
-    points = resampled_points(contour)
-    return QueryOutline((inner_shape_context(points), inner_shape_context(mirrored_outline(points))))
+    """The drawing's shape contexts, as drawn and mirrored (:func:`~corrlib.methods.contour_views.mirror_image`;
+    a reflection turns the outline clockwise, which :meth:`~corrlib.shapes.Contour2D.ccw` turns back)."""
+    resampled = contour.resample(OUTLINE_POINTS)
+    return QueryOutline(tuple(inner_shape_context(reading.ccw().points)
+                              for reading in (resampled, mirror_image(resampled))))
 
 
 def view_contexts(mesh, use_cache: bool = True) -> np.ndarray:

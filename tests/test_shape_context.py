@@ -11,9 +11,10 @@ from matplotlib.path import Path as PolygonPath
 
 from _data import TOSCA
 
-from corrlib.descriptors.shape_context import (ccw_points, chi2_costs, cyclic_alignment_cost, inner_distances,
-                                               inner_shape_context, mirrored_outline, outline_dissimilarity,
-                                               visibility)
+from corrlib.descriptors.shape_context import (chi2_costs, cyclic_alignment_cost, inner_distances,
+                                               inner_shape_context, outline_dissimilarity, visibility)
+from corrlib.methods.contour_views import mirror_image
+from corrlib.shapes import Contour2D
 from corrlib.retrieval import fused_scores
 
 #: a U: two arms of height 3 joined by a base of height 1, the notch between the arms 1 wide
@@ -69,7 +70,7 @@ def test_inner_distances_against_brute_force_visibility():
 
 def test_shape_context_histograms_and_invariances():
     rng = np.random.default_rng(5)
-    points = ccw_points(star_polygon(rng, 40))
+    points = star_polygon(rng, 40)  # counter-clockwise: increasing angles
     context = inner_shape_context(points)
     assert context.shape == (40, 60) and np.allclose(context.sum(axis=1), 1.0) and np.all(context >= 0)
     turned = points @ np.array([[0.0, 1.0], [-1.0, 0.0]])  # a quarter turn, exact in floating point
@@ -77,9 +78,8 @@ def test_shape_context_histograms_and_invariances():
     assert np.allclose(inner_shape_context(np.roll(points, 9, axis=0)), np.roll(context, 9, axis=0))
     assert outline_dissimilarity(context, np.roll(context, 13, axis=0)) == pytest.approx(0.0, abs=1e-12)
     # a reflection is another shape (the angles turn the other way) unless the mirror is compared
-    mirror = mirrored_outline(points)
+    mirror = mirror_image(Contour2D(points, validate=False)).ccw().points
     assert outline_dissimilarity(context, inner_shape_context(mirror)) > 0.05
-    assert np.allclose(mirrored_outline(mirror), points)
 
 
 def brute_alignment(costs, gap):
@@ -119,24 +119,20 @@ def test_chi2_costs_by_hand():
 def limb_shape(bend_degrees: float) -> np.ndarray:
     """A 4 × 1 body with a 3 × 0.4 limb at its right end, bent up by ``bend_degrees`` about its root (a
     polygon of 14 corners, resampled to 100 points by arc length)."""
-    from corrlib.shapes import Contour2D
-
     angle = np.radians(bend_degrees)
     axis, normal = np.array([np.cos(angle), np.sin(angle)]), np.array([-np.sin(angle), np.cos(angle)])
     root = np.array([4.0, 0.5])
     limb = [root - 0.2 * normal, root - 0.2 * normal + 3 * axis, root + 0.2 * normal + 3 * axis, root + 0.2 * normal]
     corners = [(0, 0), (4, 0), (4, 0.3), *limb, (4, 0.7), (4, 1), (0, 1)]
-    return ccw_points(Contour2D(np.array(corners, dtype=float), validate=False).resample(100).points)
+    return Contour2D(np.array(corners, dtype=float), validate=False).resample(100).ccw().points
 
 
 def test_a_bent_limb_is_nearer_than_other_shapes():
     """The descriptor's purpose: an articulation (a limb bent by 60° about its root) keeps the outline's inner
     distances, so the bent shape is nearer the straight one than shapes of other parts: the body with a limb at
     each end, and with one limb standing up from its middle."""
-    from corrlib.shapes import Contour2D
-
     def context(corners):
-        return inner_shape_context(ccw_points(Contour2D(np.array(corners, float), validate=False).resample(100).points))
+        return inner_shape_context(Contour2D(np.array(corners, float), validate=False).resample(100).ccw().points)
 
     straight, bent = inner_shape_context(limb_shape(0.0)), inner_shape_context(limb_shape(60.0))
     two_limbs = context([(0, 0), (4, 0), (4, 0.3), (7, 0.3), (7, 0.7), (4, 0.7), (4, 1), (0, 1), (0, 0.7),

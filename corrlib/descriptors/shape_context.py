@@ -13,7 +13,8 @@ left out (:func:`cyclic_alignment_cost`; the χ² distance of two histograms lie
 
 The descriptor is invariant to translation, rotation and scale (inner distances are relative to their
 mean; angles are relative to the tangent), not to a reflection: compare the mirror image as well where a
-drawing may be seen from either side (:func:`mirrored_outline`).
+drawing may be seen from either side. The functions take point arrays; an outline's points are
+counter-clockwise (:meth:`corrlib.shapes.Contour2D.ccw`).
 """
 
 from __future__ import annotations
@@ -29,29 +30,6 @@ LOG2_DISTANCE_RANGE = (-3.0, 1.0)
 #: cost of leaving one point of either outline unaligned (χ² costs lie in [0, 1]; a point whose histogram
 #: agrees with no point of the other outline costs about this much)
 GAP_COST = 0.25
-
-
-def ccw_points(points: np.ndarray) -> np.ndarray:
-    """The polygon's points in counter-clockwise order (reversed where its signed area is negative).
-
-    Parameters
-    ----------
-    points : (n, 2) float
-    """
-    points = np.asarray(points, dtype=np.float64)
-    x, y = points[:, 0], points[:, 1]
-    signed_area = 0.5 * np.sum(x * np.roll(y, -1) - np.roll(x, -1) * y)
-    return points if signed_area > 0 else points[::-1].copy()
-
-
-def mirrored_outline(points: np.ndarray) -> np.ndarray:
-    """The outline reflected across its y axis, counter-clockwise again (a reflection reverses the order).
-
-    Parameters
-    ----------
-    points : (n, 2) float
-    """
-    return ccw_points(np.asarray(points, dtype=np.float64) * np.array([-1.0, 1.0]))
 
 
 @njit(cache=True)
@@ -155,7 +133,7 @@ def inner_shape_context(points: np.ndarray, n_distance: int = N_DISTANCE_BINS,
     Parameters
     ----------
     points : (n, 2) float
-        A simple polygon's vertices, counter-clockwise (:func:`ccw_points`), roughly evenly spaced.
+        A simple polygon's vertices, counter-clockwise, roughly evenly spaced.
     n_distance, n_angle : int
         Log inner-distance bins and inner-angle bins.
 

@@ -491,6 +491,27 @@ def test_bad_arguments_of_the_python_api_are_named(tmp_path, wolf_pair):
         run(retrieve(circle, str(tmp_path), jobs=1))
 
 
+def test_an_outline_too_thin_to_fill_is_named(tmp_path, capsys):
+    """An ellipse of aspect 10^7 is a valid outline, but its triangulation holds triangles of no area that cut
+    the Laplacian apart; the eigensolver's "disconnected" was said instead of what is wrong with the drawing.
+    Both 2D-to-3D methods and the command line name the outline, and nothing is written."""
+    from corrlib.errors import ContourError
+    from corrlib.io import load_mesh
+    from corrlib.methods import solve
+    from corrlib.shapes import Contour2D
+
+    t = np.linspace(0, 2 * np.pi, 200, endpoint=False)
+    sliver = Contour2D(np.column_stack([np.cos(t), 1e-7 * np.sin(t)]), name="sliver")
+    wolf = load_mesh(WOLF0)
+    for method in ("contour3d", "contour-views"):
+        with pytest.raises(ContourError, match="sliver: the outline is too thin somewhere to be filled"):
+            solve(method, sliver, wolf)
+    np.savetxt(tmp_path / "sliver.txt", sliver.points)
+    assert main(["retrieve", str(tmp_path / "sliver.txt"), str(TOSCA), "-o", str(tmp_path / "r"), "-q"]) == 2
+    assert "error: sliver.txt: the outline is too thin somewhere" in capsys.readouterr().err
+    assert not (tmp_path / "r").exists()
+
+
 def test_counts_and_levels_of_contour_helpers_are_named(tmp_path):
     """A resampling to "x", None, NaN or 10^12 points (a MemoryError), an image threshold of "x" (a NumPy
     UFuncTypeError) and a bootstrap of 0 resamples (an IndexError) are refused by name."""

@@ -538,7 +538,12 @@ def prepare_query(contour: Contour2D, params: Contour3DParams,
     if filled.n_vertices <= params.k:
         raise ContourError(f"{contour.name}: the filled silhouette has {filled.n_vertices} vertices, too few for "
                            f"k={params.k} eigenpairs; {finer}, or lower k")
-    evals, evecs = eigenpairs(stiffness, mass, params.k, name=contour.name)
+    try:
+        evals, evecs = eigenpairs(stiffness, mass, params.k, name=contour.name)
+    except InputError as exc:  # a triangulation of a polygon is connected: only slivers of no area cut it apart
+        raise ContourError(f"{contour.name}: the outline is too thin somewhere to be filled: triangles of no area "
+                           f"cut its triangulation apart ({str(exc).removeprefix(contour.name + ': ')}); draw it "
+                           "wider there") from exc
     feats = spectral_features(evals, evecs, mass.diagonal(), params)
     m = canonical.n_points
     doubled = None

@@ -60,3 +60,11 @@ def warm_up() -> None:
     flow(basis, cube_points, 0.01 * rng.random(6), n_steps=2)
     flow_with_jacobian(basis, cube_points, 0.01 * rng.random(6), n_steps=2, dtype=np.float32)
     mixture_moments(cube_points, cube_points[::-1], 0.01, 0.1, rng.random((4, 4)), 0.5)
+    # retrieval's view dissimilarity: a rendered outline and the inner-distance shape context of a drawing
+    from corrlib.descriptors.shape_context import inner_shape_context, outline_dissimilarity
+    from corrlib.geometry.sections import rendered_view
+
+    rendered_view(sphere, np.array([0.0, 0.0, 1.0]), 32)
+    notched = np.array([[0, 0], [4, 0], [4, 3], [2.5, 3], [2, 1], [1.5, 3], [0, 3]], float)  # a U: some chords blocked
+    context = inner_shape_context(notched)
+    outline_dissimilarity(context, context)

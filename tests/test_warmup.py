@@ -45,6 +45,10 @@ SCRIPT = textwrap.dedent("""
     solve("fmap-zoomout", a, b)
     outline = load_contour(sys.argv[2])
     solve("contour3d", outline, a, n_contour=60)
+    solve("contour-views", outline, a)
+    from corrlib.progress import run
+    from corrlib.retrieval import retrieve
+    run(retrieve(outline, [people + "/human0.off"], jobs=1))  # ranked with the view dissimilarity (the default)
     after = signatures()
     print(json.dumps({name: sorted(set(sigs) - set(before.get(name, []))) for name, sigs in after.items()}))
 """)

@@ -89,7 +89,7 @@ def visibility(points: np.ndarray) -> np.ndarray:
     (n, n) bool
         Symmetric, False on the diagonal.
     """
-    p = np.ascontiguousarray(points, dtype=np.float64)
+    p = np.array(points, dtype=np.float64, order="C")  # a writable copy: one compiled signature for every caller
     scale = float(np.ptp(p, axis=0).max()) ** 2  # cross products are areas: their products scale as length⁴
     return _visibility(p, (1e-12 * scale) ** 2)
 

@@ -138,3 +138,45 @@ def test_a_cancelled_run_on_a_dask_cluster_cancels_its_futures():
                 raise Cancelled("cancelled")
         assert time.perf_counter() - started < 20  # 90 s if the three sleeps were waited for
         assert all(job.cancelled() for job in jobs)
+
+
+def test_the_threaded_kernels_give_the_same_result_on_one_thread_and_on_two(wolf_pair):
+    """Every ``prange`` kernel of the library, on one numba thread and on two, bit for bit.
+
+    Each kernel's iterations write their own rows, so the split of the rows between threads must not change
+    a digit: a result never depends on the machine's cores or on the thread a job runs on.
+    """
+    import numba
+
+    from corrlib.deformation.basis import DivFreeBasis
+    from corrlib.deformation.flow import flow_with_jacobian, velocity
+    from corrlib.deformation.mixture import mixture_moments
+    from corrlib.descriptors.shot import shot
+    from corrlib.methods.contour3d import feature_distances
+
+    wolf = wolf_pair[0]
+    rng = np.random.default_rng(5)
+    basis = DivFreeBasis(300)
+    coeffs = basis.random_coefficients(0.3, seed=4)
+    points = rng.uniform(0.1, 0.9, (257, 3))  # not a multiple of the thread count
+    targets = rng.uniform(0.1, 0.9, (301, 3))
+    feats = rng.uniform(0, 1, (257, 301))
+
+    def outputs():
+        return [velocity(basis, points, coeffs), *flow_with_jacobian(basis, points, coeffs, n_steps=4),
+                *flow_with_jacobian(basis, points, coeffs, n_steps=4, dtype=np.float32),
+                *mixture_moments(points, targets, 0.01, 0.1), *mixture_moments(points, targets, 0.01, 0.0, feats),
+                shot(wolf.vertices, wolf.faces), feature_distances(feats[:40, :60], feats[40:90, :60])]
+
+    if numba.config.NUMBA_NUM_THREADS < 2:
+        pytest.fail("numba is limited to one thread (NUMBA_NUM_THREADS); this test compares one thread with two")
+    threads = numba.get_num_threads()
+    try:
+        numba.set_num_threads(1)
+        alone = outputs()
+        numba.set_num_threads(2)
+        together = outputs()
+    finally:
+        numba.set_num_threads(threads)
+    for one, two in zip(alone, together):
+        assert one.dtype == two.dtype and np.array_equal(one, two)

@@ -679,6 +679,13 @@ def branch_and_bound(graph: ProductGraph, *, eps: float = 0.0, token: CancelToke
     return (yield from branch_and_bound_union([graph], eps=eps, token=token, max_iterations=max_iterations))
 
 
+#: backward searches of the branch-and-bound's first round below a relaxation, and the most graphs searched
+#: without relaxations: fixed, not the thread count, so that the search visits the graphs in the same order on
+#: every machine and on every thread (with ``eps > 0`` the path returned depends on that order; the optimum
+#: does not); the threads only run a round's searches side by side
+SEARCH_ROUND = 2
+
+
 def parallel_searches() -> int:
     """How many backward searches :func:`compute_heuristics` runs at once.
 
@@ -910,11 +917,12 @@ class _UnionSearch:
     def expand(self, parent: Relaxation) -> None:
         """The items below a relaxation whose bound came first in the queue (once).
 
-        Until a first closed path has been found below a relaxation, the most
-        promising items (one per thread) are searched backwards completely and
-        the best of them is followed down to a graph whose cheapest open path
-        is closed (:meth:`dive`); every other backward search skips all that
-        the best closed path beats.
+        Until a first closed path has been found below a relaxation, the
+        :data:`SEARCH_ROUND` most promising items are searched backwards
+        completely (side by side where there are threads) and the best of them
+        is followed down to a graph whose cheapest open path is closed
+        (:meth:`dive`); every other backward search skips all that the best
+        closed path beats.
         """
         if id(parent) in self.expanded:
             return
@@ -923,7 +931,7 @@ class _UnionSearch:
         if self.dived:
             self.search_below(parent, ordered)
             return
-        first, others = ordered[:parallel_searches()], ordered[parallel_searches():]
+        first, others = ordered[:SEARCH_ROUND], ordered[SEARCH_ROUND:]
         compute_heuristics([self.graph_of(item) for item in first], self.cancel)
         for item in first:
             self.settle(item)

@@ -181,7 +181,7 @@ from corrlib.descriptors.spectral import hks, wks
 from corrlib.descriptors.symmetry import K_FINAL, even_spectrum, mesh_reflection, odd_eigenfunction
 from corrlib.errors import ContourError, InputError, MeshError, ParameterError
 from corrlib.geometry.cyclic_paths import (GraphTopology, ProductGraph, Relaxation, branch_and_bound_union,
-                                           minimum_ratio_union, parallel_searches)
+                                           SEARCH_ROUND, minimum_ratio_union)
 from corrlib.geometry.remeshing import Remeshed, remeshed
 from corrlib.geometry.elastic_paths import ElasticProductGraph
 from corrlib.geometry.intrinsic_axis import IntrinsicAxis, axis_mismatch, spectral_axes
@@ -975,8 +975,8 @@ def _match_mesh(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams, to
                                             "(shape model, direction of the axis, half of the surface)")
     with watch("search"):
         search = minimum_ratio_union if params.energy.endswith("ratio") else branch_and_bound_union
-        # graphs that fit in one parallel round of backward searches gain nothing from relaxations
-        relaxed = params.energy in FIRST_ORDER_ENERGIES and len(graphs) > parallel_searches()
+        # graphs that fit in one round of backward searches gain nothing from relaxations
+        relaxed = params.energy in FIRST_ORDER_ENERGIES and len(graphs) > SEARCH_ROUND
         relaxations = relaxation_tree(graphs, readings) if relaxed else []
         bb = yield from search(graphs, eps=params.eps, token=token, max_iterations=params.max_iterations,
                                relaxations=relaxations)

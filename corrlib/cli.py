@@ -15,14 +15,16 @@ import sys
 import time
 from pathlib import Path
 
+from corrlib.cli_common import (add_output, add_scale_out, check_output_stem, command, load_input,
+                                match_output_names, parse_overrides, print_collapse_note, print_result_notes,
+                                progress_printer, say_failures, stage_match_outputs, with_options,
+                                write_match_outputs)
+from corrlib.cli_contour import add_contour_bench_parsers, add_match_contour_parser, add_retrieve_parser
 from corrlib.errors import CorrError, FileFormatError
 
 EXIT_BAD_INPUT = 2
 #: the exit status of a command whose standard output was closed by its reader (128 + SIGPIPE, as the shell's)
 EXIT_BROKEN_PIPE = 141
-#: help of the retrieval commands' --n-contour (the value is corrlib.retrieval.RETRIEVAL_N_CONTOUR; not imported
-#: here, so that `corr --help` does not load the method)
-RETRIEVAL_N_CONTOUR_HELP = "contour resampling (default 100, the retrieval default of the studio and the CLI)"
 
 
 # ----------------------------------------------------------------------------- info
@@ -177,49 +179,6 @@ def cmd_eval(args) -> int:
 # ----------------------------------------------------------------------------- match / demo
 
 
-def _load_shape(path: str):
-    """A mesh, contour or silhouette from ``path``, its warnings said (:func:`_warned`)."""
-    from corrlib.io import load_shape
-
-    return _warned(load_shape(path))
-
-
-def _warned(shape):
-    """``shape``, after what its validation warns of went to stderr (the studio shows the same in its shapes
-    panel)."""
-    for finding in getattr(shape, "report", lambda: [])():
-        if finding.level == "warning":
-            print(f"warning: {shape.name}: {finding.message}", file=sys.stderr)
-    return shape
-
-
-def _parse_overrides(pairs: list[str]) -> dict:
-    """``--param NAME=VALUE`` items as a dict; a name given twice is refused (the last would win unseen)."""
-    out = {}
-    for item in pairs or []:
-        if "=" not in item:
-            raise CorrError(f"parameter {item!r} must be NAME=VALUE")
-        key, value = item.split("=", 1)
-        if key.strip() in out:
-            raise CorrError(f"--param {key.strip()} is given twice ({out[key.strip()]!r} and {value.strip()!r}); "
-                            "give it once")
-        out[key.strip()] = value.strip()
-    return out
-
-
-def _with_options(overrides: dict, args, options: dict[str, str]) -> dict:
-    """``overrides`` with the options that set a parameter (``{parameter: option}``, e.g. ``{"k": "--k"}``) where
-    given; a parameter set by both its option and ``--param`` is refused (one would win unseen)."""
-    for key, option in options.items():
-        value = getattr(args, key, None)
-        if value is None:
-            continue
-        if key in overrides:
-            raise CorrError(f"{option} {value} and --param {key}={overrides[key]} both set {key}; give one")
-        overrides[key] = value
-    return overrides
-
-
 def _preload_plotting():
     """Start importing the plotting library in a thread; returns it (join before writing the pictures).
 
@@ -236,97 +195,6 @@ def _preload_plotting():
     thread = threading.Thread(target=load, name="preload-plotting", daemon=True)
     thread.start()
     return thread
-
-
-def _write_match_outputs(result, source, target, out: Path, *, quiet: bool = False, pictures: bool = False) -> None:
-    """The result files of a match beside the stem ``out``, all or none of them (the pictures if asked)."""
-    from corrlib.io import staged_output
-
-    with staged_output(out.parent, replaces=_match_output_names(out.name).__contains__) as stage:
-        written = [out.parent / p.name for p in _stage_match_outputs(result, source, target, stage / out.name,
-                                                                     pictures)]
-    if not quiet:
-        for path in written:
-            print(f"wrote {path}")
-
-
-def _stage_match_outputs(result, source, target, out: Path, pictures: bool) -> list[Path]:
-    from corrlib.io import save_map
-
-    npz, js = result.save(out)
-    written = [npz, js]
-    if result.map_xy is not None:
-        written.append(save_map(_beside(out, ".map_xy.txt"), result.map_xy))
-    if result.map_yx is not None:
-        written.append(save_map(_beside(out, ".map_yx.txt"), result.map_yx))
-    if pictures:
-        written += _stage_match_pictures(result, source, target, out)
-    return [Path(p) for p in written]
-
-
-def _stage_match_pictures(result, source, target, out: Path) -> list:
-    written = []
-    if result.energy_trace is not None:
-        from corrlib.plotting import save_energy_trace
-
-        written.append(save_energy_trace(_beside(out, ".energy.png"), result.energy_trace,
-                                         result.extras.get("tau_trace")))
-    from corrlib.shapes import Contour2D, TriMesh
-
-    if result.map_yx is not None and isinstance(source, TriMesh) and isinstance(target, TriMesh):
-        from corrlib.plotting import save_colour_transfer
-
-        written.append(save_colour_transfer(_beside(out, ".png"), source, target, result.map_yx,
-                                            title=f"{result.method}"))
-    elif isinstance(source, Contour2D) and isinstance(target, Contour2D):
-        from corrlib.plotting import save_torus_pictures
-
-        written.append(save_torus_pictures(_beside(out, ".png"), result))
-    elif isinstance(source, Contour2D) and result.path is not None:  # 2D-to-3D: the query and its curve on the mesh
-        from corrlib.plotting import save_contour_match
-
-        path = result.path
-        written.append(save_contour_match(_beside(out, ".png"), path.contour_points, target, path.vertices,
-                                          path.contour_index, title=f"energy {result.energy:.4g}"))
-    return written
-
-
-#: what a match may write beside its ``-o`` stem (the result, the maps, the pictures)
-MATCH_OUTPUT_SUFFIXES = (".npz", ".json", ".map_xy.txt", ".map_yx.txt", ".png", ".energy.png")
-
-
-def _check_output_stem(args, inputs) -> Path:
-    """The ``-o`` stem, checked before any work (its folder created and writable, no folder where one of its
-    files goes, and none of its files one of the ``inputs``, ``(role, path)`` pairs)."""
-    from corrlib.io import check_output_file, check_outputs_apart
-
-    stem = check_output_file(Path(args.output), "-o")
-    for suffix in MATCH_OUTPUT_SUFFIXES:
-        check_output_file(_beside(stem, suffix), "-o")
-    check_outputs_apart([("-o", _beside(stem, suffix)) for suffix in MATCH_OUTPUT_SUFFIXES], inputs)
-    return stem
-
-
-def _match_output_names(stem: str) -> set[str]:
-    """Every file name a match may write beside the stem named ``stem``: a new match replaces them as a set, so that
-    an earlier match's picture or reverse map is not left beside the new result."""
-    return {stem + suffix for suffix in MATCH_OUTPUT_SUFFIXES}
-
-
-def _beside(stem: Path, suffix: str) -> Path:
-    """The file ``stem`` + ``suffix`` (one of :data:`MATCH_OUTPUT_SUFFIXES`: the ones checked before any work)."""
-    if suffix not in MATCH_OUTPUT_SUFFIXES:
-        raise ValueError(f"{suffix!r} is not among the suffixes checked before the work")
-    return stem.with_name(stem.name + suffix)
-
-
-def _progress_printer(quiet: bool):
-    def callback(report):
-        if not quiet:
-            frac = f"{100 * report.fraction:5.1f}%" if report.fraction >= 0 else "   ..."
-            print(f"  [{frac}] {report.stage} {report.message}", file=sys.stderr)
-
-    return callback
 
 
 def _init_choices(spec) -> tuple:
@@ -390,32 +258,32 @@ def cmd_match(args) -> int:
     from corrlib.methods import get_method, solve
     from corrlib.methods.registry import check_inputs
 
-    _check_output_stem(args, [("source", args.source), ("target", args.target), ("--init", args.init)])
-    source, target = _load_shape(args.source), _load_shape(args.target)
-    overrides = _parse_overrides(args.param)
+    check_output_stem(args, [("source", args.source), ("target", args.target), ("--init", args.init)])
+    source, target = load_input(args.source), load_input(args.target)
+    overrides = parse_overrides(args.param)
     spec = get_method(args.method) if args.method else _best_method(source, target)
     check_inputs(spec, source, target)
     initial = None
     if args.init:
         if args.init in _init_choices(spec):
-            overrides = _with_options(overrides, args, {"init": "--init"})
+            overrides = with_options(overrides, args, {"init": "--init"})
         elif spec.refines:
             initial = _initial_match(args.init, source, target, spec)
         else:
             raise CorrError(f"method {spec.name!r} does not take an initial map (--init)")
     if args.times:
-        overrides = _with_options(overrides, args, {"times": "--times"})
+        overrides = with_options(overrides, args, {"times": "--times"})
     plotting = _preload_plotting() if args.pictures else None
-    result = solve(spec, source, target, callback=_progress_printer(args.quiet), initial=initial, **overrides)
+    result = solve(spec, source, target, callback=progress_printer(args.quiet), initial=initial, **overrides)
     if plotting is not None:
         plotting.join()
     # the files first: a closed or full standard output must not cost the result
-    _write_match_outputs(result, source, target, Path(args.output), quiet=args.quiet, pictures=args.pictures)
+    write_match_outputs(result, source, target, Path(args.output), quiet=args.quiet, pictures=args.pictures)
     print(f"method {result.method}: energy {result.energy}, {result.timings.get('total', 0):.2f} s")
     if result.search is not None:
         print(f"path search: {result.search.describe()}")
-    _print_result_notes(result)
-    _print_collapse_note(result, source, target)
+    print_result_notes(result)
+    print_collapse_note(result, source, target)
     if result.energy_trace is not None:
         trace = result.energy_trace
         print(f"energy trace ({trace.size} assignments): " + ", ".join(f"{e:.5g}" for e in trace))
@@ -426,8 +294,8 @@ def cmd_refine(args) -> int:
     from corrlib.methods import get_method, solve
     from corrlib.methods.registry import check_inputs
 
-    _check_output_stem(args, [("source", args.source), ("target", args.target), ("--init", args.init)])
-    source, target = _load_shape(args.source), _load_shape(args.target)
+    check_output_stem(args, [("source", args.source), ("target", args.target), ("--init", args.init)])
+    source, target = load_input(args.source), load_input(args.target)
     spec = get_method(args.method)
     if not spec.refines:
         raise CorrError(f"method {spec.name!r} does not refine a map (methods that do: "
@@ -435,14 +303,14 @@ def cmd_refine(args) -> int:
     check_inputs(spec, source, target)
     initial = _initial_match(args.init, source, target)
     plotting = _preload_plotting() if args.pictures else None
-    result = solve(spec, source, target, callback=_progress_printer(args.quiet), initial=initial,
-                   **_parse_overrides(args.param))
+    result = solve(spec, source, target, callback=progress_printer(args.quiet), initial=initial,
+                   **parse_overrides(args.param))
     if plotting is not None:
         plotting.join()
-    _write_match_outputs(result, source, target, Path(args.output), quiet=args.quiet, pictures=args.pictures)
+    write_match_outputs(result, source, target, Path(args.output), quiet=args.quiet, pictures=args.pictures)
     print(f"method {result.method}: {result.timings.get('total', 0):.2f} s")
-    _print_result_notes(result)
-    _print_collapse_note(result, source, target)
+    print_result_notes(result)
+    print_collapse_note(result, source, target)
     kept = result.extras.get("kept_matches")
     if kept is not None and not args.quiet:
         given_back = result.extras.get("isometric_matches")
@@ -451,30 +319,6 @@ def cmd_refine(args) -> int:
               f"by less than the refinement's kernel width, {isometric} farther but the more isometric partner); "
               "the others were corrected")
     return 0
-
-
-def _print_collapse_note(result, source, target) -> None:
-    """Warn (on stderr) when a mesh-to-mesh map has collapsed onto a negligible part of the target."""
-    from corrlib.evaluation import collapse_note
-
-    note = collapse_note(result.map_xy, source, target)
-    if note:
-        print(f"warning: {note}", file=sys.stderr)
-
-
-def _print_result_notes(result) -> None:
-    """Warn (on stderr) when a mesh-to-mesh map reverses orientation on most of the shape, or was turned; note
-    the other things a method tells about its result (copies, starts, a target matched unremeshed)."""
-    from corrlib.methods.contour3d import remeshing_note
-    from corrlib.methods.kernel_matching import copies_note, reversal_note, start_note, turn_note
-
-    note = reversal_note(result.extras)
-    if note:
-        print(f"warning: {note}", file=sys.stderr)
-    for said in (copies_note(result.extras), turn_note(result.extras), start_note(result.extras),
-                 remeshing_note(result.extras)):
-        if said:
-            print(f"note: {said}", file=sys.stderr)
 
 
 def _refining_methods():
@@ -519,74 +363,8 @@ def _run_bench(runner, args) -> int:
 
     summary = runner.run(jobs=args.jobs, scheduler=args.scheduler, callback=progress)
     print((runner.out / "summary.md").read_text(encoding="utf-8"))
-    _say_failures(failures, runner.out / "errors.csv")
+    say_failures(failures, runner.out / "errors.csv")
     return 0 if all(entry["failed"] == 0 for entry in summary.values()) else 1
-
-
-def _say_failures(failures: list[str], where: Path) -> None:
-    """After a benchmark: how many runs failed, the first one's reason, and where the others are (stderr)."""
-    if failures:
-        print(f"error: {len(failures)} run{'s' if len(failures) > 1 else ''} failed, e.g. {failures[0]} "
-              f"(every reason is in {where})", file=sys.stderr)
-
-
-def cmd_bench_retrieval(args) -> int:
-    from corrlib.bench import retrieval_benchmark
-    from corrlib.io import ensure_output_folder
-
-    params = _contour3d_params(args, retrieval=True)  # named errors before any work
-    ensure_output_folder(args.output, "-o")  # named as the option; the library checks the rest before any query
-
-    failures = []
-
-    def progress(done, total, row):
-        if row["error"]:
-            failures.append(f"{row['query']}: {row['error']}")
-        if not args.quiet:
-            what = f"AP {row['ap']:.3f}" if not row["error"] else f"FAILED: {row['error']}"
-            print(f"  [{done}/{total}] {row['query']} ({row['class']}): {what}", file=sys.stderr)
-
-    summary = retrieval_benchmark(args.queries, args.collection, args.output, params=params, jobs=args.jobs,
-                                  scheduler=args.scheduler, callback=progress, ranking=args.ranking)
-    print((Path(args.output) / "retrieval_summary.md").read_text(encoding="utf-8"))
-    _say_failures(failures, Path(args.output) / "retrieval.csv")
-    return 0 if summary["failed"] == 0 and not summary["failed_meshes"] else 1
-
-
-def cmd_bench_contour(args) -> int:
-    from corrlib.contour_bench import contour_benchmark
-
-    params = _with_options(_parse_overrides(args.param or []), args, {"n_contour": "--n-contour"})
-    planes = [p.strip() for p in args.planes.split(",") if p.strip() and p.strip() != "none"]
-
-    failures = []
-
-    def progress(done, total, row):
-        if row["status"] not in ("ok", "skipped"):
-            failures.append(f"{row['query']} -> {row['target']}: {row['error']}")
-        if args.quiet or row["status"] == "skipped":
-            return
-        if row["status"] != "ok":
-            what = f"FAILED: {row['error']}"
-        elif row["plane"] == "sketch":
-            what = (f"part agreement {row['part_agreement']:.2f} (mirror accepted {row['part_agreement_sym']:.2f}), "
-                    f"{row['seconds']:.1f} s")
-        elif row["plane"] == "drawn":
-            redrawn = f", redrawn {row['redraw_error']:.3f} (worst {row['redraw_worst']:.3f})" if row["redraws"] else ""
-            what = f"landmark error {row['landmark_error']:.3f}{redrawn}, {row['seconds']:.1f} s"
-        else:
-            what = f"mean error {row['mean_error']:.3f}, coverage {row['coverage']:.2f}, {row['seconds']:.1f} s"
-        print(f"  [{done}/{total}] {row['query']} -> {row['target']}: {what}", file=sys.stderr)
-
-    summary = contour_benchmark(args.datasets, args.output, planes=planes, params=params, jobs=args.jobs,
-                                scheduler=args.scheduler, pictures=not args.no_pictures, callback=progress,
-                                sketches=args.sketches or (), drawings=args.drawn or (), redraws=args.redraws,
-                                method=args.method)
-    print((Path(args.output) / "contour_summary.md").read_text(encoding="utf-8"))
-    _say_failures(failures, Path(args.output) / "contour_bench.csv")
-    failed = summary["all"]["failed"] + summary.get("sketches", {}).get("failed", 0) + \
-        summary.get("drawings", {}).get("all", {}).get("failed", 0)
-    return 0 if failed == 0 else 1
 
 
 #: the method ``corr morph`` runs unless told otherwise: the one with a deformation model of its own
@@ -624,7 +402,7 @@ def _morph_result(args, source, target):
 
     if args.map is None:
         spec = get_method(args.method or MORPH_METHOD)
-        return solve(spec, source, target, callback=_progress_printer(args.quiet), **_parse_overrides(args.param))
+        return solve(spec, source, target, callback=progress_printer(args.quiet), **parse_overrides(args.param))
     from corrlib.io import load_map
 
     map_xy = load_map(args.map, n_target=target.n_vertices, n_source=source.n_vertices, allow_unmatched=True)
@@ -642,14 +420,14 @@ def cmd_morph(args) -> int:
 
     out = ensure_output_folder(args.output, "-o")
     # the folder's set: the result, every frame; an earlier morph's frames and result files go
-    replaced_names = _match_output_names("result") | {"animation.glb", "volumes.csv"}
+    replaced_names = match_output_names("result") | {"animation.glb", "volumes.csv"}
 
     def replaced(name: str) -> bool:
         return name.startswith("frame_") or name in replaced_names
 
     inputs = [("source", args.source), ("target", args.target)] + ([("--map", args.map)] if args.map else [])
     check_outputs_apart([("-o", out / Path(path).name) for _, path in inputs if replaced(Path(path).name)], inputs)
-    source, target = _load_shape(args.source), _load_shape(args.target)
+    source, target = load_input(args.source), load_input(args.target)
     if not (isinstance(source, TriMesh) and isinstance(target, TriMesh)):
         raise CorrError("corr morph takes two meshes")
     result = _morph_result(args, source, target)
@@ -657,7 +435,7 @@ def cmd_morph(args) -> int:
     frames = frame_positions(result, source, target, times, interpolation=args.interpolation)
     with staged_output(out, replaces=replaced) as stage:  # the result and every frame, or nothing
         if args.map is None:  # a given map is the user's file already
-            _stage_match_outputs(result, source, target, stage / "result", pictures=True)
+            stage_match_outputs(result, source, target, stage / "result", pictures=True)
         written = export_sequence(stage, frames, source.faces, times, fmt=args.format, closed=source.is_closed)
     written["animation"] = written["animation"] and out / Path(written["animation"]).name
     print(f"{len(frames)} frames t = 0 .. {args.t_max:g} in {out}/, animation {written['animation']}: "
@@ -687,7 +465,7 @@ def cmd_demo(args) -> int:
     target = load_mesh(resource(DEMO_PAIR[1]))
     spec = methods_for(source, target)[0]
     print(f"demo: {source.name} -> {target.name} with {spec.label} ({spec.name})")
-    result = solve(spec, source, target, callback=_progress_printer(args.quiet))
+    result = solve(spec, source, target, callback=progress_printer(args.quiet))
     print(f"  finished in {result.timings.get('total', 0):.2f} s")
     # the demo pair shares its vertex order: the ground truth is the identity
     ident = np.arange(source.n_vertices)
@@ -695,123 +473,7 @@ def cmd_demo(args) -> int:
     for key, value in report.summary().items():
         print(f"  {key:>14}: {value:.4f}")
     out = Path(args.output) / "demo"
-    _write_match_outputs(result, source, target, out, quiet=args.quiet, pictures=True)
-    return 0
-
-
-def _query_contour(path: str, labels: str | None = None):
-    from corrlib.io import load_shape
-    from corrlib.shapes import Contour2D, TriMesh
-
-    contour = sketch = load_shape(path)
-    if isinstance(sketch, TriMesh):
-        # a planar triangulated sketch: its boundary loop is the contour
-        loops = sketch.boundary_loops
-        if not loops:
-            raise FileFormatError(f"{path}: the sketch mesh has no boundary to use as a contour")
-        loop = max(loops, key=len)
-        contour = Contour2D(sketch.vertices[loop, :2], name=Path(path).name)
-    if labels:
-        from corrlib.io import load_labels
-
-        values = load_labels(labels, what="--query-labels")
-        if isinstance(sketch, TriMesh) and values.shape[0] == sketch.n_vertices:
-            values = values[loop]  # per-vertex labels of the sketch mesh
-        if values.shape[0] != contour.n_points:
-            expected = f"{contour.n_points} (one per contour point)" + (
-                f" or {sketch.n_vertices} (one per sketch vertex)" if isinstance(sketch, TriMesh) else "")
-            raise FileFormatError(f"{labels}: the --query-labels file has {values.shape[0]} labels, expected "
-                                  f"{expected} for {contour.name}")
-        contour = Contour2D(contour.points, name=contour.name, labels=values)
-    return contour
-
-
-def _contour3d_params(args, *, retrieval: bool = False):
-    """``contour3d`` parameters from ``--param`` and the options ``--eps``, ``--k``, ``--n-contour``: the
-    method's defaults, or a retrieval's (:func:`corrlib.retrieval.retrieval_params`) if ``retrieval``."""
-    overrides = _with_options(_parse_overrides(args.param or []), args,
-                              {"eps": "--eps", "k": "--k", "n_contour": "--n-contour"})
-    if retrieval:
-        from corrlib.retrieval import retrieval_params
-
-        return retrieval_params(**overrides)
-    from corrlib.methods.base import make_params
-    from corrlib.methods.contour3d import Contour3DParams
-
-    return make_params(Contour3DParams, **overrides)
-
-
-def cmd_match_contour(args) -> int:
-    from corrlib.io import load_mesh
-    from corrlib.methods import solve
-
-    out = _check_output_stem(args, [("query", args.query), ("mesh", args.mesh), ("--query-labels", args.query_labels),
-                                    ("--mesh-labels", args.mesh_labels)])
-    contour = _query_contour(args.query, args.query_labels)
-    mesh = _warned(load_mesh(args.mesh))
-    if args.mesh_labels:
-        from corrlib.io import load_labels
-
-        mesh = mesh.with_labels(load_labels(args.mesh_labels, mesh.n_vertices, what="--mesh-labels"))
-    result = solve("contour3d", contour, mesh, _contour3d_params(args), callback=_progress_printer(args.quiet))
-    search = result.search
-    print(f"energy {result.energy:.6g} (lower bound {search.lower_bound:.6g}, "
-          f"{search.describe()}), {search.iterations} branch-and-bound "
-          f"iterations, {search.dijkstra_runs} layered Dijkstra runs of {search.seconds_per_dijkstra:.3f} s, "
-          f"{result.timings['total']:.2f} s in total")
-    _print_result_notes(result)  # e.g. a mesh matched as given because it could not be remeshed
-    from corrlib.io import staged_output
-
-    with staged_output(out.parent, replaces=_match_output_names(out.name).__contains__) as stage:
-        staged = [*result.save(stage / out.name), *_stage_match_pictures(result, contour, mesh, stage / out.name)]
-    if not args.quiet:
-        for written in staged:
-            print(f"wrote {out.parent / Path(written).name}")
-    return 0
-
-
-def cmd_retrieve(args) -> int:
-    import numpy as np
-
-    from corrlib.progress import run
-    from corrlib.retrieval import (check_picture_names, class_of, mean_average_precision, mesh_files, retrieve,
-                                   write_ranking)
-
-    if args.top < 1:
-        raise CorrError(f"--top must be at least 1, got {args.top}")
-    if args.pictures and not args.output:
-        raise CorrError("--pictures writes its pictures beside the ranking: give the ranking's file with -o")
-    files = mesh_files(args.folder)
-    if args.output:
-        from corrlib.io import check_output_file, check_outputs_apart
-
-        check_output_file(args.output, "-o")
-        check_outputs_apart([("-o", args.output)], [("the query", args.query),
-                                                     *[("a mesh of the folder", path) for path in files]])
-        if args.pictures:
-            check_picture_names(Path(args.output), files, args.top, args.folder)
-    contour = _query_contour(args.query)
-    params = _contour3d_params(args, retrieval=True)
-    hits = run(retrieve(contour, files, params, jobs=args.jobs, scheduler=args.scheduler, root=args.folder,
-                        ranking=args.ranking), callback=_progress_printer(args.quiet))
-    written = write_ranking(hits, Path(args.output), args.top if args.pictures else 0) if args.output else []
-    print(f"{'rank':>4}  {'score':>8}  {'energy':>12}  {'views':>7}  {'seconds':>7}  mesh")
-    for rank, hit in enumerate(hits[: args.top], 1):
-        extra = f"  ({hit.error})" if hit.error else ""
-        views = f"{hit.view_distance:.4f}" if np.isfinite(hit.view_distance) else "-"  # not measured
-        print(f"{rank:>4}  {hit.score:>8.4g}  {hit.energy:>12.6g}  {views:>7}  {hit.seconds:>7.2f}  {hit.name}{extra}")
-    query_class = class_of(args.query)
-    labels = [h.label for h in hits]
-    if query_class in labels:
-        print(f"average precision for class {query_class!r}: "
-              f"{mean_average_precision([(query_class, labels)]):.4f}")
-    for path in written:
-        print(f"wrote {path}")
-    failed = sum(1 for hit in hits if hit.error)
-    if failed:  # as corr bench: exit 1 when a mesh could not be ranked, with every reason above
-        print(f"error: {failed} of {len(hits)} meshes could not be matched"
-              f"{' (none ranked)' if failed == len(hits) else ''}; see the reasons above", file=sys.stderr)
-        return 1
+    write_match_outputs(result, source, target, out, quiet=args.quiet, pictures=True)
     return 0
 
 
@@ -842,57 +504,8 @@ def cmd_perf(args) -> int:
 # ----------------------------------------------------------------------------- parser
 
 
-def _jobs_option(text: str) -> int:
-    """``--jobs``: 0 (all cores) or a positive number of worker processes; argparse names the option otherwise."""
-    from corrlib.parallel import check_jobs
-
-    try:
-        value = int(text)
-        check_jobs(value)  # the library's rule
-    except (ValueError, CorrError):
-        raise argparse.ArgumentTypeError(f"expected 0 (all cores) or a positive number of worker processes, "
-                                         f"got {text}") from None
-    return value
-
-
-def _add_scale_out(p: argparse.ArgumentParser) -> None:
-    """``--jobs`` / ``--scheduler`` of the commands that run independent jobs (see corrlib.parallel.job_executor)."""
-    p.add_argument("--jobs", type=_jobs_option, help="local worker processes (default: all cores)")
-    p.add_argument("--scheduler", help="Dask scheduler address (tcp://host:8786) instead of local processes")
-
-
-#: corrlib.retrieval.RANKINGS, named here so that building the parser does not import the retrieval module
-RANKING_CHOICES = ("fused", "energy")
-
-
-def _add_ranking(p: argparse.ArgumentParser) -> None:
-    """``--ranking`` of the retrieval commands (corrlib.retrieval.retrieve)."""
-    p.add_argument("--ranking", choices=RANKING_CHOICES, default=RANKING_CHOICES[0],
-                   help="fused (default): the matching energy times the drawing's dissimilarity to the mesh's "
-                        "rendered views; energy: the matching energy alone (the thesis' ranking)")
-
-
-def _command(sub, name: str, help: str, description: str | None = None, **defaults) -> argparse.ArgumentParser:
-    """A subcommand: ``help`` is its one line in ``corr --help``, ``description`` its text in ``corr NAME --help``."""
-    p = sub.add_parser(name, help=help, description=description or help)
-    p.set_defaults(**defaults)
-    return p
-
-
-#: the ``-o`` help of the commands that write a match's set of files beside one stem
-STEM_HELP = ("output path without suffix; the files written there replace every file an earlier match wrote under "
-             f"that stem ({', '.join(MATCH_OUTPUT_SUFFIXES)})")
-
-
-def _add_output(p: argparse.ArgumentParser, default: str, help: str = STEM_HELP, *,
-                quiet: bool = True) -> None:
-    p.add_argument("-o", "--output", default=default, help=help)
-    if quiet:
-        p.add_argument("-q", "--quiet", action="store_true")
-
-
 def _add_info_parser(sub) -> None:
-    p = _command(sub, "info", "statistics and validation report of a mesh or contour",
+    p = command(sub, "info", "statistics and validation report of a mesh or contour",
                  "Statistics and a validation report of a mesh or contour file (loaded as 'corr match' loads it). "
                  "Exit status 2 if the file cannot be used.", func=cmd_info)
     p.add_argument("file")
@@ -900,7 +513,7 @@ def _add_info_parser(sub) -> None:
 
 
 def _add_repair_parser(sub) -> None:
-    p = _command(sub, "repair", "weld, drop bad faces and loose parts of a mesh",
+    p = command(sub, "repair", "weld, drop bad faces and loose parts of a mesh",
                  "Write a mesh with the repairs a file may need before the methods accept it: vertices at one "
                  "position welded; faces dropped that repeat a vertex, have zero area or repeat another face; the "
                  "largest connected component kept; unused vertices dropped; face windings made to agree. Each "
@@ -912,7 +525,7 @@ def _add_repair_parser(sub) -> None:
 
 
 def _add_eval_parser(sub) -> None:
-    p = _command(sub, "eval", "geodesic error of a map against ground truth",
+    p = command(sub, "eval", "geodesic error of a map against ground truth",
                  "Princeton-protocol geodesic error of a map against ground truth.", func=cmd_eval)
     p.add_argument("map", help="map file: one 0-based target index per source vertex (or a result .npz)")
     p.add_argument("--gt-source", required=True, help=".vts ground truth of the source (1-based)")
@@ -934,7 +547,7 @@ def _add_pictures_flag(p) -> None:
 
 def _add_match_parsers(sub) -> None:
     """``match``, ``match-contour`` and ``match-contours``."""
-    p = _command(sub, "match", "match two shapes with a registered method", func=cmd_match)
+    p = command(sub, "match", "match two shapes with a registered method", func=cmd_match)
     p.add_argument("source")
     p.add_argument("target")
     p.add_argument("--method", help="registered method (see `corr methods`; default: the best-ranked method for the "
@@ -946,48 +559,16 @@ def _add_match_parsers(sub) -> None:
                                   "that refine")
     p.add_argument("--times", help="comma-separated diffusion times relative to the area (kernel matching)")
     _add_pictures_flag(p)
-    _add_output(p, "result")
+    add_output(p, "result")
 
-    p = _command(sub, "match-contour", "match a closed 2D contour to a mesh (2D-to-3D)",
-                 "2D-to-3D elastic matching of a closed contour to a mesh.", func=cmd_match_contour)
-    p.add_argument("query", help="contour: point file, SVG, silhouette image or planar sketch mesh")
-    p.add_argument("mesh")
-    p.add_argument("--eps", type=float, help="approximation factor (0 = global optimum)")
-    p.add_argument("--k", type=int, help="Laplace-Beltrami eigenpairs for the features (default 25)")
-    p.add_argument("--n-contour", dest="n_contour", type=int, help="contour resampling (default 200)")
-    p.add_argument("--query-labels", help="part label per contour point (or per sketch-mesh vertex)")
-    p.add_argument("--mesh-labels", help="part label per mesh vertex")
-    p.add_argument("--param", action="append", metavar="NAME=VALUE", help="other method parameter")
-    _add_output(p, "contour_match")
+    add_match_contour_parser(sub)
 
-    p = _command(sub, "match-contours", "match two closed contours on their product torus",
+    p = command(sub, "match-contours", "match two closed contours on their product torus",
                  func=cmd_match, method="contour2d", init=None, times=None, pictures=True)
     p.add_argument("source")
     p.add_argument("target")
     p.add_argument("--param", action="append", metavar="NAME=VALUE", help="method parameter (repeatable)")
-    _add_output(p, "contours")
-
-
-def _add_retrieve_parser(sub) -> None:
-    p = _command(sub, "retrieve", "rank the meshes of a folder against a query contour",
-                 "Rank the meshes of a folder for a query contour: by its matching energy and its likeness to "
-                 "each mesh's rendered views (--ranking).", func=cmd_retrieve)
-    p.add_argument("query")
-    p.add_argument("folder", help="the collection: meshes in it and its subfolders; a subfolder per class "
-                                  "(cat/0.off) or class names in the file names (cat0.off)")
-    p.add_argument("--top", type=int, default=10, help="how many ranks to print")
-    _add_scale_out(p)
-    p.add_argument("--eps", type=float, default=0.0,
-                   help="approximation factor (default 0: rank by the exact optima)")
-    p.add_argument("--k", type=int)
-    p.add_argument("--n-contour", dest="n_contour", type=int, help=RETRIEVAL_N_CONTOUR_HELP)
-    p.add_argument("--param", action="append", metavar="NAME=VALUE")
-    _add_ranking(p)
-    p.add_argument("--pictures", action="store_true",
-                   help="also write, beside the ranking (-o), the query and its matched curve on each of the --top "
-                        "meshes (STEM.RANK-MESH.png)")
-    _add_output(p, None, "write the full ranking as TSV (with --pictures, the pictures of an earlier ranking of "
-                         "these meshes under its name are replaced)")
+    add_output(p, "contours")
 
 
 def _add_bench_parsers(sub) -> None:
@@ -995,7 +576,7 @@ def _add_bench_parsers(sub) -> None:
     from corrlib.formats import suffixes
 
     meshes = " ".join("*" + s for s in suffixes("mesh", vertex_order=True))
-    p = _command(sub, "bench", "run methods over a benchmark dataset",
+    p = command(sub, "bench", "run methods over a benchmark dataset",
                  "Run methods over a benchmark dataset with the standard protocol.", func=cmd_bench)
     p.add_argument("dataset", help=f"folder: meshes ({meshes}), corres/<name>.vts (+ .sym.vts), pairs.txt; or "
                                    "meshes with one connectivity (identity ground truth)")
@@ -1005,53 +586,15 @@ def _add_bench_parsers(sub) -> None:
     p.add_argument("--maps", action="append", metavar="LABEL=FOLDER",
                    help="evaluate external map files <source>__<target>.txt from FOLDER (repeatable)")
     p.add_argument("--pairs", help="pairs file (default: DATASET/pairs.txt, else all ordered pairs)")
-    _add_scale_out(p)
+    add_scale_out(p)
     p.add_argument("--geodesics", default="exact", choices=["exact", "heat", "graph"])
-    _add_output(p, "bench_output", "output folder (a rerun resumes it)")
+    add_output(p, "bench_output", "output folder (a rerun resumes it)")
 
-    p = _command(sub, "bench-retrieval", "retrieval benchmark: mean average precision",
-                 "Retrieval benchmark: queries against a collection, MAP and per-class average precision.",
-                 func=cmd_bench_retrieval)
-    p.add_argument("queries", help="folder of silhouette images / contour files (class = name without number)")
-    p.add_argument("collection", help="folder of meshes (class = name without number)")
-    _add_scale_out(p)
-    p.add_argument("--eps", type=float, default=0.0,
-                   help="approximation factor (default 0: rank by the exact optima)")
-    p.add_argument("--n-contour", dest="n_contour", type=int, help=RETRIEVAL_N_CONTOUR_HELP)
-    p.add_argument("--param", action="append", metavar="KEY=VALUE", help="another contour3d parameter (repeatable)")
-    _add_ranking(p)
-    _add_output(p, "retrieval_output", "output folder")
-
-    p = _command(sub, "bench-contour", "2D-to-3D benchmark with plane-section queries",
-                 "2D-to-3D benchmark: plane-section queries with ground truth matched to their mesh and to the "
-                 "other poses of its class.", func=cmd_bench_contour)
-    p.add_argument("datasets", nargs="+", help="dataset folders (the layouts of 'corr bench'; the class of a mesh "
-                                                "is its name without a trailing number)")
-    p.add_argument("--planes", default="main,symmetry,silhouette",
-                   help="comma-separated queries: the sections main, symmetry, cross, the side-view "
-                        "silhouette and the top-view outline top, or none (default: main,symmetry,silhouette)")
-    p.add_argument("--sketches", action="append", metavar="FOLDER",
-                   help="folder of labelled sketches (NAME_contour.txt, NAME.off, NAME_segmentation.txt), matched "
-                        "to every mesh with part labels (MESH_segmentation.txt) and scored by part agreement "
-                        "(repeatable)")
-    p.add_argument("--drawn", action="append", metavar="FOLDER",
-                   help="folder of drawings with landmarks (NAME.txt, NAME.landmarks: 'label x y' per line), matched "
-                        "to every mesh with landmarks (MESH.landmarks: 'label vertex') and scored by the geodesic "
-                        "error at the landmarks (repeatable)")
-    p.add_argument("--redraws", type=int, default=0,
-                   help="with --drawn: also match this many redrawn variants of each drawing (every point moved "
-                        "by 1 %% of its size) and report their mean and worst landmark error (0-100, default 0)")
-    p.add_argument("--method", default="contour3d",
-                   help="the 2D-to-3D method: contour3d (default) or contour-views (the drawing read as a view)")
-    p.add_argument("--n-contour", dest="n_contour", type=int, help="contour points (default: the method's)")
-    p.add_argument("--param", action="append", metavar="KEY=VALUE", help="a parameter of the method (repeatable)")
-    p.add_argument("--no-pictures", action="store_true", help="do not write a picture per query")
-    _add_scale_out(p)
-    _add_output(p, "contour_bench_output", "output folder")
+    add_contour_bench_parsers(sub)
 
 
 def _add_refine_parser(sub) -> None:
-    p = _command(sub, "refine", "refine an initial map or landmarks into a dense map", func=cmd_refine)
+    p = command(sub, "refine", "refine an initial map or landmarks into a dense map", func=cmd_refine)
     p.add_argument("source")
     p.add_argument("target")
     p.add_argument("--init", required=True,
@@ -1059,13 +602,13 @@ def _add_refine_parser(sub) -> None:
     p.add_argument("--method", default="product-manifold", help="a refining method (default product-manifold)")
     p.add_argument("--param", action="append", metavar="NAME=VALUE", help="method parameter (repeatable)")
     _add_pictures_flag(p)
-    _add_output(p, "refined")
+    add_output(p, "refined")
 
 
 def _add_morph_parser(sub) -> None:
     from corrlib.formats import suffixes
 
-    p = _command(sub, "morph", "deform the source into the target, export the frames",
+    p = command(sub, "morph", "deform the source into the target, export the frames",
                  "Deform the source into the target and export interpolated and extrapolated meshes.",
                  func=cmd_morph)
     p.add_argument("source")
@@ -1085,18 +628,18 @@ def _add_morph_parser(sub) -> None:
     p.add_argument("--format", default="obj", choices=[s.lstrip(".") for s in suffixes("mesh", writable=True)],
                    help="mesh format of the frames")
     p.add_argument("--param", action="append", metavar="NAME=VALUE", help="method parameter (repeatable)")
-    _add_output(p, "frames", "output folder (an earlier morph's frames and result files there are replaced)")
+    add_output(p, "frames", "output folder (an earlier morph's frames and result files there are replaced)")
 
 
 def _add_tool_parsers(sub) -> None:
     """``demo``, ``methods`` and ``perf``."""
-    p = _command(sub, "demo", "match the bundled demo pair, write result and picture",
+    p = command(sub, "demo", "match the bundled demo pair, write result and picture",
                  "Match the bundled demo pair and write a result and a picture.", func=cmd_demo)
-    _add_output(p, "demo_output", "output folder")
+    add_output(p, "demo_output", "output folder")
 
-    _command(sub, "methods", "list the registered methods and their parameters", func=cmd_methods)
+    command(sub, "methods", "list the registered methods and their parameters", func=cmd_methods)
 
-    p = _command(sub, "perf", "performance benchmarks (prints figures)", func=cmd_perf)
+    p = command(sub, "perf", "performance benchmarks (prints figures)", func=cmd_perf)
     p.add_argument("suite", nargs="?", default="foundation", help="benchmark suite (default: foundation)")
     p.add_argument("--repeat", type=int, default=3, help="repetitions; the best time is reported")
     p.add_argument("--quick", action="store_true", help="a short smoke run with fewer cases")
@@ -1106,7 +649,7 @@ def build_parser() -> argparse.ArgumentParser:
     """The ``corr`` parser: one subcommand per ``_add_*_parser`` call, in the order ``corr --help`` lists them."""
     parser = argparse.ArgumentParser(prog="corr", description="Continuous non-rigid shape correspondence.")
     sub = parser.add_subparsers(dest="command", required=True)
-    for add in (_add_info_parser, _add_repair_parser, _add_eval_parser, _add_match_parsers, _add_retrieve_parser,
+    for add in (_add_info_parser, _add_repair_parser, _add_eval_parser, _add_match_parsers, add_retrieve_parser,
                 _add_bench_parsers, _add_refine_parser, _add_morph_parser, _add_tool_parsers):
         add(sub)
     return parser

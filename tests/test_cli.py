@@ -253,17 +253,17 @@ def test_retrieval_defaults_are_shared(capsys):
     """`corr retrieve`, `corr bench-retrieval`, the library and the studio rank with the same parameters."""
     import argparse
 
-    from corrlib.cli import RETRIEVAL_N_CONTOUR_HELP, _contour3d_params
+    from corrlib.cli_contour import RETRIEVAL_N_CONTOUR_HELP, contour3d_params
     from corrlib.errors import ParameterError
     from corrlib.retrieval import RETRIEVAL_N_CONTOUR, retrieval_params
 
     assert f"default {RETRIEVAL_N_CONTOUR}" in RETRIEVAL_N_CONTOUR_HELP
     args = argparse.Namespace(param=None, eps=0.0, k=None, n_contour=None)
-    assert _contour3d_params(args, retrieval=True) == retrieval_params()
+    assert contour3d_params(args, retrieval=True) == retrieval_params()
     assert retrieval_params().n_contour == RETRIEVAL_N_CONTOUR
-    assert _contour3d_params(args).n_contour != RETRIEVAL_N_CONTOUR  # a single match keeps the method's default
+    assert contour3d_params(args).n_contour != RETRIEVAL_N_CONTOUR  # a single match keeps the method's default
     args.n_contour, args.param = 70, ["axis_weight=0.5"]
-    assert _contour3d_params(args, retrieval=True) == retrieval_params(n_contour=70, axis_weight=0.5)
+    assert contour3d_params(args, retrieval=True) == retrieval_params(n_contour=70, axis_weight=0.5)
     with pytest.raises(ParameterError, match="n_contour"):
         retrieval_params(n_contour=3)
     for command in ("retrieve", "bench-retrieval"):

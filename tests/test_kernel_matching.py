@@ -641,7 +641,7 @@ def test_orientation_agreement_changes_sign_under_a_reflection(wolf_pair):
 def test_a_map_that_reverses_orientation_is_reported(wolf_pair, wolf_result, capsys):
     """Every kernel-matching result carries its orientation agreement; a negative one (left matched to right,
     which the kernel energy cannot see) gets a warning, in the CLI as in the studio's log."""
-    from corrlib.cli import _print_result_notes
+    from corrlib.cli_common import print_result_notes
     from corrlib.methods.kernel_matching import reversal_note
 
     assert wolf_result.extras["orientation_agreement"] > 1.0  # wolf0 -> wolf1, the right orientation
@@ -652,7 +652,7 @@ def test_a_map_that_reverses_orientation_is_reported(wolf_pair, wolf_result, cap
     class Flipped:
         extras = {"orientation_agreement": -0.5}
 
-    _print_result_notes(Flipped())
+    print_result_notes(Flipped())
     assert "warning: the map reverses orientation" in capsys.readouterr().err
 
 

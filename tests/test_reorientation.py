@@ -82,7 +82,7 @@ def test_kernel_matching_turns_a_map_that_started_reversed(cat_pair, monkeypatch
 
 def test_a_turned_map_is_reported(capsys):
     """The CLI (and the studio's job log, through the same function) say that the map was turned and how."""
-    from corrlib.cli import _print_result_notes
+    from corrlib.cli_common import print_result_notes
     from corrlib.methods.kernel_matching import turn_note
 
     assert turn_note({}) is None and turn_note({"turned": False, "orientation_agreement": 5.0}) is None
@@ -92,7 +92,7 @@ def test_a_turned_map_is_reported(capsys):
 
     note = turn_note(Turned.extras)
     assert "-5.82" in note and "4.81" in note and "reflection" in note and "reorient=false" in note
-    _print_result_notes(Turned())
+    print_result_notes(Turned())
     err = capsys.readouterr().err
     assert err.startswith("note: the map sent left to right") and "warning" not in err
 

@@ -201,7 +201,8 @@ def test_retrieve_ranks_by_the_chosen_measure():
     with pytest.raises(ParameterError, match="ranking must be one of fused, energy"):
         run(retrieve(query, meshes, params, jobs=1, ranking="views"))
     # the command line offers the same rankings (named there without importing the retrieval module)
-    from corrlib.cli import RANKING_CHOICES, build_parser
+    from corrlib.cli import build_parser
+    from corrlib.cli_contour import RANKING_CHOICES
     from corrlib.retrieval import RANKINGS
 
     assert RANKING_CHOICES == RANKINGS

@@ -72,6 +72,20 @@ def _repairable(code: str, problem: str, advice: str | None = None) -> Finding:
     return Finding("error", code, f"{problem}; {advice}", advice)
 
 
+def readonly_view(a, dtype) -> np.ndarray:
+    """``a`` as a C-contiguous array of ``dtype`` that cannot be written through; ``a``'s own flags are left as
+    they are (a view, or a copy where the layout or the dtype differ).
+
+    Numba compiles a kernel once per argument type, and a read-only array is another type than a writable one.
+    The arrays of :class:`TriMesh` and :class:`Contour2D` are read-only; handing a kernel every input array
+    through this function gives it one signature for every caller, the one the warm-up compiles ahead
+    (:mod:`corrlib.warmup`), instead of a second compilation the first time a caller passes its own array.
+    """
+    view = np.ascontiguousarray(a, dtype=dtype).view()
+    view.flags.writeable = False
+    return view
+
+
 def _readonly(a: np.ndarray) -> np.ndarray:
     a = np.ascontiguousarray(a)
     a.setflags(write=False)

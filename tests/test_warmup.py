@@ -101,3 +101,31 @@ def test_a_signature_loaded_from_numbas_cache_counts_as_added(tmp_path):
     assert [r["hits"] for r in runs] == [0, 1]
     for run in runs:
         assert run["before"] == [] and len(run["after"]) == 1
+
+
+def test_a_caller_s_own_writable_arrays_reach_the_kernels_as_the_meshes_do():
+    """SHOT and the closest surface points take plain arrays; a writable array is another numba type than a
+    mesh's read-only one, so each kernel compiled twice (at a fresh install's first call with the caller's
+    array, after the warm-up). Handed through :func:`corrlib.shapes.readonly_view`, both reach one
+    signature, and the caller's array stays writable."""
+    import numpy as np
+
+    from corrlib.descriptors import shot as shot_module
+    from corrlib.geometry import lifting
+    from corrlib.io import load_mesh
+    from corrlib.shapes import readonly_view
+    from tests._data import TOSCA
+
+    mesh = load_mesh(TOSCA / "wolf0.off")
+    own = np.array(mesh.vertices)  # writable, a caller's points
+    normals = shot_module.vertex_normals(mesh.vertices, mesh.faces)
+    assert own.flags.writeable and not mesh.vertices.flags.writeable
+    view = readonly_view(own[:, ::-1], np.float64)  # not contiguous: a copy
+    assert not view.flags.writeable and view.flags.c_contiguous and own.flags.writeable
+    assert np.array_equal(view, own[:, ::-1])
+    for points in (mesh.vertices, own):
+        shot_module.shot(points, normals=normals, radius=0.05 * np.ptp(mesh.vertices, axis=0).max())
+        lifting.closest_surface_points(points, mesh, np.zeros((len(points), 1), dtype=np.int64))
+    assert len(shot_module._shot_all.signatures) == 1
+    assert len(lifting._closest_in_stars.signatures) == 1
+    assert own.flags.writeable

@@ -60,7 +60,7 @@ import numpy as np
 from scipy.spatial import cKDTree
 
 from corrlib.errors import InputError, ParameterError
-from corrlib.shapes import triangle_areas, area_weighted_normals
+from corrlib.shapes import area_weighted_normals, readonly_view, triangle_areas
 
 __all__ = ["shot", "local_reference_frame", "vertex_normals"]
 
@@ -546,5 +546,6 @@ def shot(
     r = _support_radius(v, f, radius, radius_fraction)
     indptr, indices = _neighbour_csr(v, r)
     out = np.zeros((n, N_CELLS * n_bins))
-    _shot_all(v, np.ascontiguousarray(nrm), indptr, indices, r, n_bins, min_neighbors, out)
+    _shot_all(readonly_view(v, np.float64), readonly_view(nrm, np.float64), indptr, indices, r, n_bins, min_neighbors,
+              out)
     return out

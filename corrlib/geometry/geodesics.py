@@ -24,6 +24,7 @@ import numpy as np
 from scipy.sparse.csgraph import dijkstra
 
 from corrlib.errors import InputError, MeshError, ParameterError
+from corrlib.shapes import readonly_view
 
 #: sources per call of scipy's Dijkstra, which holds the interpreter lock for the whole call: about 10 ms at 5k
 #: vertices, so that a studio running a method in a worker thread keeps redrawing (the lock is free between calls)
@@ -137,7 +138,7 @@ def edge_paths(mesh, starts, ends) -> list[np.ndarray]:
     if np.any(component[starts] != component[ends]):
         raise InputError(f"{mesh.name}: some vertex pairs lie on different connected components (no path between "
                          "them)")
-    vertices = np.ascontiguousarray(mesh.vertices, dtype=np.float64)
+    vertices = readonly_view(mesh.vertices, np.float64)
     _, offsets, flat = _astar_paths(vertices, adj.indptr.astype(np.int64), adj.indices.astype(np.int64),
                                     adj.data.astype(np.float64), starts, ends)
     return [flat[offsets[i]:offsets[i + 1]] for i in range(starts.size)]
@@ -255,7 +256,7 @@ class GeodesicSolver:
         if a.size == 0:
             return np.zeros(0)
         adj = mesh.adjacency
-        vertices = np.ascontiguousarray(mesh.vertices, dtype=np.float64)
+        vertices = readonly_view(mesh.vertices, np.float64)
         lengths, offsets, flat = _astar_paths(vertices, adj.indptr.astype(np.int64), adj.indices.astype(np.int64),
                                               adj.data.astype(np.float64), a.astype(np.int64), b.astype(np.int64))
         if not np.all(np.isfinite(lengths)):

@@ -34,6 +34,7 @@ from corrlib.geometry.fmaps import ZoomOutSamples, repeated_pointwise_from_basis
 from corrlib.geometry.laplacian import mesh_laplacian
 from corrlib.geometry.remeshing import remeshed
 from corrlib.geometry.spectrum import Spectrum
+from corrlib.shapes import readonly_view
 
 #: the nearest vertices of the copy whose stars hold the candidates of a closest point (see
 #: :func:`closest_surface_points`)
@@ -138,8 +139,8 @@ def closest_surface_points(points: np.ndarray, mesh, nearby: np.ndarray) -> tupl
     nearby = np.ascontiguousarray(np.asarray(nearby, dtype=np.int64).reshape(len(points), -1))
     star = sp.csr_matrix((np.ones(3 * mesh.n_faces), (mesh.faces.ravel(), np.repeat(np.arange(mesh.n_faces), 3))),
                          shape=(mesh.n_vertices, mesh.n_faces))
-    return _closest_in_stars(np.ascontiguousarray(points, dtype=np.float64), np.asarray(mesh.vertices),
-                             np.asarray(mesh.faces, dtype=np.int64), star.indptr.astype(np.int64),
+    return _closest_in_stars(readonly_view(points, np.float64), readonly_view(mesh.vertices, np.float64),
+                             readonly_view(mesh.faces, np.int64), star.indptr.astype(np.int64),
                              star.indices.astype(np.int64), nearby)
 
 

@@ -19,7 +19,7 @@ import numba
 import numpy as np
 
 from corrlib.errors import InputError
-from corrlib.shapes import Contour2D
+from corrlib.shapes import Contour2D, readonly_view
 
 
 @dataclass
@@ -230,7 +230,7 @@ def rendered_view(mesh, direction, resolution: int = 256, *, up=None) -> tuple[C
     projection = project_for_silhouette(mesh, direction, resolution, up=up)
     mask = np.zeros(projection.shape, dtype=np.bool_)
     _fill_triangles(np.ascontiguousarray(-projection.pixels[:, 1]), np.ascontiguousarray(projection.pixels[:, 0]),
-                    np.ascontiguousarray(mesh.faces, dtype=np.int64), mask)
+                    readonly_view(mesh.faces, np.int64), mask)
     # thin slivers can leave single-pixel gaps between faces: one dilation/erosion pass closes them
     mask = binary_fill_holes(binary_closing(mask, iterations=1))
     outline = Contour2D(contour_from_mask(mask, name=f"{mesh.name} silhouette"), name=f"{mesh.name} silhouette")

@@ -22,6 +22,7 @@ def warm_up() -> None:
     from corrlib.descriptors.shot import shot
     from corrlib.geometry.cholesky import CholeskySolver
     from corrlib.geometry.cyclic_paths import ProductGraph, branch_and_bound
+    from corrlib.geometry.elastic_paths import ElasticProductGraph
     from corrlib.geometry.geodesics import GeodesicSolver
     from corrlib.geometry.lifting import closest_surface_points
     from corrlib.geometry.sampling import farthest_point_sampling
@@ -41,6 +42,8 @@ def warm_up() -> None:
     adj = sp.coo_matrix((np.ones(6), (np.arange(6), (np.arange(6) + 1) % 6)), shape=(6, 6))
     cost = node_costs(rng.random((5, 3)), rng.random((6, 3)))
     run(branch_and_bound(ProductGraph(cost, ring[:5, :2], ring, adj)))
+    # contour3d's elastic energies (energy=elastic / elastic-ratio, offered in the studio's form)
+    run(branch_and_bound(ElasticProductGraph(cost, ring[:5, :2], ring, adj, stretch=0.1, bending=0.1)))
     sphere_v = np.array([[0, 0, 1], [1, 0, 0], [0, 1, 0], [-1, 0, 0], [0, -1, 0], [0, 0, -1]], float)
     sphere_f = np.array([[0, 1, 2], [0, 2, 3], [0, 3, 4], [0, 4, 1], [5, 2, 1], [5, 3, 2], [5, 4, 3], [5, 1, 4]])
     sphere = TriMesh(sphere_v, sphere_f, validate=False)

@@ -44,7 +44,7 @@ if [ ! -f "$stamp" ] || [ "$(cat "$stamp")" != "$want" ]; then
     .venv/bin/python -m pip install -q --upgrade pip >/dev/null
     .venv/bin/python -m pip install -q -e "$spec"
     echo "$want" > "$stamp"
-    echo "setup: compiling the numerical kernels (once, about half a minute)"
+    echo "setup: compiling the numerical kernels (once, under a minute)"
 fi
 # compile the numerical kernels now (numba caches them next to the sources), not in the first run of a method;
 # a second setup only loads them (about a second)

@@ -45,6 +45,7 @@ SCRIPT = textwrap.dedent("""
     solve("fmap-zoomout", a, b)
     outline = load_contour(sys.argv[2])
     solve("contour3d", outline, a, n_contour=60)
+    solve("contour3d", outline, a, n_contour=30, energy="elastic")  # an energy the studio's form offers
     solve("contour-views", outline, a)
     from corrlib.progress import run
     from corrlib.retrieval import retrieve

@@ -270,7 +270,7 @@ def test_a_tree_of_relaxations_finds_the_same_optimum_with_fewer_backward_search
     assert result.graph_index in (0, 1)
     assert graphs[2].runs == graphs[3].runs == 0, "a pair whose bound exceeds the optimum was searched"
     threads = numba.get_num_threads()
-    try:  # one search at a time: another order of the backward searches, the same optimum
+    try:  # one search at a time: the round's backward searches one after the other, the same optimum
         numba.set_num_threads(1)
         graphs, tree = relaxed_family(seed, metric=metric)
         assert run(branch_and_bound_union(graphs, relaxations=tree)).energy == pytest.approx(min(exact), rel=1e-12)

@@ -22,6 +22,8 @@ from __future__ import annotations
 import numpy as np
 from numba import njit
 
+from corrlib.shapes import readonly_view
+
 #: histogram bins (the paper's choice for the MPEG-7 shapes: 5 inner-distance bins, 12 inner-angle bins)
 N_DISTANCE_BINS, N_ANGLE_BINS = 5, 12
 #: log2 of the innermost and outermost inner-distance bin edges, relative to the mean inner distance
@@ -89,7 +91,7 @@ def visibility(points: np.ndarray) -> np.ndarray:
     (n, n) bool
         Symmetric, False on the diagonal.
     """
-    p = np.array(points, dtype=np.float64, order="C")  # a writable copy: one compiled signature for every caller
+    p = readonly_view(points, np.float64)  # one compiled signature for every caller
     scale = float(np.ptp(p, axis=0).max()) ** 2  # cross products are areas: their products scale as length⁴
     return _visibility(p, (1e-12 * scale) ** 2)
 

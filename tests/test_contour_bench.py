@@ -596,6 +596,31 @@ def test_the_view_set_turns_the_side_view_about_the_vertical_axis():
         assert level @ axes[2] / np.linalg.norm(level) == pytest.approx(np.cos(np.radians(30)))
 
 
+def test_the_drawn_set_names_a_class_of_the_collection_for_every_drawing(tmp_path):
+    """``scripts/retrieval_drawn.py``: every bundled drawing becomes a query ``CLASS_NN.txt`` of a class the
+    collection holds (else its average precision is undefined), the outline a simple polygon, and a second run
+    into the same folder stops with a named error before writing."""
+    import importlib.util
+
+    from corrlib.io import load_contour
+    from corrlib.retrieval import class_of
+    from corrlib.shapes import inspect_contour
+
+    spec = importlib.util.spec_from_file_location("retrieval_drawn", ROOT / "scripts" / "retrieval_drawn.py")
+    drawn = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(drawn)
+    drawn.main(tmp_path)
+    queries = sorted((tmp_path / "queries").iterdir())
+    classes = {class_of(mesh) for mesh in (tmp_path / "collection").glob("*.off")}
+    assert len(queries) == len(drawn.drawings()) == 7
+    assert {class_of(query) for query in queries} == {"cat", "wolf", "lion", "human"} <= classes
+    for query in queries:
+        outline = load_contour(query)
+        assert outline.points.shape[0] >= 20 and inspect_contour(outline.points) == [], query.name
+    with pytest.raises(SystemExit):
+        drawn.main(tmp_path)
+
+
 def test_an_approximate_search_returns_the_same_curve_on_any_thread():
     """With ``eps > 0`` the branch-and-bound may stop at any closed path within ``1 + eps`` of the optimum, so
     which one it returns depends on the order in which it searches the graphs. That order does not depend on

@@ -600,7 +600,8 @@ def _checked_retrieval_run(queries, out, jobs: int | None, scheduler: str | None
 
 
 def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | None = None,
-                        scheduler: str | None = None, callback=None, ranking: str = "fused") -> dict:
+                        scheduler: str | None = None, callback=None, ranking: str = "fused",
+                        own_meshes=None) -> dict:
     """Rank a collection against every query; average precision per query and class, and their mean.
 
     Parameters
@@ -615,8 +616,8 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
         (``horse/0.off`` or ``horse0.off``).
     out : path
         Writes ``retrieval.csv`` (query, class, AP, rank of the first relevant
-        mesh, class margin (:func:`~corrlib.retrieval.class_margin`), top hits),
-        ``retrieval_ranking.csv`` (every query's whole ranking: rank, mesh, its
+        mesh, class margin (:func:`~corrlib.retrieval.class_margin`), top hits, the AP with the query's own
+        mesh left out), ``retrieval_ranking.csv`` (every query's whole ranking: rank, mesh, its
         class, ranking score, matching energy, view dissimilarity, seconds, why a mesh failed),
         ``retrieval_summary.json`` and ``retrieval_summary.md``.
     params : Contour3DParams, optional
@@ -624,27 +625,34 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
         Local processes or a Dask scheduler (see :func:`corrlib.parallel.job_executor`).
     ranking : {"fused", "energy"}
         :func:`~corrlib.retrieval.retrieve`'s ranking.
+    own_meshes : path, optional
+        The mesh each listed query was made from (:func:`~corrlib.retrieval.read_own_meshes`, read and checked
+        before any query): each listed query is also scored with that mesh left out of its ranking
+        (:func:`~corrlib.retrieval.ap_without`), and the summary gives the MAP of those and, apart, of the
+        queries not listed (:func:`own_mesh_summary`).
 
     Returns
     -------
     dict
         ``{"map": float, "map_interval": [low, high]`` (95 % bootstrap interval over the queries,
         :func:`~corrlib.retrieval.map_interval`), ``"median_margin": float, "right_class_first": int,
-        "per_class": {class: mean AP}, "queries": int, "failed": int, ...}``.
+        "per_class": {class: mean AP}, "queries": int, "failed": int, "own_meshes": dict or None, ...}``.
     """
     from corrlib.io import atomic_write, load_contour
     from corrlib.progress import run
-    from corrlib.retrieval import (average_precision, class_margin, class_of, collection_name, files_under,
-                                   map_interval, mesh_files, retrieve)
+    from corrlib.retrieval import (ap_without, average_precision, class_margin, class_of, collection_name,
+                                   files_under, map_interval, mesh_files, read_own_meshes, retrieve)
 
     query_paths = files_under(queries, CONTOUR_SUFFIXES, "query silhouettes or contour files")
     meshes = mesh_files(collection)
+    own = {} if own_meshes is None else read_own_meshes(
+        own_meshes, [collection_name(q, queries) for q in query_paths], [collection_name(m, collection) for m in meshes])
     out = _checked_retrieval_run(queries, out, jobs, scheduler)
     rows, ranked, failed_meshes = [], [], set()
     for number, q in enumerate(query_paths, 1):
         name = collection_name(q, queries)
         row = {"query": name, "class": class_of(q, queries), "ap": float("nan"), "first_relevant": "",
-               "margin": float("nan"), "top": "", "error": ""}
+               "margin": float("nan"), "top": "", "ap_own_left_out": float("nan"), "error": ""}
         try:
             hits = run(retrieve(load_contour(q), meshes, params, jobs=jobs, scheduler=scheduler, root=collection,
                                 ranking=ranking))
@@ -663,13 +671,15 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
             row["first_relevant"] = labels.index(row["class"]) + 1
             row["margin"] = class_margin(labels, [h.score for h in hits], row["class"])
             row["top"] = " ".join(h.name for h in hits[:5])
+            if name in own:
+                row["ap_own_left_out"] = ap_without([h.name for h in hits], labels, own[name], row["class"])
         except Exception as exc:  # a failing query is recorded, the others go on
             row["error"] = f"{type(exc).__name__}: {exc}"
         rows.append(row)
         if callback is not None:
             callback(number, len(query_paths), row)
     with atomic_write(out / "retrieval.csv") as fh:
-        columns = ("query", "class", "ap", "first_relevant", "margin", "top", "error")
+        columns = ("query", "class", "ap", "first_relevant", "margin", "top", "ap_own_left_out", "error")
         fh.write(",".join(columns) + "\n")
         fh.writelines(",".join(csv_cell(r[c]) for c in columns) + "\n" for r in rows)
     columns = ("query", "rank", "mesh", "class", "score", "energy", "view_distance", "seconds", "error")
@@ -687,25 +697,53 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
                "right_class_first": sum(m > 0 for m in margins),
                "per_class": {c: float(np.mean(v)) for c, v in sorted(per_class.items())},
                "queries": len(rows), "failed": len(rows) - len(ok), "collection": len(meshes),
-               "failed_meshes": sorted(failed_meshes)}
+               "failed_meshes": sorted(failed_meshes), "own_meshes": own_mesh_summary(ok, own) if own else None}
     with atomic_write(out / "retrieval_summary.json") as fh:
         json.dump(summary, fh, indent=1)
     with atomic_write(out / "retrieval_summary.md") as fh:
-        head = (f"mean average precision: {summary['map']:.3f} over {len(ok)} queries" if ok else
-                "mean average precision: none (no query was ranked)")
-        fh.write(f"{head} ({summary['failed']} failed), {len(meshes)} meshes\n")
-        if ok:
-            low, high = summary["map_interval"]
-            fh.write(f"95 % bootstrap interval over the queries: {low:.3f}–{high:.3f} (how much the MAP depends on "
-                     f"which queries the set holds)\n")
-        if margins:
-            fh.write(f"class margin (best other class's {'energy' if ranking == 'energy' else 'score'} against the "
-                     f"query class's, relative; retrieval.csv "
-                     f"per query): median {summary['median_margin']:+.3f}, the query's class first on "
-                     f"{summary['right_class_first']} of {len(margins)} queries\n")
-        if failed_meshes:
-            fh.write(f"meshes that could not be matched (ranked last; see retrieval_ranking.csv): "
-                     f"{', '.join(sorted(failed_meshes))}\n")
-        fh.write("\n| class | AP |\n|---|---|\n")
-        fh.write("".join(f"| {c} | {v:.3f} |\n" for c, v in summary["per_class"].items()))
+        fh.write(retrieval_summary_text(summary, len(ok), len(margins), ranking))
     return summary
+
+
+def own_mesh_summary(rows: list[dict], own: dict[str, str]) -> dict:
+    """:func:`retrieval_benchmark`'s figures for a list of own meshes, from its answered query ``rows``: the MAP
+    of the listed queries with their own mesh left out (``map_left_out`` over ``left_out`` queries; listed
+    queries whose class has no other mesh are named in ``no_other_member``) and the MAP of the queries not
+    listed (``map_not_listed`` over ``not_listed``); a MAP over no query is None."""
+    listed = [r for r in rows if r["query"] in own]
+    scored = [r["ap_own_left_out"] for r in listed if np.isfinite(r["ap_own_left_out"])]
+    others = [r["ap"] for r in rows if r["query"] not in own]
+    return {"map_left_out": float(np.mean(scored)) if scored else None, "left_out": len(scored),
+            "no_other_member": [r["query"] for r in listed if not np.isfinite(r["ap_own_left_out"])],
+            "map_not_listed": float(np.mean(others)) if others else None, "not_listed": len(others)}
+
+
+def retrieval_summary_text(summary: dict, answered: int, with_margin: int, ranking: str) -> str:
+    """``retrieval_summary.md``: the MAP, its interval, the class margins, the own-mesh figures, the failed
+    meshes and the AP per class, from :func:`retrieval_benchmark`'s summary (``answered`` queries, of which
+    ``with_margin`` have a class margin)."""
+    lines = [(f"mean average precision: {summary['map']:.3f} over {answered} queries" if answered else
+              "mean average precision: none (no query was ranked)")
+             + f" ({summary['failed']} failed), {summary['collection']} meshes"]
+    if answered:
+        low, high = summary["map_interval"]
+        lines.append(f"95 % bootstrap interval over the queries: {low:.3f}–{high:.3f} (how much the MAP depends on "
+                     f"which queries the set holds)")
+    if summary["median_margin"] is not None:
+        lines.append(f"class margin (best other class's {'energy' if ranking == 'energy' else 'score'} against the "
+                     f"query class's, relative; retrieval.csv per query): median {summary['median_margin']:+.3f}, "
+                     f"the query's class first on {summary['right_class_first']} of {with_margin} queries")
+    own = summary["own_meshes"]
+    if own is not None:
+        def mean(value):
+            return "none" if value is None else f"{value:.3f}"
+        without = (f"; {len(own['no_other_member'])} have no other mesh of their class: "
+                   f"{', '.join(own['no_other_member'])}" if own["no_other_member"] else "")
+        lines.append(f"with each listed query's own mesh left out of its ranking: MAP {mean(own['map_left_out'])} "
+                     f"over {own['left_out']} queries{without}; the queries not listed: MAP "
+                     f"{mean(own['map_not_listed'])} over {own['not_listed']}")
+    if summary["failed_meshes"]:
+        lines.append(f"meshes that could not be matched (ranked last; see retrieval_ranking.csv): "
+                     f"{', '.join(summary['failed_meshes'])}")
+    table = "".join(f"| {c} | {v:.3f} |\n" for c, v in summary["per_class"].items())
+    return "\n".join(lines) + "\n\n| class | AP |\n|---|---|\n" + table

@@ -171,7 +171,8 @@ def cmd_bench_retrieval(args) -> int:
             print(f"  [{done}/{total}] {row['query']} ({row['class']}): {what}", file=sys.stderr)
 
     summary = retrieval_benchmark(args.queries, args.collection, args.output, params=params, jobs=args.jobs,
-                                  scheduler=args.scheduler, callback=progress, ranking=args.ranking)
+                                  scheduler=args.scheduler, callback=progress, ranking=args.ranking,
+                                  own_meshes=args.own_meshes)
     print((Path(args.output) / "retrieval_summary.md").read_text(encoding="utf-8"))
     say_failures(failures, Path(args.output) / "retrieval.csv")
     return 0 if summary["failed"] == 0 and not summary["failed_meshes"] else 1
@@ -264,6 +265,11 @@ def add_contour_bench_parsers(sub) -> None:
                    help="approximation factor (default 0: rank by the exact optima)")
     p.add_argument("--n-contour", dest="n_contour", type=int, help=RETRIEVAL_N_CONTOUR_HELP)
     p.add_argument("--param", action="append", metavar="KEY=VALUE", help="another contour3d parameter (repeatable)")
+    p.add_argument("--own-meshes", dest="own_meshes", metavar="FILE",
+                   help="lines 'QUERY MESH': the mesh of the collection each listed query was made from (e.g. "
+                        "rendered); each is also scored with that mesh left out of its ranking, and the MAP of the "
+                        "queries not listed is given apart (scripts/retrieval_set.py writes OUT/sources.txt, "
+                        "scripts/retrieval_views.py OUT/views.txt)")
     add_ranking(p)
     add_output(p, "retrieval_output", "output folder")
 

@@ -306,6 +306,59 @@ def average_precision(ranked_labels: list[str], relevant: str) -> float:
     return total / hits if hits else 0.0
 
 
+def ap_without(ranked_names: list[str], ranked_labels: list[str], left_out: str, relevant: str) -> float:
+    """:func:`average_precision` of a ranking with the mesh named ``left_out`` taken out of it; NaN where no mesh
+    of the class ``relevant`` is left (the precision of a class without members is undefined, not 0)."""
+    labels = [label for name, label in zip(ranked_names, ranked_labels) if name != left_out]
+    return average_precision(labels, relevant) if relevant in labels else float("nan")
+
+
+def read_own_meshes(path, query_names, mesh_names) -> dict[str, str]:
+    """The mesh of the collection that each listed query was made from (``corr bench-retrieval --own-meshes``).
+
+    A query rendered from a mesh of the collection finds that mesh first at almost no cost, so its average
+    precision as given says little; ranked with that mesh left out (:func:`ap_without`) it says how the query
+    ranks the *other* members of its class (an outline against the shape's other poses). The file has one
+    line ``QUERY MESH`` per listed query; whatever follows the two names is ignored (so that
+    ``scripts/retrieval_views.py``'s ``views.txt`` serves as it is), as are blank lines and ``#`` comments.
+    Names are those the benchmark gives (:func:`collection_name`: the path within the folder).
+
+    Returns
+    -------
+    dict
+        ``{query name: mesh name}``.
+
+    Raises
+    ------
+    InputError
+        Naming the file (and line) where it cannot be read, a line has fewer than two names, a query or mesh
+        is not in the benchmark, or a query is listed twice.
+    """
+    path = Path(path)
+    try:
+        text = path.read_text(encoding="utf-8")
+    except (OSError, UnicodeDecodeError) as exc:
+        raise InputError(f"{path}: cannot read the own-mesh list ({exc}){lost_working_folder(path)}") from None
+    queries, meshes, own = set(query_names), set(mesh_names), {}
+    for number, line in enumerate(text.splitlines(), 1):
+        words = line.split("#", 1)[0].split()
+        if not words:
+            continue
+        where = f"{path}, line {number}"
+        if len(words) < 2:
+            raise InputError(f"{where}: expected 'QUERY MESH' (the query and the mesh it was made from), "
+                             f"got {line.strip()!r}")
+        query, mesh = words[:2]
+        if query not in queries:
+            raise InputError(f"{where}: no query {query!r} among the queries")
+        if mesh not in meshes:
+            raise InputError(f"{where}: no mesh {mesh!r} in the collection")
+        if query in own:
+            raise InputError(f"{where}: query {query!r} is listed a second time")
+        own[query] = mesh
+    return own
+
+
 #: resamples of the bootstrap interval of a MAP (:func:`map_interval`): with another seed its ends move by a
 #: standard deviation of 0.001-0.003 on the bundled retrieval sets (21 and 60 queries)
 BOOTSTRAP_RESAMPLES = 4000

@@ -18,7 +18,9 @@ of the synthetic person in ``resources/people``) and ``OUT/queries``
   side, a person from the front), as a user would click them
   (``resources/data/silhouettes/drawn``).
 
-Then: ``corr bench-retrieval OUT/queries OUT/collection``.
+``OUT/sources.txt`` names the mesh of each rendered query (``QUERY MESH`` per line). Then: ``corr
+bench-retrieval OUT/queries OUT/collection``, with ``--own-meshes OUT/sources.txt`` to score the rendered
+queries also with their own mesh left out (an outline against its shape's other poses).
 """
 
 from __future__ import annotations
@@ -62,8 +64,9 @@ def main(out: Path) -> None:
     collection, queries = new_benchmark_folders(out)
 
     count = 0
+    sources = []  # "QUERY MESH" of every query rendered from a mesh of the collection
 
-    def write(points, label, suffix=".txt", source=None):
+    def write(points, label, suffix=".txt", source=None, mesh=None):
         nonlocal count
         count += 1
         target = queries / f"{label}_{count:02d}{suffix}"
@@ -71,21 +74,26 @@ def main(out: Path) -> None:
             np.savetxt(target, points)
         else:
             shutil.copy(source, target)
+        if mesh is not None:
+            sources.append(f"{target.name} {mesh}.off")
 
     for name in ("cat0", "cat1", "cat2", "wolf0", "wolf1", "lion0"):
         mesh = load_mesh(collection / f"{name}.off")
         label = name.rstrip("0123456789")
-        write(silhouette_query(mesh).contour.points, label)
-        write(silhouette_query(mesh, 256, view="top").contour.points, label)
+        write(silhouette_query(mesh).contour.points, label, mesh=name)
+        write(silhouette_query(mesh, 256, view="top").contour.points, label, mesh=name)
     for name in ("human0", "human3"):
-        write(silhouette_query(load_mesh(collection / f"{name}.off")).contour.points, "human")
+        write(silhouette_query(load_mesh(collection / f"{name}.off")).contour.points, "human", mesh=name)
     for sketch in "ab":
         write(None, "human", source=resource(f"data/sketch2d/human_sketch_{sketch}_contour.txt"))
     write(None, "human", ".gif", resource("data/silhouettes/mpeg7/children-1.gif"))
     write(None, "wolf", ".gif", resource("data/silhouettes/mpeg7/dog-1.gif"))
     for label in ("cat", "human", "wolf"):
         write(None, label, source=resource(f"data/silhouettes/drawn/{label}.txt"))
-    print(f"{len(list(collection.iterdir()))} meshes in {collection}, {count} queries in {queries}")
+    (out / "sources.txt").write_text("".join(f"{line}\n" for line in sources))
+    print(f"{len(list(collection.iterdir()))} meshes in {collection}, {count} queries in {queries}; "
+          f"{out / 'sources.txt'} names the mesh each rendered query was made from (corr bench-retrieval "
+          f"--own-meshes)")
 
 
 if __name__ == "__main__":

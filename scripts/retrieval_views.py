@@ -13,7 +13,8 @@ projection seen from
 The vertical axis is the mesh's principal axis of middle variance (a quadruped's height) and, for the
 class ``human``, of largest variance (a standing person's height). Queries are named ``CLASS_NN.txt``
 (``corr bench-retrieval`` reads the class from the name); ``OUT/views.txt`` says which mesh and view each
-one is. Then: ``corr bench-retrieval OUT/queries OUT/collection``.
+one is. Then: ``corr bench-retrieval OUT/queries OUT/collection --own-meshes OUT/views.txt`` (every query also
+scored with the mesh it was rendered from left out of its ranking).
 """
 
 from __future__ import annotations

@@ -348,6 +348,57 @@ def test_retrieval_benchmark_names_broken_meshes_and_absent_classes(tmp_path, ca
     assert "no mesh of the collection could be matched" in (tmp_path / "b" / "retrieval.csv").read_text()
 
 
+def test_retrieval_benchmark_scores_rendered_queries_without_their_own_mesh(tmp_path, capsys):
+    """``--own-meshes``: a query rendered from a mesh of the collection is also scored with that mesh left out
+    of its ranking (the AP of the rest of the ranking, recomputed here from ``retrieval_ranking.csv``); a query
+    whose class has no other mesh is named, not scored 0; the queries not listed get a MAP of their own. A bad
+    list stops the command with a message naming the file and line before any query is matched."""
+    from corrlib.cli import main
+    from corrlib.geometry.sections import render_silhouette
+    from corrlib.io import load_mesh, save_contour
+    from corrlib.retrieval import ap_without, average_precision
+
+    queries, collection = tmp_path / "queries", tmp_path / "collection"
+    for folder in (queries, collection):
+        folder.mkdir()
+    for name in ("cat0", "cat1", "wolf0"):
+        shutil.copy(TOSCA / f"{name}.off", collection)
+    side = {name: render_silhouette(load_mesh(TOSCA / f"{name}.off"), [0, 0, 1]) for name in ("cat0", "wolf0")}
+    save_contour(queries / "cat-1.txt", side["cat0"])
+    save_contour(queries / "wolf-1.txt", side["wolf0"])
+    save_contour(queries / "cat-2.txt", side["cat0"])  # not listed
+    listing = tmp_path / "own.txt"
+    listing.write_text("# query mesh\ncat-1.txt cat0.off  rendered from the side\n\nwolf-1.txt wolf0.off\n")
+    out = tmp_path / "out"
+    assert main(["bench-retrieval", str(queries), str(collection), "-o", str(out), "--jobs", "1", "-q",
+                 "--n-contour", "60", "--own-meshes", str(listing)]) == 0
+    summary = json.loads((out / "retrieval_summary.json").read_text())
+    lines = (out / "retrieval.csv").read_text().splitlines()
+    rows = {r["query"]: r for r in (dict(zip(lines[0].split(","), line.split(","))) for line in lines[1:])}
+    ranking = [line.split(",") for line in (out / "retrieval_ranking.csv").read_text().splitlines()[1:]]
+    cat_ranking = [(r[2], r[3]) for r in ranking if r[0] == "cat-1.txt"]
+    expected = average_precision([label for mesh, label in cat_ranking if mesh != "cat0.off"], "cat")
+    assert float(rows["cat-1.txt"]["ap_own_left_out"]) == pytest.approx(expected)
+    assert ap_without(*zip(*cat_ranking), "cat0.off", "cat") == pytest.approx(expected)
+    assert rows["wolf-1.txt"]["ap_own_left_out"] == "nan" and rows["cat-2.txt"]["ap_own_left_out"] == "nan"
+    own = summary["own_meshes"]
+    assert own["left_out"] == 1 and own["map_left_out"] == pytest.approx(expected)
+    assert own["no_other_member"] == ["wolf-1.txt"]
+    assert own["not_listed"] == 1 and own["map_not_listed"] == pytest.approx(float(rows["cat-2.txt"]["ap"]))
+    text = (out / "retrieval_summary.md").read_text()
+    assert "own mesh left out" in text and "wolf-1.txt" in text
+    capsys.readouterr()
+    for content, message in (("cat-1.txt\n", "own.txt, line 1: expected 'QUERY MESH'"),
+                             ("cat-9.txt cat0.off\n", "own.txt, line 1: no query 'cat-9.txt'"),
+                             ("\ncat-1.txt lion0.off\n", "own.txt, line 2: no mesh 'lion0.off'"),
+                             ("cat-1.txt cat0.off\ncat-1.txt cat1.off\n", "line 2: query 'cat-1.txt' is listed")):
+        listing.write_text(content)
+        assert main(["bench-retrieval", str(queries), str(collection), "-o", str(tmp_path / "bad"), "-q",
+                     "--own-meshes", str(listing)]) == 2
+        assert message in capsys.readouterr().err
+        assert not (tmp_path / "bad" / "retrieval.csv").exists()
+
+
 @pytest.mark.parametrize("pairs_text,expected", [
     ("cat0 cat1 cat2\n", "line 1: expected 'source target'"),
     ("\ncat0 lion\n", "line 2: .*lion.off does not exist"),

@@ -616,8 +616,9 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
         (``horse/0.off`` or ``horse0.off``).
     out : path
         Writes ``retrieval.csv`` (query, class, AP, rank of the first relevant
-        mesh, class margin (:func:`~corrlib.retrieval.class_margin`), top hits, the AP with the query's own
-        mesh left out), ``retrieval_ranking.csv`` (every query's whole ranking: rank, mesh, its
+        mesh, class margin (:func:`~corrlib.retrieval.class_margin`), top hits, the Princeton Shape Benchmark's
+        measures (:func:`~corrlib.retrieval.ranking_measures`), the AP with the query's own mesh left out),
+        ``retrieval_ranking.csv`` (every query's whole ranking: rank, mesh, its
         class, ranking score, matching energy, view dissimilarity, seconds, why a mesh failed),
         ``retrieval_summary.json`` and ``retrieval_summary.md``.
     params : Contour3DParams, optional
@@ -636,12 +637,14 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
     dict
         ``{"map": float, "map_interval": [low, high]`` (95 % bootstrap interval over the queries,
         :func:`~corrlib.retrieval.map_interval`), ``"median_margin": float, "right_class_first": int,
-        "per_class": {class: mean AP}, "queries": int, "failed": int, "own_meshes": dict or None, ...}``.
+        "per_class": {class: mean AP}, "queries": int, "failed": int, "own_meshes": dict or None,
+        "nn", "first_tier", "second_tier", "e_measure", "dcg": their means, ...}``.
     """
     from corrlib.io import atomic_write, load_contour
     from corrlib.progress import run
-    from corrlib.retrieval import (ap_without, average_precision, class_margin, class_of, collection_name,
-                                   files_under, map_interval, mesh_files, read_own_meshes, retrieve)
+    from corrlib.retrieval import (RANKING_MEASURES, ap_without, average_precision, class_margin, class_of,
+                                   collection_name, files_under, map_interval, mesh_files, ranking_measures,
+                                   read_own_meshes, retrieve)
 
     query_paths = files_under(queries, CONTOUR_SUFFIXES, "query silhouettes or contour files")
     meshes = mesh_files(collection)
@@ -652,7 +655,8 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
     for number, q in enumerate(query_paths, 1):
         name = collection_name(q, queries)
         row = {"query": name, "class": class_of(q, queries), "ap": float("nan"), "first_relevant": "",
-               "margin": float("nan"), "top": "", "ap_own_left_out": float("nan"), "error": ""}
+               "margin": float("nan"), "top": "", **dict.fromkeys(RANKING_MEASURES, float("nan")),
+               "ap_own_left_out": float("nan"), "error": ""}
         try:
             hits = run(retrieve(load_contour(q), meshes, params, jobs=jobs, scheduler=scheduler, root=collection,
                                 ranking=ranking))
@@ -671,6 +675,7 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
             row["first_relevant"] = labels.index(row["class"]) + 1
             row["margin"] = class_margin(labels, [h.score for h in hits], row["class"])
             row["top"] = " ".join(h.name for h in hits[:5])
+            row.update(ranking_measures(labels, row["class"]))
             if name in own:
                 row["ap_own_left_out"] = ap_without([h.name for h in hits], labels, own[name], row["class"])
         except Exception as exc:  # a failing query is recorded, the others go on
@@ -679,7 +684,8 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
         if callback is not None:
             callback(number, len(query_paths), row)
     with atomic_write(out / "retrieval.csv") as fh:
-        columns = ("query", "class", "ap", "first_relevant", "margin", "top", "ap_own_left_out", "error")
+        columns = ("query", "class", "ap", "first_relevant", "margin", "top", *RANKING_MEASURES, "ap_own_left_out",
+                   "error")
         fh.write(",".join(columns) + "\n")
         fh.writelines(",".join(csv_cell(r[c]) for c in columns) + "\n" for r in rows)
     columns = ("query", "rank", "mesh", "class", "score", "energy", "view_distance", "seconds", "error")
@@ -697,7 +703,8 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
                "right_class_first": sum(m > 0 for m in margins),
                "per_class": {c: float(np.mean(v)) for c, v in sorted(per_class.items())},
                "queries": len(rows), "failed": len(rows) - len(ok), "collection": len(meshes),
-               "failed_meshes": sorted(failed_meshes), "own_meshes": own_mesh_summary(ok, own) if own else None}
+               "failed_meshes": sorted(failed_meshes), "own_meshes": own_mesh_summary(ok, own) if own else None,
+               **{m: float(np.mean([r[m] for r in ok])) if ok else None for m in RANKING_MEASURES}}
     with atomic_write(out / "retrieval_summary.json") as fh:
         json.dump(summary, fh, indent=1)
     with atomic_write(out / "retrieval_summary.md") as fh:
@@ -729,6 +736,9 @@ def retrieval_summary_text(summary: dict, answered: int, with_margin: int, ranki
         low, high = summary["map_interval"]
         lines.append(f"95 % bootstrap interval over the queries: {low:.3f}–{high:.3f} (how much the MAP depends on "
                      f"which queries the set holds)")
+        lines.append(f"nearest neighbour {summary['nn']:.3f}, first tier {summary['first_tier']:.3f}, second tier "
+                     f"{summary['second_tier']:.3f}, E-measure {summary['e_measure']:.3f}, DCG {summary['dcg']:.3f} "
+                     f"(the Princeton Shape Benchmark's measures, as the SHREC sketch tracks report them)")
     if summary["median_margin"] is not None:
         lines.append(f"class margin (best other class's {'energy' if ranking == 'energy' else 'score'} against the "
                      f"query class's, relative; retrieval.csv per query): median {summary['median_margin']:+.3f}, "

@@ -306,6 +306,45 @@ def average_precision(ranked_labels: list[str], relevant: str) -> float:
     return total / hits if hits else 0.0
 
 
+#: results the E-measure reads (the Princeton Shape Benchmark's choice, :func:`ranking_measures`)
+E_MEASURE_RESULTS = 32
+#: the measures of :func:`ranking_measures`, in the order the benchmark reports them
+RANKING_MEASURES = ("nn", "first_tier", "second_tier", "e_measure", "dcg")
+
+
+def ranking_measures(ranked_labels: list[str], relevant: str) -> dict[str, float]:
+    """The Princeton Shape Benchmark's measures of one ranking (Shilane, Min, Kazhdan, Funkhouser, *The
+    Princeton Shape Benchmark*, SMI 2004), which the SHREC sketch-based retrieval tracks report beside the mean
+    average precision (Li et al., SHREC'13/'14).
+
+    With ``C`` the number of meshes of the class ``relevant`` in the ranking (the query is not in the
+    collection, so all of them count) and ``r(k)`` the number of them among the first ``k``:
+
+    * ``nn``: 1 if the first mesh is of the class, else 0 (nearest-neighbour precision);
+    * ``first_tier``, ``second_tier``: ``r(C) / C`` and ``r(2C) / C`` (recall within the first ``C`` and ``2C``);
+    * ``e_measure``: ``2 / (1/P + 1/R)`` of the first ``k = min(32, n)`` results, with ``P = r(k)/k`` and
+      ``R = r(k)/C``, i.e. ``2 r(k) / (k + C)`` (0 where ``r(k) = 0``);
+    * ``dcg``: ``G_1 + Σ_{i≥2} G_i / log2 i`` (``G_i`` 1 for a mesh of the class) divided by its value for the
+      ideal ranking, all ``C`` first (1 for a perfect ranking).
+
+    Returns
+    -------
+    dict
+        The five measures (:data:`RANKING_MEASURES`), NaN where the ranking holds no mesh of the class.
+    """
+    gains = np.array([label == relevant for label in ranked_labels], dtype=float)
+    members = int(gains.sum())
+    if members == 0:
+        return dict.fromkeys(RANKING_MEASURES, float("nan"))
+    found = np.cumsum(gains)  # r(k) at index k - 1
+    k = min(E_MEASURE_RESULTS, gains.size)
+    discounts = 1.0 / np.log2(np.maximum(np.arange(1, gains.size + 1), 2))  # 1, 1/log2 2, 1/log2 3, ...
+    return {"nn": float(gains[0]), "first_tier": float(found[members - 1] / members),
+            "second_tier": float(found[min(2 * members, gains.size) - 1] / members),
+            "e_measure": float(2.0 * found[k - 1] / (k + members)),
+            "dcg": float(gains @ discounts / discounts[:members].sum())}
+
+
 def ap_without(ranked_names: list[str], ranked_labels: list[str], left_out: str, relevant: str) -> float:
     """:func:`average_precision` of a ranking with the mesh named ``left_out`` taken out of it; NaN where no mesh
     of the class ``relevant`` is left (the precision of a class without members is undefined, not 0)."""

@@ -387,6 +387,15 @@ def test_retrieval_benchmark_scores_rendered_queries_without_their_own_mesh(tmp_
     assert own["not_listed"] == 1 and own["map_not_listed"] == pytest.approx(float(rows["cat-2.txt"]["ap"]))
     text = (out / "retrieval_summary.md").read_text()
     assert "own mesh left out" in text and "wolf-1.txt" in text
+    # the Princeton measures of every query's ranking, and their means in the summary
+    from corrlib.retrieval import RANKING_MEASURES, ranking_measures
+
+    for query, row in rows.items():
+        expected = ranking_measures([r[3] for r in ranking if r[0] == query], row["class"])
+        assert {m: float(row[m]) for m in RANKING_MEASURES} == pytest.approx(expected)
+    for measure in RANKING_MEASURES:
+        assert summary[measure] == pytest.approx(np.mean([float(r[measure]) for r in rows.values()]))
+    assert "first tier" in text
     capsys.readouterr()
     for content, message in (("cat-1.txt\n", "own.txt, line 1: expected 'QUERY MESH'"),
                              ("cat-9.txt cat0.off\n", "own.txt, line 1: no query 'cat-9.txt'"),

@@ -710,6 +710,37 @@ def test_average_precision_by_hand():
     assert average_precision(["b", "b"], "a") == 0.0
 
 
+def test_the_princeton_measures_by_hand_and_against_their_definitions():
+    """Nearest neighbour, first and second tier, E-measure and DCG (Shilane et al. 2004): one ranking worked by
+    hand, the limits, and random rankings against a direct reading of each definition."""
+    from corrlib.retrieval import ranking_measures
+
+    # a b a a b for class a: C = 3; r(3) = 2, r(5) = 3; k = 5; DCG (1 + 1/log2 3 + 1/2) / (1 + 1 + 1/log2 3)
+    measured = ranking_measures(list("abaab"), "a")
+    dcg = (1 + 1 / np.log2(3) + 0.5) / (2 + 1 / np.log2(3))
+    assert measured == pytest.approx({"nn": 1.0, "first_tier": 2 / 3, "second_tier": 1.0, "e_measure": 0.75,
+                                      "dcg": dcg})
+    assert ranking_measures(list("aabbb"), "a")["dcg"] == pytest.approx(1.0)
+    assert ranking_measures(list("bbbaa"), "a")["nn"] == 0.0
+    assert all(np.isnan(v) for v in ranking_measures(list("bbb"), "a").values())
+    rng = np.random.default_rng(5)
+    for _ in range(200):
+        labels = list(rng.choice(["a", "b", "c"], size=int(rng.integers(1, 60))))
+        if "a" not in labels:
+            continue
+        c = labels.count("a")
+        got = ranking_measures(labels, "a")
+        assert got["nn"] == (labels[0] == "a")
+        assert got["first_tier"] == pytest.approx(labels[:c].count("a") / c)
+        assert got["second_tier"] == pytest.approx(labels[:2 * c].count("a") / c)
+        k = min(32, len(labels))
+        hits = labels[:k].count("a")
+        assert got["e_measure"] == pytest.approx(0.0 if hits == 0 else 2 / (k / hits + c / hits))
+        dcg = sum((label == "a") / (np.log2(i) if i > 1 else 1.0) for i, label in enumerate(labels, 1))
+        ideal = sum(1 / (np.log2(i) if i > 1 else 1.0) for i in range(1, c + 1))
+        assert got["dcg"] == pytest.approx(dcg / ideal)
+
+
 def test_a_collection_is_read_with_its_subfolders_and_a_subfolder_names_the_class(tmp_path):
     """``collection/cat/0.off`` is class ``cat`` (class-per-folder benchmarks), ``collection/wolf3.off`` class
     ``wolf``; hidden folders and links to folders are left out; the names are relative to the collection."""

@@ -618,7 +618,8 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
         Writes ``retrieval.csv`` (query, class, AP, rank of the first relevant
         mesh, class margin (:func:`~corrlib.retrieval.class_margin`), top hits, the Princeton Shape Benchmark's
         measures (:func:`~corrlib.retrieval.ranking_measures`), the AP with the query's own mesh left out),
-        ``retrieval_ranking.csv`` (every query's whole ranking: rank, mesh, its
+        ``retrieval_pr.csv`` and ``retrieval_pr.png`` (the mean interpolated precision at 11 recall levels,
+        :func:`~corrlib.retrieval.interpolated_precision`), ``retrieval_ranking.csv`` (every query's whole ranking: rank, mesh, its
         class, ranking score, matching energy, view dissimilarity, seconds, why a mesh failed),
         ``retrieval_summary.json`` and ``retrieval_summary.md``.
     params : Contour3DParams, optional
@@ -638,13 +639,13 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
         ``{"map": float, "map_interval": [low, high]`` (95 % bootstrap interval over the queries,
         :func:`~corrlib.retrieval.map_interval`), ``"median_margin": float, "right_class_first": int,
         "per_class": {class: mean AP}, "queries": int, "failed": int, "own_meshes": dict or None,
-        "nn", "first_tier", "second_tier", "e_measure", "dcg": their means, ...}``.
+        "nn", "first_tier", "second_tier", "e_measure", "dcg": their means, "precision_at_recall": (11,), ...}``.
     """
     from corrlib.io import atomic_write, load_contour
     from corrlib.progress import run
     from corrlib.retrieval import (RANKING_MEASURES, ap_without, average_precision, class_margin, class_of,
-                                   collection_name, files_under, map_interval, mesh_files, ranking_measures,
-                                   read_own_meshes, retrieve)
+                                   collection_name, files_under, interpolated_precision, map_interval, mesh_files,
+                                   ranking_measures, read_own_meshes, retrieve)
 
     query_paths = files_under(queries, CONTOUR_SUFFIXES, "query silhouettes or contour files")
     meshes = mesh_files(collection)
@@ -675,7 +676,7 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
             row["first_relevant"] = labels.index(row["class"]) + 1
             row["margin"] = class_margin(labels, [h.score for h in hits], row["class"])
             row["top"] = " ".join(h.name for h in hits[:5])
-            row.update(ranking_measures(labels, row["class"]))
+            row.update(ranking_measures(labels, row["class"]), precision=interpolated_precision(labels, row["class"]))
             if name in own:
                 row["ap_own_left_out"] = ap_without([h.name for h in hits], labels, own[name], row["class"])
         except Exception as exc:  # a failing query is recorded, the others go on
@@ -683,16 +684,9 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
         rows.append(row)
         if callback is not None:
             callback(number, len(query_paths), row)
-    with atomic_write(out / "retrieval.csv") as fh:
-        columns = ("query", "class", "ap", "first_relevant", "margin", "top", *RANKING_MEASURES, "ap_own_left_out",
-                   "error")
-        fh.write(",".join(columns) + "\n")
-        fh.writelines(",".join(csv_cell(r[c]) for c in columns) + "\n" for r in rows)
-    columns = ("query", "rank", "mesh", "class", "score", "energy", "view_distance", "seconds", "error")
-    with atomic_write(out / "retrieval_ranking.csv") as fh:
-        fh.write(",".join(columns) + "\n")
-        fh.writelines(",".join(csv_cell(r[c]) for c in columns) + "\n" for r in ranked)
     ok = [r for r in rows if not r["error"]]
+    precision = np.mean([r["precision"] for r in ok], axis=0) if ok else None
+    write_retrieval_tables(out, rows, ranked, precision, f"{Path(queries).name} against {Path(collection).name}, {ranking} ranking")
     per_class = {}
     for r in ok:
         per_class.setdefault(r["class"], []).append(r["ap"])
@@ -704,12 +698,39 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
                "per_class": {c: float(np.mean(v)) for c, v in sorted(per_class.items())},
                "queries": len(rows), "failed": len(rows) - len(ok), "collection": len(meshes),
                "failed_meshes": sorted(failed_meshes), "own_meshes": own_mesh_summary(ok, own) if own else None,
-               **{m: float(np.mean([r[m] for r in ok])) if ok else None for m in RANKING_MEASURES}}
+               **{m: float(np.mean([r[m] for r in ok])) if ok else None for m in RANKING_MEASURES},
+               "precision_at_recall": None if precision is None else [float(p) for p in precision]}
     with atomic_write(out / "retrieval_summary.json") as fh:
         json.dump(summary, fh, indent=1)
     with atomic_write(out / "retrieval_summary.md") as fh:
         fh.write(retrieval_summary_text(summary, len(ok), len(margins), ranking))
     return summary
+
+
+def write_retrieval_tables(out: Path, rows: list[dict], ranked: list[dict], precision, title: str) -> None:
+    """:func:`retrieval_benchmark`'s tables: ``retrieval.csv`` (a row per query), ``retrieval_ranking.csv`` (a row
+    per query and mesh) and, where a query was answered, the mean interpolated precision at the 11 recall
+    levels as ``retrieval_pr.csv`` and ``retrieval_pr.png`` (``precision``: (11,) float or None)."""
+    from corrlib.io import atomic_write
+    from corrlib.retrieval import RANKING_MEASURES, RECALL_LEVELS
+
+    tables = (("retrieval.csv", ("query", "class", "ap", "first_relevant", "margin", "top", *RANKING_MEASURES,
+                                 "ap_own_left_out", "error"), rows),
+              ("retrieval_ranking.csv", ("query", "rank", "mesh", "class", "score", "energy", "view_distance",
+                                         "seconds", "error"), ranked))
+    for name, columns, table in tables:
+        with atomic_write(out / name) as fh:
+            fh.write(",".join(columns) + "\n")
+            fh.writelines(",".join(csv_cell(r[c]) for c in columns) + "\n" for r in table)
+    if precision is None:
+        return
+    with atomic_write(out / "retrieval_pr.csv") as fh:
+        fh.write("recall,precision\n")
+        fh.writelines(f"{r:.1f},{p:.6g}\n" for r, p in zip(RECALL_LEVELS, precision))
+    from corrlib.plotting import save_precision_recall
+
+    save_precision_recall(out / "retrieval_pr.png", RECALL_LEVELS, precision,
+                          title=f"{title}: interpolated precision-recall")
 
 
 def own_mesh_summary(rows: list[dict], own: dict[str, str]) -> dict:

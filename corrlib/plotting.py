@@ -172,6 +172,20 @@ def save_error_curves(path, curves: dict, thresholds: np.ndarray, *, title: str 
     return _save_figure(fig, path)
 
 
+def save_precision_recall(path, recall: np.ndarray, precision: np.ndarray, *, title: str) -> Path:
+    """PNG of an interpolated precision–recall curve (the mean over a benchmark's queries)."""
+    fig = _figure(figsize=(6, 4.5), dpi=100)
+    ax = fig.subplots()
+    ax.plot(recall, precision, marker="o")
+    ax.set_xlabel("recall")
+    ax.set_ylabel("precision (interpolated)")
+    ax.set_xlim(0, 1)
+    ax.set_ylim(0, 1.02)
+    ax.grid(alpha=0.3)
+    ax.set_title(title)
+    return _save_figure(fig, path)
+
+
 def _draw_query(ax, contour_points: np.ndarray, hue: np.ndarray) -> None:
     """The filled query contour with its points coloured by contour position."""
     closed = np.vstack([contour_points, contour_points[:1]])

@@ -345,6 +345,33 @@ def ranking_measures(ranked_labels: list[str], relevant: str) -> dict[str, float
             "dcg": float(gains @ discounts / discounts[:members].sum())}
 
 
+#: recall levels of the interpolated precision–recall curve (:func:`interpolated_precision`: the 11 levels of
+#: TREC and of the SHREC retrieval tracks' diagrams)
+RECALL_LEVELS = np.linspace(0.0, 1.0, 11)
+
+
+def interpolated_precision(ranked_labels: list[str], relevant: str) -> np.ndarray:
+    """(11,) float: the interpolated precision of a ranking at :data:`RECALL_LEVELS` (NaN where the ranking holds
+    no mesh of the class ``relevant``).
+
+    After the ``k``-th result the precision is ``r(k)/k`` and the recall ``r(k)/C`` (``r(k)`` meshes of the class
+    among the first ``k``, ``C`` in all); the interpolated precision at recall level ``ρ`` is the highest precision
+    at any recall ``≥ ρ`` (Manning, Raghavan, Schütze, *Introduction to Information Retrieval*, 2008, §8.4), so
+    the curve never rises and a ranking with every member first is 1 at every level.
+    """
+    gains = np.array([label == relevant for label in ranked_labels], dtype=float)
+    members = gains.sum()
+    if members == 0:
+        return np.full(RECALL_LEVELS.size, np.nan)
+    found = np.cumsum(gains)
+    precision = found / np.arange(1, gains.size + 1)
+    recall = found / members
+    # the highest precision at this recall or beyond, then read at the first rank that reaches each level
+    best_after = np.maximum.accumulate(precision[::-1])[::-1]
+    reached = np.searchsorted(recall, RECALL_LEVELS - 1e-12, side="left")
+    return best_after[reached]
+
+
 def ap_without(ranked_names: list[str], ranked_labels: list[str], left_out: str, relevant: str) -> float:
     """:func:`average_precision` of a ranking with the mesh named ``left_out`` taken out of it; NaN where no mesh
     of the class ``relevant`` is left (the precision of a class without members is undefined, not 0)."""

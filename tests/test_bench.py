@@ -396,6 +396,15 @@ def test_retrieval_benchmark_scores_rendered_queries_without_their_own_mesh(tmp_
     for measure in RANKING_MEASURES:
         assert summary[measure] == pytest.approx(np.mean([float(r[measure]) for r in rows.values()]))
     assert "first tier" in text
+    # the mean interpolated precision–recall curve, as a table and a picture
+    from corrlib.retrieval import RECALL_LEVELS, interpolated_precision
+
+    curve = np.loadtxt(out / "retrieval_pr.csv", delimiter=",", skiprows=1)
+    expected = np.mean([interpolated_precision([r[3] for r in ranking if r[0] == query], row["class"])
+                        for query, row in rows.items()], axis=0)
+    assert np.allclose(curve[:, 0], RECALL_LEVELS) and np.allclose(curve[:, 1], expected, atol=1e-6)
+    assert summary["precision_at_recall"] == pytest.approx(list(expected))
+    assert (out / "retrieval_pr.png").stat().st_size > 1000
     capsys.readouterr()
     for content, message in (("cat-1.txt\n", "own.txt, line 1: expected 'QUERY MESH'"),
                              ("cat-9.txt cat0.off\n", "own.txt, line 1: no query 'cat-9.txt'"),

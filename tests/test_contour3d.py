@@ -741,6 +741,28 @@ def test_the_princeton_measures_by_hand_and_against_their_definitions():
         assert got["dcg"] == pytest.approx(dcg / ideal)
 
 
+def test_the_interpolated_precision_by_hand_and_against_its_definition():
+    """Interpolated precision at the 11 recall levels: a ranking worked by hand, a perfect one, and random
+    rankings against the definition read directly (the highest precision at any rank whose recall reaches the
+    level)."""
+    from corrlib.retrieval import RECALL_LEVELS, interpolated_precision
+
+    # a b a a b: precision 1, 1/2, 2/3, 3/4, 3/5 at recall 1/3, 1/3, 2/3, 1, 1
+    assert interpolated_precision(list("abaab"), "a") == pytest.approx([1.0] * 4 + [0.75] * 7)
+    assert interpolated_precision(list("aab"), "a") == pytest.approx([1.0] * 11)
+    assert np.all(np.isnan(interpolated_precision(list("bb"), "a")))
+    rng = np.random.default_rng(8)
+    for _ in range(200):
+        labels = list(rng.choice(["a", "b"], size=int(rng.integers(1, 40))))
+        if "a" not in labels:
+            continue
+        c = labels.count("a")
+        points = [(labels[:k].count("a") / c, labels[:k].count("a") / k) for k in range(1, len(labels) + 1)]
+        expected = [max(p for r, p in points if r >= level - 1e-12) for level in RECALL_LEVELS]
+        got = interpolated_precision(labels, "a")
+        assert got == pytest.approx(expected) and np.all(np.diff(got) <= 1e-12)
+
+
 def test_a_collection_is_read_with_its_subfolders_and_a_subfolder_names_the_class(tmp_path):
     """``collection/cat/0.off`` is class ``cat`` (class-per-folder benchmarks), ``collection/wolf3.off`` class
     ``wolf``; hidden folders and links to folders are left out; the names are relative to the collection."""

@@ -619,8 +619,9 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
         mesh, class margin (:func:`~corrlib.retrieval.class_margin`), top hits, the Princeton Shape Benchmark's
         measures (:func:`~corrlib.retrieval.ranking_measures`), the AP with the query's own mesh left out),
         ``retrieval_pr.csv`` and ``retrieval_pr.png`` (the mean interpolated precision at 11 recall levels,
-        :func:`~corrlib.retrieval.interpolated_precision`), ``retrieval_ranking.csv`` (every query's whole ranking: rank, mesh, its
-        class, ranking score, matching energy, view dissimilarity, seconds, why a mesh failed),
+        :func:`~corrlib.retrieval.interpolated_precision`), ``retrieval_ranking.csv`` (every query's whole
+        ranking: rank, mesh, its class, ranking score, matching energy, view dissimilarity, seconds, why a mesh
+        failed),
         ``retrieval_summary.json`` and ``retrieval_summary.md``.
     params : Contour3DParams, optional
     jobs, scheduler
@@ -649,8 +650,8 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
 
     query_paths = files_under(queries, CONTOUR_SUFFIXES, "query silhouettes or contour files")
     meshes = mesh_files(collection)
-    own = {} if own_meshes is None else read_own_meshes(
-        own_meshes, [collection_name(q, queries) for q in query_paths], [collection_name(m, collection) for m in meshes])
+    own = {} if own_meshes is None else read_own_meshes(own_meshes, [collection_name(q, queries) for q in query_paths],
+                                                         [collection_name(m, collection) for m in meshes])
     out = _checked_retrieval_run(queries, out, jobs, scheduler)
     rows, ranked, failed_meshes = [], [], set()
     for number, q in enumerate(query_paths, 1):
@@ -686,7 +687,8 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
             callback(number, len(query_paths), row)
     ok = [r for r in rows if not r["error"]]
     precision = np.mean([r["precision"] for r in ok], axis=0) if ok else None
-    write_retrieval_tables(out, rows, ranked, precision, f"{Path(queries).name} against {Path(collection).name}, {ranking} ranking")
+    write_retrieval_tables(out, rows, ranked, precision,
+                           f"{Path(queries).name} against {Path(collection).name}, {ranking} ranking")
     per_class = {}
     for r in ok:
         per_class.setdefault(r["class"], []).append(r["ap"])

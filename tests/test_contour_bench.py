@@ -84,6 +84,16 @@ def test_score_of_the_ground_truth_is_perfect_and_of_a_collapsed_curve_is_not():
     assert score_curve(collapsed_map, short, either, wolf, query.length_3d)["mean_error"] == 0.0
     alternative = score_curve(collapsed_map, short, np.column_stack([gt, gt]), wolf, query.length_3d)
     assert alternative["mean_error"] == pytest.approx(bad["mean_error"], rel=1e-12)
+    # the share of the truth reached by the curve: all of it for the truth and for the truth traversed the other
+    # way round (every point on the curve, the errors large); little of it for the short curve, and for a curve
+    # crowded into the same stretch that wiggles back and forth until it is as long as the truth
+    assert perfect["reached"] == 1.0 and bad["reached"] < 0.2
+    backwards = score_curve(gt[::-1], np.array(path[::-1]), gt, wolf, query.length_3d)
+    assert backwards["reached"] == 1.0 and backwards["mean_error"] > 0.2
+    repeats = int(np.ceil(perfect["coverage"] / bad["coverage"]))
+    wiggle = np.r_[np.tile(short[:-1], repeats), short[-1]]
+    crowded = score_curve(collapsed_map, wiggle, gt, wolf, query.length_3d)
+    assert crowded["coverage"] >= perfect["coverage"] and crowded["reached"] == bad["reached"]
 
 
 def test_jobs_pair_each_mesh_with_itself_and_its_class(tmp_path):

@@ -38,6 +38,22 @@ def test_plane_distances_are_euclidean(plane):
     assert rel.max() < 0.12 and rel.mean() < 0.03  # the heat method is approximate (a few percent)
 
 
+def test_distances_to_the_nearest_source_are_the_nearest_of_single_source_distances(plane):
+    """One Dijkstra run from several sources equals the smallest of the single-source graph distances, is zero at
+    the sources and never below the nearest Euclidean distance on a plane; a repeated source changes nothing,
+    and a source outside the mesh is named."""
+    solver = GeodesicSolver(plane)
+    sources = np.array([5, 300, 777, 300])
+    found = solver.distances_to_nearest(sources)
+    assert np.allclose(found, solver.distances(sources, method="graph").min(axis=0))
+    assert found.shape == (plane.n_vertices,) and np.all(found[sources] == 0.0)
+    nearest = np.min(np.linalg.norm(plane.vertices[:, None, :] - plane.vertices[sources][None], axis=2), axis=1)
+    assert np.all(found >= nearest - 1e-12)
+    assert np.array_equal(found, solver.distances_to_nearest(np.unique(sources)))
+    with pytest.raises(InputError):
+        solver.distances_to_nearest([plane.n_vertices])
+
+
 def test_graph_distances_are_computed_in_short_calls(plane, monkeypatch):
     """Many sources give scipy's Dijkstra, row for row, in the order asked; no call takes more than
     ``GRAPH_SOURCES_PER_CALL`` of them (each call holds the interpreter lock, which a studio's drawing needs)."""

@@ -264,6 +264,14 @@ def _vts_transfer(source_vertices: np.ndarray, rows_source: np.ndarray, rows_tar
     return transfer
 
 
+def point_errors(map_xy: np.ndarray, gt: np.ndarray, target: TriMesh, solver) -> np.ndarray:
+    """(m,) float: the geodesic error / √area of every matched contour point against its ground-truth vertex, or
+    the nearest of its acceptable vertices (``gt`` (m,) or (m, k) int); ``solver``: the target's
+    :class:`~corrlib.geometry.geodesics.GeodesicSolver`."""
+    candidates = np.asarray(gt).reshape(len(map_xy), -1)
+    return np.min([solver.pair_distances(map_xy, column) for column in candidates.T], axis=0) / np.sqrt(target.area)
+
+
 def score_curve(map_xy: np.ndarray, path_vertices: np.ndarray, gt: np.ndarray, target: TriMesh,
                 gt_length: float, solver=None) -> dict:
     """Accuracy and coverage of a matched closed curve.
@@ -298,7 +306,7 @@ def score_curve(map_xy: np.ndarray, path_vertices: np.ndarray, gt: np.ndarray, t
 
     solver = solver or GeodesicSolver(target)
     candidates = np.asarray(gt).reshape(len(map_xy), -1)
-    errors = np.min([solver.pair_distances(map_xy, column) for column in candidates.T], axis=0) / np.sqrt(target.area)
+    errors = point_errors(map_xy, candidates, target, solver)
     length = np.linalg.norm(np.diff(target.vertices[path_vertices], axis=0), axis=1).sum()
     to_curve = solver.distances_to_nearest(path_vertices)[candidates].min(axis=1) / np.sqrt(target.area)
     return {"n_points": int(len(map_xy)), "mean_error": float(errors.mean()), "median_error": float(np.median(errors)),
@@ -377,9 +385,8 @@ def match_cut_query(source_path, target_path, plane: str, params: dict, *, gt_ro
                                solver))
         row["mean_error_sym"] = row["mean_error"]
         if mirror_rows is not None:
-            mirrored = score_curve(result.map_xy, path, _vts_transfer(target.vertices, *mirror_rows)(gt), target, 1.0,
-                                   solver)
-            row["mean_error_sym"] = min(row["mean_error"], mirrored["mean_error"])
+            mirrored = point_errors(result.map_xy, _vts_transfer(target.vertices, *mirror_rows)(gt), target, solver)
+            row["mean_error_sym"] = min(row["mean_error"], float(mirrored.mean()))
         row.update(view=result.extras.get("view", ""), model=result.extras.get("model", ""))
         row.update(path_search_fields(result, seconds))
         if picture is not None:

@@ -398,7 +398,7 @@ def read_own_meshes(path, query_names, mesh_names) -> dict[str, str]:
     ------
     InputError
         Naming the file (and line) where it cannot be read, a line has fewer than two names, a query or mesh
-        is not in the benchmark, or a query is listed twice.
+        is not in the benchmark, a query is listed twice, or no query is listed.
     """
     path = Path(path)
     try:
@@ -422,6 +422,8 @@ def read_own_meshes(path, query_names, mesh_names) -> dict[str, str]:
         if query in own:
             raise InputError(f"{where}: query {query!r} is listed a second time")
         own[query] = mesh
+    if not own:
+        raise InputError(f"{path}: lists no query (expected lines 'QUERY MESH')")
     return own
 
 

@@ -21,6 +21,11 @@ of the synthetic person in ``resources/people``) and ``OUT/queries``
 ``OUT/sources.txt`` names the mesh of each rendered query (``QUERY MESH`` per line). Then: ``corr
 bench-retrieval OUT/queries OUT/collection``, with ``--own-meshes OUT/sources.txt`` to score the rendered
 queries also with their own mesh left out (an outline against its shape's other poses).
+
+``python scripts/retrieval_set.py --drawn OUT`` writes the same collection and, as queries, the seven outlines
+of ``resources/data/silhouettes/drawn_set`` (two cats, a wolf, a lion, three people), drawn before any ranking
+of them was seen (``docs/decisions.md``, sixty-fourth session): a check of retrieval on drawings that no choice
+of the ranking was compared on, which the three drawings above were.
 """
 
 from __future__ import annotations
@@ -96,7 +101,28 @@ def main(out: Path) -> None:
           f"--own-meshes)")
 
 
+def drawings() -> list[Path]:
+    """The outlines of ``resources/data/silhouettes/drawn_set``, each named ``CLASS_WHAT.txt``."""
+    from corrlib.resources import resource
+
+    return sorted(Path(resource("data/silhouettes/drawn_set")).glob("*.txt"))
+
+
+def drawn_main(out: Path) -> None:
+    """``--drawn OUT``: the bundled collection and the drawn set as queries, in a subfolder per class
+    (``OUT/queries/cat/cat_walking.txt``), so that every query keeps the name of its drawing."""
+    _, queries = new_benchmark_folders(out)
+    for drawing in drawings():
+        (queries / drawing.stem.split("_")[0]).mkdir(exist_ok=True)
+        shutil.copy(drawing, queries / drawing.stem.split("_")[0] / drawing.name)
+    print(f"{len(drawings())} drawn queries in {queries}, a subfolder per class; the bundled collection in "
+          f"{out / 'collection'}")
+
+
 if __name__ == "__main__":
-    if len(sys.argv) != 2:
-        _fail("usage: python scripts/retrieval_set.py OUT")
-    main(Path(sys.argv[1]))
+    if len(sys.argv) == 3 and sys.argv[1] == "--drawn":
+        drawn_main(Path(sys.argv[2]))
+    elif len(sys.argv) == 2 and not sys.argv[1].startswith("-"):
+        main(Path(sys.argv[1]))
+    else:
+        _fail("usage: python scripts/retrieval_set.py [--drawn] OUT")

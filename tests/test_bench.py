@@ -409,7 +409,8 @@ def test_retrieval_benchmark_scores_rendered_queries_without_their_own_mesh(tmp_
     for content, message in (("cat-1.txt\n", "own.txt, line 1: expected 'QUERY MESH'"),
                              ("cat-9.txt cat0.off\n", "own.txt, line 1: no query 'cat-9.txt'"),
                              ("\ncat-1.txt lion0.off\n", "own.txt, line 2: no mesh 'lion0.off'"),
-                             ("cat-1.txt cat0.off\ncat-1.txt cat1.off\n", "line 2: query 'cat-1.txt' is listed")):
+                             ("cat-1.txt cat0.off\ncat-1.txt cat1.off\n", "line 2: query 'cat-1.txt' is listed"),
+                             ("# nothing\n\n", "own.txt: lists no query")):
         listing.write_text(content)
         assert main(["bench-retrieval", str(queries), str(collection), "-o", str(tmp_path / "bad"), "-q",
                      "--own-meshes", str(listing)]) == 2

@@ -607,28 +607,29 @@ def test_the_view_set_turns_the_side_view_about_the_vertical_axis():
 
 
 def test_the_drawn_set_names_a_class_of_the_collection_for_every_drawing(tmp_path):
-    """``scripts/retrieval_drawn.py``: every bundled drawing becomes a query ``CLASS_NN.txt`` of a class the
-    collection holds (else its average precision is undefined), the outline a simple polygon, and a second run
-    into the same folder stops with a named error before writing."""
+    """``scripts/retrieval_set.py --drawn``: every bundled drawing becomes a query in the subfolder of its class, a
+    class the collection holds (else its average precision is undefined), the outline a simple polygon; a second
+    run into the same folder stops with a named error before writing."""
     import importlib.util
 
     from corrlib.io import load_contour
-    from corrlib.retrieval import class_of
+    from corrlib.retrieval import class_of, files_under
     from corrlib.shapes import inspect_contour
 
-    spec = importlib.util.spec_from_file_location("retrieval_drawn", ROOT / "scripts" / "retrieval_drawn.py")
-    drawn = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(drawn)
-    drawn.main(tmp_path)
-    queries = sorted((tmp_path / "queries").iterdir())
+    spec = importlib.util.spec_from_file_location("retrieval_set", ROOT / "scripts" / "retrieval_set.py")
+    sets = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(sets)
+    sets.drawn_main(tmp_path)
+    queries = files_under(tmp_path / "queries", {".txt"}, "queries")
     classes = {class_of(mesh) for mesh in (tmp_path / "collection").glob("*.off")}
-    assert len(queries) == len(drawn.drawings()) == 7
-    assert {class_of(query) for query in queries} == {"cat", "wolf", "lion", "human"} <= classes
+    assert len(queries) == len(sets.drawings()) == 7
+    assert {class_of(query, tmp_path / "queries") for query in queries} == {"cat", "wolf", "lion", "human"} <= classes
+    assert {query.name for query in queries} == {drawing.name for drawing in sets.drawings()}
     for query in queries:
         outline = load_contour(query)
         assert outline.points.shape[0] >= 20 and inspect_contour(outline.points) == [], query.name
     with pytest.raises(SystemExit):
-        drawn.main(tmp_path)
+        sets.drawn_main(tmp_path)
 
 
 def test_an_approximate_search_returns_the_same_curve_on_any_thread():

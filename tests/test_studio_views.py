@@ -543,3 +543,91 @@ def test_a_map_opened_for_the_pair_is_compared_with_the_methods(qtbot, window, t
     window.load_file(str(TOSCA / "wolf1.off"), "source")  # another pair: the map is not its map
     wait_loaded(qtbot, window)
     assert window.map_files == []
+
+
+def test_the_product_layout_draws_the_smaller_shape_larger():
+    """Worked by hand: two shapes twice as wide as tall in a 600 × 600 plot are drawn 300 px wide side by side
+    (300 × 600 viewports) and 600 px wide stacked (600 × 300), so they are stacked; two shapes twice as tall
+    as wide are drawn 600 px tall side by side and 300 px stacked; a tie stays side by side."""
+    from app.views.product import SIDE_BY_SIDE, STACKED, drawn_scale, product_layout
+
+    assert drawn_scale((2.0, 1.0), (300, 600)) == 150 and drawn_scale((2.0, 1.0), (600, 300)) == 300
+    assert product_layout([(2.0, 1.0), (2.0, 1.0)], (600, 600)) is STACKED
+    assert product_layout([(1.0, 2.0), (1.0, 2.0)], (600, 600)) is SIDE_BY_SIDE
+    assert product_layout([(1.0, 1.0), (1.0, 1.0)], (600, 300)) is SIDE_BY_SIDE  # 300 px against 150 stacked
+    assert product_layout([(1.0, 1.0), (1.0, 1.0)], (600, 600)) is SIDE_BY_SIDE  # 300 either way: a tie
+    # the smaller of the two decides: a tall contour beside a wide mesh in a wide plot
+    assert product_layout([(1.0, 3.0), (3.0, 1.0)], (1200, 400)) is SIDE_BY_SIDE
+
+
+def test_an_animal_seen_from_the_side_is_drawn_below_its_outline(qtbot, window):
+    """A side view of the wolf in the product view: both shapes are wide, so the outline is drawn above the mesh
+    (each viewport the whole width), and side by side again in a plot wide enough for both."""
+    from app.views.camera import ShapeDisplay
+    from app.views.product import SIDE_BY_SIDE, STACKED
+    from corrlib.io import load_mesh
+
+    wolf = load_mesh(TOSCA / "wolf0.off")
+    points = ShapeDisplay.of(wolf.vertices).points(wolf.vertices)
+    rim = np.flatnonzero(np.abs(points[:, 2]) < 0.01)  # the section by the plane of the side view
+    rim = rim[np.argsort(np.arctan2(points[rim, 1], points[rim, 0]))]
+    view = window.product_view
+    window.tabs.setCurrentWidget(view)
+    window.resize(1280, 720)
+    qtbot.wait(300)
+    view.show_contour_match(points[rim, :2], wolf, rim, np.arange(rim.size), 1.0)
+    qtbot.wait(300)  # the plot laid out at its size
+
+    def viewports():
+        return tuple(tuple(renderer.GetViewport()) for renderer in view.plotter.renderers[:2])
+
+    assert viewports() == STACKED
+    window.resize(1900, 420)  # a plot several times as wide as tall
+    qtbot.waitUntil(lambda: viewports() == SIDE_BY_SIDE, timeout=5000)
+
+
+def test_a_matched_curve_is_lifted_off_the_surface_along_the_outward_normals():
+    """On a sphere of radius 1 the curve's points lie at 1 + lift, also where the faces are oriented inward."""
+    from app.views.scene import lifted_curve, outward_normals
+    from corrlib.shapes import TriMesh
+    import pyvista as pv
+
+    sphere = pv.Sphere(radius=1.0, theta_resolution=24, phi_resolution=24).triangulate().clean()
+    vertices, faces = np.asarray(sphere.points, dtype=float), np.asarray(sphere.faces).reshape(-1, 4)[:, 1:]
+    path = np.arange(0, vertices.shape[0], 5)
+    for f in (faces, faces[:, ::-1]):
+        mesh = TriMesh(vertices, f)
+        curve = lifted_curve(vertices, outward_normals(mesh), path, 0.05)
+        assert np.allclose(np.linalg.norm(curve.points, axis=1), 1.05, atol=2e-3)
+        assert curve.n_points == path.size
+
+
+def test_a_curve_along_the_outline_of_the_thumbnail_is_in_sight(monkeypatch):
+    """A curve along the wolf's back, which the side view sees edge-on: lifted off the surface it shows along
+    the back's outline; drawn on the surface, the body hides a good part of the same tube."""
+    from io import BytesIO
+
+    from PIL import Image
+
+    from app.views import retrieval, scene
+    from app.views.camera import ShapeDisplay
+    from corrlib.io import load_mesh
+
+    wolf = load_mesh(TOSCA / "wolf0.off")
+    points = ShapeDisplay.of(wolf.vertices).points(wolf.vertices)
+    middle = np.flatnonzero(np.abs(points[:, 2]) < 0.01)
+    back = middle[points[middle, 1] > np.percentile(points[:, 1], 60)]
+    back = back[np.argsort(points[back, 0])]
+
+    def crimson_pixels():
+        renderer = retrieval.ThumbnailRenderer(size=200)
+        try:
+            image = np.asarray(Image.open(BytesIO(renderer.png(wolf, back))))[..., :3].astype(int)
+        finally:
+            renderer.close()
+        return int(((image[..., 0] > 150) & (image[..., 1] < 80) & (image[..., 2] < 100)).sum())
+
+    lifted = crimson_pixels()
+    on_surface = scene.lifted_curve
+    monkeypatch.setattr(scene, "lifted_curve", lambda p, n, path, lift, closed=True: on_surface(p, n, path, 0.0, closed))
+    assert lifted > 300 and lifted > 1.25 * crimson_pixels()

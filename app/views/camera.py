@@ -48,6 +48,10 @@ class ShapeDisplay:
         """(n, 3) float: ``vertices`` (the shape's or its deformations') in the display frame."""
         return (np.asarray(vertices, dtype=np.float64) - self.centre) @ self.rotation.T / self.scale
 
+    def directions(self, vectors: np.ndarray) -> np.ndarray:
+        """(n, 3) float: unit ``vectors`` (e.g. normals) in the display frame (rotated; lengths kept)."""
+        return np.asarray(vectors, dtype=np.float64) @ self.rotation.T
+
 
 @dataclass(frozen=True)
 class Displayed:
@@ -86,12 +90,17 @@ def viewport_aspect(plotter, renderer=None) -> float:
     """
     renderer = renderer or plotter.renderers[0]
     x0, y0, x1, y1 = renderer.GetViewport()
+    width, height = window_size(plotter)
+    return max((x1 - x0) * width, 1.0) / max((y1 - y0) * height, 1.0)
+
+
+def window_size(plotter) -> tuple[int, int]:
+    """Width and height in pixels of the plotter's whole window: the Qt widget's size where there is one (the
+    render window learns its new size only at its next render), else the window size."""
     interactor = getattr(plotter, "interactor", None)
     if interactor is not None and hasattr(interactor, "width") and interactor.width() > 0:
-        width, height = interactor.width(), interactor.height()
-    else:
-        width, height = plotter.window_size
-    return max((x1 - x0) * width, 1.0) / max((y1 - y0) * height, 1.0)
+        return interactor.width(), interactor.height()
+    return tuple(plotter.window_size)
 
 
 def apply_camera(plotter, camera: Camera, renderers=None) -> None:

@@ -5,8 +5,9 @@ from __future__ import annotations
 import numpy as np
 from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QVBoxLayout, QWidget
 
-from app.views.camera import DISPLAY_FRAME, FramedView, ShapeDisplay, viewport_aspect
-from app.views.scene import LABEL_FONT_SIZE, PLAIN_COLOR, LazyPlotter, hue_colors, polydata, polyline
+from app.views.camera import DISPLAY_FRAME, FramedView, ShapeDisplay, viewport_aspect, window_size
+from app.views.scene import (LABEL_FONT_SIZE, PLAIN_COLOR, LazyPlotter, hue_colors, lifted_curve, outward_normals,
+                             polydata, polyline)
 from corrlib.viewing import outline_frame
 
 CURVE_WIDTH = 4  # line width of the query contour
@@ -15,7 +16,36 @@ PRODUCT_HINT = ("Match a contour to a mesh (2D-to-3D) to see the matched curve h
                 "pairs appear when that method is available.")
 CONTOUR_MARGIN = 1.05  # the query contour fills its viewport up to this margin
 CONTOUR_VIEW_ANGLE = 30.0  # degrees: VTK's default, the contour's camera
-CURVE_TUBE_RADIUS = 0.004  # radius of the matched curve's tube, relative to the mesh's bounding-box diagonal
+CURVE_TUBE_RADIUS = 0.007  # radius of the matched curve's tube, relative to the mesh's bounding-box diagonal
+#: viewports (x0, y0, x1, y1) of the contour and of the mesh: side by side, or the contour above the mesh
+SIDE_BY_SIDE = ((0.0, 0.0, 0.5, 1.0), (0.5, 0.0, 1.0, 1.0))
+STACKED = ((0.0, 0.5, 1.0, 1.0), (0.0, 0.0, 1.0, 0.5))
+
+
+def drawn_scale(extent: tuple[float, float], viewport: tuple[float, float]) -> float:
+    """Pixels per unit at which a shape of ``extent`` (width, height) just fits a ``viewport`` (width, height)."""
+    return min(viewport[0] / max(extent[0], 1e-12), viewport[1] / max(extent[1], 1e-12))
+
+
+def product_layout(extents: list[tuple[float, float]], window: tuple[float, float]) -> tuple:
+    """:data:`SIDE_BY_SIDE` or :data:`STACKED`, whichever draws the contour and the mesh larger.
+
+    Each shape's size is its :func:`drawn_scale` relative to its own larger extent, and the layout whose smaller
+    shape is drawn larger wins (side by side on a tie): two wide shapes (an animal seen from the side) are
+    stacked in a squarish window and drawn about twice as large, two tall ones (a person) stand side by side.
+
+    Parameters
+    ----------
+    extents : list of (width, height)
+        The contour's and the mesh's extents as shown.
+    window : (width, height)
+        The plot's size in pixels.
+    """
+    def smaller_size(viewports) -> float:
+        return min(drawn_scale(extent, (window[0] * (x1 - x0), window[1] * (y1 - y0))) * max(extent)
+                   for extent, (x0, y0, x1, y1) in zip(extents, viewports))
+
+    return STACKED if smaller_size(STACKED) > smaller_size(SIDE_BY_SIDE) else SIDE_BY_SIDE
 
 
 class ProductView(QWidget, FramedView):
@@ -105,9 +135,11 @@ class ProductView(QWidget, FramedView):
         p.add_mesh(line, scalars=hue_colors(np.arange(m) / m), rgb=True, line_width=CURVE_WIDTH)
         p.add_text("query contour", font_size=LABEL_FONT_SIZE)
         p.subplot(0, 1)
-        self.mesh_points = ShapeDisplay.of(mesh.vertices, self.up).points(mesh.vertices)
+        display = ShapeDisplay.of(mesh.vertices, self.up)
+        self.mesh_points = display.points(mesh.vertices)
         p.add_mesh(polydata(self.mesh_points, mesh.faces), color=PLAIN_COLOR, smooth_shading=True)
-        self.curve = polyline(self.mesh_points[path_vertices], closed=False)
+        self.curve = lifted_curve(self.mesh_points, display.directions(outward_normals(mesh)), path_vertices,
+                                  CURVE_TUBE_RADIUS, closed=False)
         self.curve["colors"] = hue_colors(path_contour_index / m)  # carried onto the tube's points
         tube = self.curve.tube(radius=CURVE_TUBE_RADIUS)  # the display frame has unit diagonal
         if tube.n_points:
@@ -120,15 +152,31 @@ class ProductView(QWidget, FramedView):
         if np.unique(path_vertices).size > 2:
             self.drawn_frame = outline_frame(self.mesh_points[path_vertices], contour_points[path_contour_index],
                                              DISPLAY_FRAME)
+        self._contour_display = np.asarray(line.points)
+        self._lay_out_match()
         self.fit_preset()
         p.subplot(0, 0)
-        self._contour_display = np.asarray(line.points)
         self._fit_contour(self._contour_display)
         p.render()
         self.info.setText(f"{m} contour points matched along a closed curve of {len(path_vertices)} steps.")
 
+    def _lay_out_match(self) -> None:
+        """The contour and the mesh side by side or one above the other (:func:`product_layout`), the mesh's
+        extent as seen from its preset frame."""
+        frame = (self.drawn_frame or DISPLAY_FRAME).matrix[:2]
+        seen = self.mesh_points @ frame.T
+        extents = [tuple(np.ptp(points[:, :2], axis=0)) for points in (self._contour_display, seen)]
+        self._set_viewports(product_layout(extents, window_size(self.plotter)))
+
+    def _set_viewports(self, viewports) -> None:
+        for renderer, viewport in zip(self.plotter.renderers, viewports):
+            renderer.SetViewport(*viewport)
+
     def _on_resized(self) -> None:
-        """Refit the mesh (while at its preset) and the contour to their new viewports."""
+        """Lay the match out again for the new size, and refit the mesh (while at its preset) and the contour to
+        their viewports."""
+        if self._match is not None and getattr(self, "_contour_display", None) is not None:
+            self._lay_out_match()
         super()._on_resized()
         if self._match is not None and getattr(self, "_contour_display", None) is not None:
             self.plotter.subplot(0, 0)
@@ -176,6 +224,7 @@ class ProductView(QWidget, FramedView):
         values = np.asarray(path.product_functions[name], dtype=np.float64).ravel() if name else None
         p = self.plotter
         p.clear_actors()
+        self._set_viewports(SIDE_BY_SIDE)
         curve_uv = path_angles(path.layers, path.vertices, u, v)
         for col, flat in ((0, False), (1, True)):
             p.subplot(0, col)

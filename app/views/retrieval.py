@@ -23,7 +23,7 @@ from PySide6.QtWidgets import (
 THUMBNAIL_PX = 160  # gallery thumbnails are square, this many pixels wide
 GALLERY_SPACING_PX = 8
 THUMBNAIL_GREY = 0.8  # colour of the mesh in a thumbnail (the matched curve is crimson)
-CURVE_TUBE_RADIUS = 0.006  # radius of the matched curve's tube in display units (unit diagonal)
+CURVE_TUBE_RADIUS = 0.012  # radius of the matched curve's tube in display units (unit diagonal)
 
 
 class ThumbnailRenderer:
@@ -57,16 +57,18 @@ class ThumbnailRenderer:
         from PIL import Image
 
         from app.views.camera import DISPLAY_FRAME, ShapeDisplay, apply_camera, show_preset
-        from app.views.scene import polydata, polyline
+        from app.views.scene import lifted_curve, outward_normals, polydata
         from corrlib.viewing import fitted_camera, outline_frame
 
         plotter = self._get()
         plotter.clear_actors()
-        points = ShapeDisplay.of(mesh.vertices, up).points(mesh.vertices)
+        display = ShapeDisplay.of(mesh.vertices, up)
+        points = display.points(mesh.vertices)
         plotter.add_mesh(polydata(points, mesh.faces), color=[THUMBNAIL_GREY] * 3, smooth_shading=True)
         curve = None if path_vertices is None or len(path_vertices) < 2 else points[path_vertices]
         if curve is not None:
-            plotter.add_mesh(polyline(curve, closed=True).tube(radius=CURVE_TUBE_RADIUS), color="crimson")
+            lifted = lifted_curve(points, display.directions(outward_normals(mesh)), path_vertices, CURVE_TUBE_RADIUS)
+            plotter.add_mesh(lifted.tube(radius=CURVE_TUBE_RADIUS), color="crimson")
         if curve is not None and outline is not None and len(np.unique(path_vertices)) > 2:
             apply_camera(plotter, fitted_camera(points, outline_frame(curve, outline, DISPLAY_FRAME)))
         else:

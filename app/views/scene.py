@@ -42,6 +42,36 @@ def polyline(points: np.ndarray, closed: bool = True) -> pv.PolyData:
     return pv.PolyData(p, lines=np.concatenate([[idx.size], idx]))
 
 
+def outward_normals(mesh) -> np.ndarray:
+    """(n, 3) float: the mesh's unit vertex normals, turned outward where a closed mesh's faces are oriented
+    inward (negative enclosed volume); an open mesh's as its faces give them."""
+    volume = mesh.enclosed_volume()
+    return -mesh.vertex_normals if volume is not None and volume < 0 else mesh.vertex_normals
+
+
+def lifted_curve(points: np.ndarray, normals: np.ndarray, path_vertices: np.ndarray, lift: float,
+                 closed: bool = True) -> pv.PolyData:
+    """A curve through mesh vertices, lifted off the surface by ``lift`` along the outward vertex normals.
+
+    Drawn as a tube of radius ``lift``, it lies on the surface instead of half inside it. A curve along the
+    outline of the view (an animal's back or belly seen from the side, where a silhouette's curve runs) would
+    otherwise be half hidden by the shape it lies on, and a thin tube entirely.
+
+    Parameters
+    ----------
+    points, normals : (n, 3) float
+        The mesh's vertices and outward unit vertex normals (:func:`outward_normals`), in one frame.
+    path_vertices : (p,) int
+        The curve's vertices in order.
+    lift : float
+        Distance from the surface, in the units of ``points``.
+    closed : bool
+        Whether the last vertex joins the first.
+    """
+    path = np.asarray(path_vertices)
+    return polyline(points[path] + lift * normals[path], closed=closed)
+
+
 def hue_colors(values: np.ndarray) -> np.ndarray:
     """(n, 3) RGB in [0, 1] from values in [0, 1) on the HSV hue circle."""
     from matplotlib import cm

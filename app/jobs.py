@@ -273,7 +273,8 @@ def _outcome(result, source, target, gt, view_data: bool):
 
 def contour_reading(result) -> str:
     """One log line on how a 2D-to-3D match read its query: the energy's meaning and, for ``contour3d``, the
-    view it took with the two measures that decided it (so that a wrong view can be forced)."""
+    view it took with the two measures that decided it (so that a wrong view can be forced); a second line
+    warns when the matched curve is short enough to have collapsed (:func:`~corrlib.methods.contour3d.short_curve_note`)."""
     line = f"{result.method}: {result.energy_meaning or 'energy'} {result.energy:.6g}"
     extras = result.extras or {}
     if "view" in extras:
@@ -287,7 +288,9 @@ def contour_reading(result) -> str:
         line += (f"; the contour was matched at {extras['contour_points']} points instead of "
                  f"{extras['contour_points_asked']}: the target's mean edge is longer than the finer step, "
                  "which would press the curve short")
-    from corrlib.methods.contour3d import remeshing_note
+    from corrlib.methods.contour3d import remeshing_note, short_curve_note
 
     note = remeshing_note(extras)
-    return line + (f"; {note}" if note else "")
+    line += f"; {note}" if note else ""
+    warning = short_curve_note(extras)
+    return line + (f"\nwarning: {warning}" if warning else "")

@@ -6,7 +6,8 @@
 * ``--screenshot PATH`` renders the window once the first result is shown
   (or after ``--timeout`` seconds), writes the PNG and exits — for
   documentation and for checking the GUI on a machine without a screen
-  (run it under ``xvfb-run``).
+  (run it under ``xvfb-run``); the errors the window shows go to stderr,
+  and the exit status is 1 after one, or after the timeout.
 """
 
 from __future__ import annotations
@@ -15,6 +16,8 @@ import argparse
 import math
 import os
 import sys
+
+from app.views import TAB_NAMES
 
 
 DEFAULT_SCREENSHOT_TIMEOUT_S = 300.0
@@ -29,7 +32,7 @@ def build_parser() -> argparse.ArgumentParser:
     parser.add_argument("files", nargs="*", help="source and target (meshes, contours or silhouettes)")
     parser.add_argument("--demo", action="store_true", help="open the bundled demo pair and run a method")
     parser.add_argument("--method", help="method to run on start (default: the best available)")
-    parser.add_argument("--tab", help="tab to show: Pair, Product, Sequence, Retrieval, Compare")
+    parser.add_argument("--tab", type=str.capitalize, choices=TAB_NAMES, help=f"tab to show: {', '.join(TAB_NAMES)}")
     from app.views.pair import MODES
 
     parser.add_argument("--pair-mode", choices=list(MODES),
@@ -130,9 +133,10 @@ def start_jobs(window, args) -> bool:
     return False
 
 
-def schedule_screenshot(app, window, args, started: bool) -> None:
-    """Write ``args.screenshot`` after the first result or error (or soon, if nothing runs), then quit;
-    give up after ``args.timeout`` seconds."""
+def schedule_screenshot(app, window, args, started: bool, errors: list) -> None:
+    """Write ``args.screenshot`` after the first result or error (or soon, if nothing runs), then quit with
+    exit status 1 if the window showed an error (``errors``: every message shown so far, and later) or no
+    result came within ``args.timeout`` seconds, 0 otherwise."""
     from PySide6.QtCore import QTimer
 
     from app.views.sequence import STEPS
@@ -150,14 +154,20 @@ def schedule_screenshot(app, window, args, started: bool) -> None:
         for _ in range(SETTLE_EVENT_ROUNDS):
             app.processEvents()
         QTimer.singleShot(SCREENSHOT_SETTLE_MS,
-                          lambda: (window.save_screenshot(args.screenshot), window.close(), app.quit()))
+                          lambda: (window.save_screenshot(args.screenshot), window.close(), app.exit(1 if errors else 0)))
 
     if started:
         window.result_ready.connect(shoot)
         window.error_shown.connect(shoot)
     else:
         QTimer.singleShot(NO_JOB_SCREENSHOT_DELAY_MS, shoot)
-    QTimer.singleShot(int(args.timeout * 1000), lambda: (window.save_screenshot(args.screenshot), app.quit()))
+    def give_up():
+        print(f"corr-studio: no result within --timeout {args.timeout:g} s; the screenshot shows the window as it "
+              "was", file=sys.stderr)
+        window.save_screenshot(args.screenshot)
+        app.exit(1)
+
+    QTimer.singleShot(int(args.timeout * 1000), give_up)
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -165,6 +175,15 @@ def main(argv: list[str] | None = None) -> int:
 
     t_start = time.perf_counter()
     args = build_parser().parse_args(argv)
+    if args.method is not None:
+        from corrlib.errors import ParameterError
+        from corrlib.methods.registry import get_method
+
+        try:
+            get_method(args.method)
+        except ParameterError as exc:
+            print(f"corr-studio: --method: {exc}", file=sys.stderr)
+            return 2
     if not has_display():
         return 2
     if args.bench:
@@ -177,6 +196,10 @@ def main(argv: list[str] | None = None) -> int:
 
     app = QApplication.instance() or QApplication(sys.argv[:1])
     window = MainWindow(interactive=args.screenshot is None)
+    errors: list[str] = []
+    window.error_shown.connect(errors.append)  # before the inputs load: a file that fails to is an error too
+    if args.screenshot:  # no one reads the window's log: the errors go to stderr too
+        window.error_shown.connect(lambda message: print(f"corr-studio: {message}", file=sys.stderr))
     window.show()
     open_inputs(window, args)
     select_tab(window, args.tab)
@@ -189,7 +212,7 @@ def main(argv: list[str] | None = None) -> int:
             return 2
     started = start_jobs(window, args)
     if args.screenshot:
-        schedule_screenshot(app, window, args, started)
+        schedule_screenshot(app, window, args, started, errors)
     return app.exec()
 
 

@@ -34,6 +34,7 @@ from app.gui_gc import STUDIO_THREAD_PREFIX, collect_on_gui_thread
 from app.jobs import LoadedShape, MethodOutcome, contour_reading, describe, load_job, map_job, method_job, repair_job
 from app.param_form import ParamForm
 from app.sketch import SketchPanel
+from app.views import TAB_NAMES
 from app.views.compare import CompareView
 from app.views.pair import PairView
 from app.views.product import ProductView
@@ -203,9 +204,8 @@ class MainWindow(QMainWindow):
         self.sequence_view = SequenceView()
         self.retrieval_view = RetrievalView()
         self.compare_view = CompareView()
-        for name, view in (("Pair", self.pair_view), ("Product", self.product_view),
-                           ("Sequence", self.sequence_view), ("Retrieval", self.retrieval_view),
-                           ("Compare", self.compare_view)):
+        for name, view in zip(TAB_NAMES, (self.pair_view, self.product_view, self.sequence_view,
+                                          self.retrieval_view, self.compare_view)):
             self.tabs.addTab(view, name)
         self.setCentralWidget(self.tabs)
         self.retrieval_view.run_requested.connect(self.run_retrieval)
@@ -786,6 +786,9 @@ class MainWindow(QMainWindow):
             step = self.next_step()
             self.show_error(f"no method to run: {step[0].lower()}{step[1:]}")
             return
+        if name not in self._forms:  # every registered method has a form
+            self.show_error(f"unknown method {name!r} (available: {', '.join(sorted(self._forms))})")
+            return
         self._start_method(PAIR_KEY, name)
 
     def _start_method(self, key: str, name: str) -> bool:
@@ -889,7 +892,7 @@ class MainWindow(QMainWindow):
             self.pair_view.set_result(result, None if outcome.errors is None else outcome.errors.per_vertex,
                                       function=outcome.function, n_unmatched=outcome.n_unmatched)
             if outcome.sequences:
-                self.sequence_view.set_sequences(self.source, outcome.sequences)
+                self.sequence_view.set_sequences(self.source, outcome.sequences, self.target)
             from corrlib.methods.kernel_matching import (  # loaded by the method that ran
                 copies_note, reversal_note, start_note, turn_note)
 

@@ -154,14 +154,15 @@ def progress_printer(quiet: bool):
 
 
 def print_result_notes(result) -> None:
-    """Warn (on stderr) when a mesh-to-mesh map reverses orientation on most of the shape, or was turned; note
-    the other things a method tells about its result (copies, starts, a target matched unremeshed)."""
-    from corrlib.methods.contour3d import remeshing_note
+    """Warn (on stderr) when a mesh-to-mesh map reverses orientation on most of the shape, or a 2D-to-3D match's
+    curve is short enough to have collapsed; note the other things a method tells about its result (a turn,
+    copies, starts, a target matched unremeshed)."""
+    from corrlib.methods.contour3d import remeshing_note, short_curve_note
     from corrlib.methods.kernel_matching import copies_note, reversal_note, start_note, turn_note
 
-    note = reversal_note(result.extras)
-    if note:
-        print(f"warning: {note}", file=sys.stderr)
+    for note in (reversal_note(result.extras), short_curve_note(result.extras)):
+        if note:
+            print(f"warning: {note}", file=sys.stderr)
     for said in (copies_note(result.extras), turn_note(result.extras), start_note(result.extras),
                  remeshing_note(result.extras)):
         if said:

@@ -229,16 +229,23 @@ class Camera:
 
 
 def fitted_camera(vertices: np.ndarray, frame: ViewFrame, view: str = "front", aspect: float = 1.0,
-                  view_angle: float = 30.0, margin: float = 1.05) -> Camera:
+                  view_angle: float = 30.0, margin: float = 1.05, top: float = 0.0) -> Camera:
     """The camera of a preset view that fits the shape tightly into a viewport of width/height ``aspect``.
 
     The distance is the smallest at which every vertex lies within the view
     angle shrunk by ``margin`` (each vertex's own depth counts, so the nearest
     wide part decides): the shape fills its viewport instead of its bounding
-    sphere.
+    sphere. ``top`` (a fraction ``t`` of the viewport's height, below 1) is
+    kept free at the top for a caption: camera and focal point move up by
+    ``s = t d tan(θ/2) / margin`` at the distance ``d``, and ``d`` is the
+    smallest at which every vertex (screen height ``u``, depth ``d − z``) lies
+    below the band, ``(u − s) margin ≤ (1 − 2t)(d − z) tan(θ/2)``, and above
+    the bottom, ``(s − u) margin ≤ (d − z) tan(θ/2)``: both are linear in ``d``.
     """
     if aspect <= 0:
         raise ParameterError(f"aspect must be positive, got {aspect!r}")
+    if not 0.0 <= top < 1.0:
+        raise ParameterError(f"top must be in [0, 1), got {top!r}")
     v = np.asarray(vertices, dtype=np.float64)
     toward, screen_up = frame.direction(view)
     screen_right = np.cross(screen_up, toward)
@@ -246,8 +253,11 @@ def fitted_camera(vertices: np.ndarray, frame: ViewFrame, view: str = "front", a
     centre = (lo + hi) / 2
     rel = v - centre
     tan_half = np.tan(np.radians(view_angle) / 2)
-    across = np.maximum(np.abs(rel @ screen_right) / aspect, np.abs(rel @ screen_up)) / tan_half
-    # vertex i is in view from distance d along `toward` if across_i * margin <= d - depth_i
-    distance = max(float(np.max(rel @ toward + margin * across)), 1e-12)
-    position = centre + distance * toward
-    return Camera(tuple(position), tuple(centre), tuple(screen_up), view_angle)
+    depth, height = rel @ toward, rel @ screen_up
+    # vertex i is in view from distance d along `toward` if its extent times the margin is within d - depth_i
+    across = depth + margin * np.abs(rel @ screen_right) / (aspect * tan_half)
+    below_band = (margin * height + (1.0 - 2.0 * top) * depth * tan_half) / ((1.0 - top) * tan_half)
+    above_bottom = (depth * tan_half - margin * height) / ((1.0 - top) * tan_half)
+    distance = max(float(np.max(np.maximum(across, np.maximum(below_band, above_bottom)))), 1e-12)
+    focal = centre + (top * distance * tan_half / margin) * screen_up
+    return Camera(tuple(focal + distance * toward), tuple(focal), tuple(screen_up), view_angle)

@@ -967,3 +967,34 @@ def test_a_mesh_too_small_for_a_spectrum_is_refused_by_name(tmp_path):
     params = Contour3DParams()
     with pytest.raises(InputError, match="too small for 2D-to-3D matching"):
         run(match_prepared(prepare_query(blob, params), tetrahedron, params, CancelToken()))
+
+
+def test_the_curve_length_ratio_by_hand():
+    """A closed path round a square of side 0.5 against an outline round a square of side 1: 2 / 4; a vertex
+    repeated where the curve stays on it adds nothing."""
+    from corrlib.methods.contour3d import curve_length_ratio
+
+    corners = 0.5 * np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=float)
+    outline = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], dtype=float)
+    assert curve_length_ratio(corners, np.array([0, 1, 2, 3]), outline) == pytest.approx(0.5)
+    assert curve_length_ratio(corners, np.array([0, 0, 1, 2, 2, 2, 3]), outline) == pytest.approx(0.5)
+    assert curve_length_ratio(corners, np.array([0, 1]), outline) == pytest.approx(0.25)  # out and back
+
+
+def test_a_short_matched_curve_is_reported_as_collapsed(capsys, tmp_path):
+    """The MPEG-7 dog on the howling wolf1 is crowded onto a foreleg (a curve about a third of the outline's
+    length); on the standing wolf0 it runs round the body (three quarters) and nothing is said. Through the CLI
+    the first is a warning."""
+    from _data import SILHOUETTES
+    from corrlib.cli import main
+    from corrlib.io import load_contour
+    from corrlib.methods.contour3d import SHORT_CURVE_RATIO, short_curve_note
+
+    dog = load_contour(SILHOUETTES / "mpeg7" / "dog-1.gif")
+    on_wolf0 = solve("contour3d", dog, load_mesh(TOSCA / "wolf0.off"))
+    assert on_wolf0.extras["curve_length_ratio"] > 0.6 and short_curve_note(on_wolf0.extras) is None
+    argv = ["match-contour", SILHOUETTES / "mpeg7" / "dog-1.gif", TOSCA / "wolf1.off", "-o", tmp_path / "r", "-q"]
+    assert main(list(map(str, argv))) == 0
+    err = capsys.readouterr().err
+    assert "warning: the matched curve is 0." in err and "contour-views" in err
+    assert short_curve_note({"curve_length_ratio": SHORT_CURVE_RATIO}) is None and short_curve_note({}) is None

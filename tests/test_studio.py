@@ -734,3 +734,17 @@ def test_a_matched_curve_without_length_is_drawn_as_points(qtbot, window):
     view = window.product_view
     view.show_contour_match(contour, wolf, np.zeros(30, dtype=int), np.arange(30), 1.0)
     assert "30 contour points matched" in view.info.text()
+
+
+def test_a_screenshot_run_whose_input_fails_says_so_and_exits_nonzero(tmp_path):
+    """Found by a review: a missing input was written to the window's log only and the screenshot run exited 0,
+    so a script could not tell. The error goes to stderr and the exit status is 1; the picture is still written."""
+    import subprocess
+    import sys
+
+    shot = tmp_path / "shot.png"
+    proc = subprocess.run([sys.executable, "-m", "app.main", str(tmp_path / "missing.off"), str(TOSCA / "wolf0.off"),
+                           "--screenshot", str(shot), "--timeout", "120"], env={**os.environ, "QT_QPA_PLATFORM": "xcb"},
+                          capture_output=True, text=True, timeout=300)
+    assert proc.returncode == 1, proc.stderr
+    assert "missing.off" in proc.stderr and shot.stat().st_size > 10_000

@@ -415,6 +415,20 @@ def test_the_log_says_when_the_contour_was_matched_at_fewer_points():
     assert "instead of" not in reading(200, 200)
 
 
+def test_the_log_warns_of_a_matched_curve_short_enough_to_have_collapsed():
+    """A second log line, beginning "warning:", where the curve is under half the outline's length."""
+    from types import SimpleNamespace
+
+    from app.jobs import contour_reading
+
+    def reading(ratio):
+        return contour_reading(SimpleNamespace(method="contour3d", energy_meaning="paper energy", energy=1.0,
+                                               extras={"curve_length_ratio": ratio}))
+
+    assert "\nwarning: the matched curve is 0.36 of the outline's length" in reading(0.36)
+    assert "warning" not in reading(0.75)
+
+
 def test_a_mesh_is_shown_alone_until_the_other_comes(qtbot, window):
     """The pair view drew nothing until both meshes were loaded: a user could not see what was loaded (or what
     a repair made of it) before choosing the other."""
@@ -438,7 +452,7 @@ def test_the_query_contour_fills_its_viewport_after_a_resize_and_a_redraw(qtbot,
     """Found by fuzzing: the contour's camera came from VTK's reset, which fits the window size VTK last rendered
     at: right after a resize the fit was the old one, and after the next render a redraw divided by the narrow
     viewport's aspect, so the contour showed at about half its size. Its box now fills the width or the height."""
-    from app.views.camera import viewport_aspect
+    from app.views.camera import caption_band, viewport_aspect
     from app.views.product import CONTOUR_MARGIN
     from corrlib.io import load_mesh
 
@@ -454,7 +468,8 @@ def test_the_query_contour_fills_its_viewport_after_a_resize_and_a_redraw(qtbot,
         camera = renderer.camera
         half_height = np.linalg.norm(np.subtract(camera.position, camera.focal_point)) * \
             np.tan(np.radians(camera.view_angle) / 2)
-        needed = CONTOUR_MARGIN * max(1.0 / viewport_aspect(view.plotter, renderer), 2.0)
+        needed = CONTOUR_MARGIN * max(1.0 / viewport_aspect(view.plotter, renderer),
+                                      2.0 / (1 - caption_band(view.plotter, renderer)))
         return half_height == pytest.approx(needed, rel=1e-6)
 
     for size in ((1280, 720), (900, 700)):
@@ -631,3 +646,48 @@ def test_a_curve_along_the_outline_of_the_thumbnail_is_in_sight(monkeypatch):
     on_surface = scene.lifted_curve
     monkeypatch.setattr(scene, "lifted_curve", lambda p, n, path, lift, closed=True: on_surface(p, n, path, 0.0, closed))
     assert lifted > 300 and lifted > 1.25 * crimson_pixels()
+
+
+def test_the_sequence_keeps_its_extrapolation_in_view_and_names_both_shapes(qtbot, window):
+    """Found by a review: at the slider's end (t max 1.5 by default) the extrapolated wolf stood below the view,
+    which was fitted to t = 0 and 1 only, and the caption named the source alone. The camera is fitted to the
+    pose at t max too, again when t max changes, and the caption names the source and the target."""
+    from app.jobs import sequence_options
+    from corrlib.methods.base import MatchResult
+
+    load_demo(qtbot, window)
+    view = window.sequence_view
+    ident = np.arange(window.source.n_vertices)
+    options = sequence_options(MatchResult("descriptor-nn", ident, ident), window.source, window.target)
+    view.t_max.setValue(1.5)
+    view.set_sequences(window.source, options, window.target)
+    assert view.caption == "wolf0.off to wolf1.off"
+    assert len(view.ends) == 3
+    assert np.allclose(view.ends[2], view.display.points(view.positions(1.5)))
+    view.t_max.setValue(2.0)
+    assert np.allclose(view.ends[2], view.display.points(view.positions(2.0)))
+    view.t_max.setValue(1.0)
+    assert len(view.ends) == 2  # no extrapolation: the source and the target pose
+    at_one = view.camera()
+    view.t_max.setValue(2.0)  # the camera, still at its preset, is fitted again to the farther pose
+    assert not np.allclose(view.camera().position, at_one.position)
+
+
+def test_the_studio_command_line_refuses_a_method_or_tab_it_does_not_know(capsys):
+    """Found by a review: ``--method`` with an unknown name ended in a KeyError traceback, and an unknown ``--tab``
+    was ignored. Both stop before a window opens, naming what exists."""
+    from app.main import main
+
+    assert main(["--demo", "--method", "Contour3D"]) == 2
+    assert "unknown method 'Contour3D' (available: contour-views" in capsys.readouterr().err
+    with pytest.raises(SystemExit) as stop:
+        main(["--demo", "--tab", "torus"])
+    assert stop.value.code == 2 and "invalid choice: 'Torus'" in capsys.readouterr().err
+
+
+def test_an_unknown_method_asked_of_the_window_is_an_error_not_a_traceback(qtbot, window):
+    messages = []
+    window.error_shown.connect(messages.append)
+    load_demo(qtbot, window)
+    window.run_method(method="nosuch")
+    assert messages and messages[-1].startswith("unknown method 'nosuch' (available: ")

@@ -152,3 +152,30 @@ def test_outline_fit_of_a_curve_seen_edge_on_and_bad_shapes():
     assert outline_fit(np.zeros((6, 3)), _seen_from(frame, curve), frame) == 0.0  # a curve at one point
     with pytest.raises(ParameterError, match="the same p"):
         outline_fit(curve, L_SHAPE[:5], frame)
+
+
+@pytest.mark.parametrize("view", ["front", "side", "top"])
+@pytest.mark.parametrize("aspect", [0.5, 2.0])
+def test_a_fitted_camera_keeps_the_top_free_for_a_caption(view, aspect):
+    """With ``top=0.2`` of the viewport's height kept free, every vertex is below that band (normalised screen
+    height 1 − 2 · 0.2) and in view, each within the margin; and the nearest to an edge is at it: the shape fills
+    what is left."""
+    points = load_mesh(TOSCA / "wolf0.off").vertices
+    frame = view_frame(points)
+    camera = fitted_camera(points, frame, view, aspect=aspect, view_angle=30.0, margin=1.05, top=0.2)
+    position, focal, up = (np.array(x) for x in (camera.position, camera.focal_point, camera.view_up))
+    forward = (focal - position) / np.linalg.norm(focal - position)
+    right = np.cross(forward, up)
+    rel = points - position
+    depth = rel @ forward
+    tan_half = np.tan(np.radians(15.0))
+    x = np.abs(rel @ right) / depth / (tan_half * aspect)
+    y = (rel @ up) / depth / tan_half
+    assert np.all(depth > 0)
+    # each vertex's room to the edges, in units of its margin: all at least 1, the tightest exactly 1
+    room = np.min([1.0 / (1.05 * x), (1.0 - 2 * 0.2) / (1.05 * np.maximum(y, 1e-12)),
+                   1.0 / (1.05 * np.maximum(-y, 1e-12))], axis=0)
+    assert room.min() == pytest.approx(1.0)
+    assert y.max() <= 1.0 - 2 * 0.2 and y.min() >= -1.0
+    with pytest.raises(ParameterError, match="top"):
+        fitted_camera(points, frame, view, top=1.0)

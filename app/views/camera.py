@@ -18,6 +18,10 @@ from corrlib.viewing import Camera, ViewFrame, fitted_camera, view_frame
 
 #: the display frame's own axes: right +x, up +y, toward the front camera +z
 DISPLAY_FRAME = ViewFrame(np.array([1.0, 0.0, 0.0]), np.array([0.0, 1.0, 0.0]), np.array([0.0, 0.0, 1.0]))
+#: pixels at the top of a 3D view kept free of the shape for its one-line caption, and the largest share of a
+#: (small) viewport's height they may take
+CAPTION_BAND_PX = 24
+MAX_CAPTION_BAND = 0.25
 
 
 @dataclass(frozen=True)
@@ -94,6 +98,14 @@ def viewport_aspect(plotter, renderer=None) -> float:
     return max((x1 - x0) * width, 1.0) / max((y1 - y0) * height, 1.0)
 
 
+def caption_band(plotter, renderer) -> float:
+    """The share of ``renderer``'s viewport height that its one-line caption (``add_text`` at the upper left, in
+    :data:`~app.views.scene.LABEL_FONT_SIZE`) takes: :data:`CAPTION_BAND_PX`, at most :data:`MAX_CAPTION_BAND`."""
+    x0, y0, x1, y1 = renderer.GetViewport()
+    height = max((y1 - y0) * window_size(plotter)[1], 1.0)
+    return min(CAPTION_BAND_PX / height, MAX_CAPTION_BAND)
+
+
 def window_size(plotter) -> tuple[int, int]:
     """Width and height in pixels of the plotter's whole window: the Qt widget's size where there is one (the
     render window learns its new size only at its next render), else the window size."""
@@ -137,7 +149,8 @@ def show_preset(plotter, display_points: list[np.ndarray], view: str = "front", 
     """
     points = np.vstack([np.asarray(p, dtype=np.float64) for p in display_points])
     first = plotter.renderers[0] if renderers is None else renderers[0]
-    camera = fitted_camera(points, frame, view, aspect=viewport_aspect(plotter, first))
+    camera = fitted_camera(points, frame, view, aspect=viewport_aspect(plotter, first),
+                           top=caption_band(plotter, first))
     apply_camera(plotter, camera, renderers)
     return camera
 

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QVBoxLayout, QWidget
 
-from app.views.camera import DISPLAY_FRAME, FramedView, ShapeDisplay, viewport_aspect, window_size
+from app.views.camera import DISPLAY_FRAME, FramedView, ShapeDisplay, caption_band, viewport_aspect, window_size
 from app.views.scene import (LABEL_FONT_SIZE, PLAIN_COLOR, LazyPlotter, hue_colors, lifted_curve, outward_normals,
                              polydata, polyline)
 from corrlib.viewing import outline_frame
@@ -72,6 +72,7 @@ class ProductView(QWidget, FramedView):
         self.torus_curve = None  # the correspondence curve on the torus (for tests)
         self._pair = None
         self._match = None  # the arguments of the last show_contour_match (redrawn on a new up axis)
+        self._contour_display: np.ndarray | None = None  # the query contour's points as drawn, (m, 3)
         self.mesh_points: np.ndarray | None = None  # the matched mesh in its display frame
         self.drawn_frame = None  # the upright view the matched curve looks most like the query from (ViewFrame)
 
@@ -175,26 +176,30 @@ class ProductView(QWidget, FramedView):
     def _on_resized(self) -> None:
         """Lay the match out again for the new size, and refit the mesh (while at its preset) and the contour to
         their viewports."""
-        if self._match is not None and getattr(self, "_contour_display", None) is not None:
+        shown = self._match is not None and self._contour_display is not None
+        if shown:
             self._lay_out_match()
         super()._on_resized()
-        if self._match is not None and getattr(self, "_contour_display", None) is not None:
+        if shown:
             self.plotter.subplot(0, 0)
             self._fit_contour(self._contour_display)
             self.plotter.render()
 
     def _fit_contour(self, points: np.ndarray) -> None:
-        """The contour seen from +z, its bounding box filling the width or the height of its viewport (up to
-        :data:`CONTOUR_MARGIN`). The camera is placed here from the widget's own size: VTK's reset fits a
-        bounding sphere to the window size it last rendered at, which lags a resize (too near) and, once it
-        knows a narrow viewport, divides by its aspect (the contour at half its size)."""
+        """The contour seen from +z, its bounding box filling the width or the height of its viewport below the
+        caption's band (:func:`~app.views.camera.caption_band`; up to :data:`CONTOUR_MARGIN`). The camera is
+        placed here from the widget's own size: VTK's reset fits a bounding sphere to the window size it last
+        rendered at, which lags a resize (too near) and, once it knows a narrow viewport, divides by its aspect
+        (the contour at half its size)."""
         p = self.plotter
         camera = p.renderers[0].camera
         low, high = points[:, :2].min(axis=0), points[:, :2].max(axis=0)
         half_width, half_height = (high - low) / 2
-        half_shown = CONTOUR_MARGIN * max(half_width / viewport_aspect(p, p.renderers[0]), half_height, 1e-12)
+        band = caption_band(p, p.renderers[0])
+        half_shown = CONTOUR_MARGIN * max(half_width / viewport_aspect(p, p.renderers[0]), half_height / (1 - band),
+                                          1e-12)
         camera.view_angle = CONTOUR_VIEW_ANGLE
-        centre = np.append((low + high) / 2, 0.0)
+        centre = np.append((low + high) / 2, 0.0) + [0.0, band * half_shown, 0.0]  # the contour below the band
         camera.focal_point = centre
         camera.position = centre + [0.0, 0.0, half_shown / np.tan(np.radians(CONTOUR_VIEW_ANGLE) / 2)]
         camera.up = (0.0, 1.0, 0.0)

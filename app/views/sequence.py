@@ -48,6 +48,7 @@ class SequenceView(QWidget, FramedView):
         self.t_max.setSingleStep(T_MAX_STEP)
         self.t_max.setValue(DEFAULT_T_MAX)
         self.t_max.setToolTip("Largest t of the slider; t > 1 extrapolates beyond the target.")
+        self.t_max.valueChanged.connect(self._on_t_max)
         self.speed = QDoubleSpinBox()
         self.speed.setRange(*SPEED_RANGE)
         self.speed.setValue(DEFAULT_SPEED)
@@ -88,7 +89,10 @@ class SequenceView(QWidget, FramedView):
         self.source = None
         self.display: ShapeDisplay | None = None  # the source's display frame (every frame is drawn in it)
         self.description = ""
-        self.ends: list[np.ndarray] = []  # the source and the target pose (t = 1) in the display frame
+        self.caption = ""  # the source's name and the target's: what moves where
+        #: the poses the camera is fitted to, in the display frame: the source, the target pose (t = 1) and the
+        #: farthest extrapolated pose (t max)
+        self.ends: list[np.ndarray] = []
         self.options: dict[str, tuple] = {}  # kind -> (positions, description) the motion box offers
 
     def view_plotter(self):
@@ -110,16 +114,18 @@ class SequenceView(QWidget, FramedView):
     def clear(self) -> None:
         """Forget the sequence (a new shape was loaded: the last pair's motion no longer fits it)."""
         self.source = self.positions = self.mesh = self.display = None
-        self.ends, self.description = [], ""
+        self.ends, self.description, self.caption = [], "", ""
         self.kind.setText("")
         self._offer({})
         if self._plotter.created:
             self.plotter.clear_actors()
 
-    def set_sequences(self, source, options: dict[str, tuple]) -> None:
+    def set_sequences(self, source, options: dict[str, tuple], target=None) -> None:
         """Show ``source`` moving along the first of ``options`` (kind -> ``(positions, description)``, see
-        :func:`app.jobs.sequence_options`); the motion box offers all of them."""
+        :func:`app.jobs.sequence_options`) towards ``target`` (named in the caption); the motion box offers all
+        of them."""
         self._offer(options)
+        self.caption = source.name if target is None else f"{source.name} to {target.name}"
         kind = next(iter(options))
         self._show(source, *options[kind])
 
@@ -159,12 +165,26 @@ class SequenceView(QWidget, FramedView):
         self.display = ShapeDisplay.of(source.vertices, self.up)
         self.mesh = polydata(self.display.points(source.vertices), source.faces)
         self.plotter.add_mesh(self.mesh, scalars=coordinate_colors(source.vertices), rgb=True)
-        self.plotter.add_text(source.name, font_size=LABEL_FONT_SIZE)
-        # fitted to the source and the target pose (t = 1), so that the whole motion stays in view
-        self.ends = [self.mesh.points.copy(), self.display.points(positions(1.0))]
+        self.plotter.add_text(self.caption or source.name, font_size=LABEL_FONT_SIZE)
+        self.ends = self._framed_poses()
         self.fit_preset()
         self.slider.setValue(0)
         self._on_slider(0)
+
+    def _framed_poses(self) -> list[np.ndarray]:
+        """The poses at t = 0, 1 and t max in the display frame: fitted to them, the camera keeps the whole motion,
+        the extrapolated part too, in view."""
+        times = (0.0, 1.0) + ((self.t_max.value(),) if self.t_max.value() > 1.0 else ())
+        return [self.display.points(self.positions(t)) for t in times]
+
+    def _on_t_max(self, _value: float) -> None:
+        """A new slider range: the frame at the slider's position, and the camera refitted (while at its preset)
+        to the farthest pose."""
+        if self.mesh is None or self.positions is None:
+            return
+        self.ends = self._framed_poses()
+        self._on_resized()
+        self._on_slider(self.slider.value())
 
     def t(self) -> float:
         return self.slider.value() / STEPS * self.t_max.value()

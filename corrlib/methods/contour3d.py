@@ -215,6 +215,9 @@ VIEW_POINTS, VIEW_K = 200, 25
 MIN_CONTOUR_POINTS = 10
 #: the energies on the first-order product graph (the only ones that take directed edge costs)
 FIRST_ORDER_ENERGIES = ("paper", "ratio")
+#: a matched curve shorter than this fraction of the outline, both at the scale of the match, is reported as
+#: collapsed (:func:`short_curve_note`): half the length of a curve that follows the outline
+SHORT_CURVE_RATIO = 0.5
 #: the resolution meshes are matched at (``mesh_vertices``): the benchmarks' meshes (TOSCA and SHREC's 5k copies,
 #: FAUST's 6.9k and the bundled meshes have 4.3k–7.2k vertices) and the speed target (a 200-point query against a
 #: 5k mesh in 2 s) are at this size
@@ -898,6 +901,42 @@ def match_prepared(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams,
     return on_input_vertices(result, coarse)
 
 
+def curve_length_ratio(mesh_vertices: np.ndarray, path_vertices: np.ndarray, outline: np.ndarray) -> float:
+    """Length of the matched closed curve over the length of the outline, both at the scale of the match.
+
+    Parameters
+    ----------
+    mesh_vertices : (n, 3) float
+        The mesh scaled to unit area (:class:`PreparedMesh`).
+    path_vertices : (p,) int
+        The matched curve's vertices in order (a vertex repeats where the curve stays on it).
+    outline : (m, 2) float
+        The query in canonical pose, enclosing ``area_ratio`` of the unit area (:class:`PreparedQuery`).
+
+    A curve that follows the outline round the surface is about as long as the outline at this scale, the
+    scale at which the filled outline is the part of the surface it shows; a curve crowded onto a limb or a
+    flank, which no feature of the outline told from its true place, is much shorter
+    (:func:`short_curve_note`).
+    """
+    closed_path = np.r_[path_vertices, path_vertices[:1]]
+    curve = float(np.linalg.norm(np.diff(mesh_vertices[closed_path], axis=0), axis=1).sum())
+    closed_outline = np.vstack([outline, outline[:1]])
+    return curve / max(float(np.linalg.norm(np.diff(closed_outline, axis=0), axis=1).sum()), 1e-300)
+
+
+def short_curve_note(extras: dict) -> str | None:
+    """A warning when the matched curve is shorter than :data:`SHORT_CURVE_RATIO` of the outline
+    (:func:`curve_length_ratio`), else None: the search proves the curve optimal for the energy, not that the
+    energy found the outline's place."""
+    ratio = (extras or {}).get("curve_length_ratio")
+    if ratio is None or ratio >= SHORT_CURVE_RATIO:
+        return None
+    return (f"the matched curve is {ratio:.2f} of the outline's length at the scale of the match: it has probably "
+            "collapsed onto a part of the mesh instead of running round the outline's place (the curve is optimal "
+            "for the energy, whose features did not find that place on this mesh); a mesh in the pose of the "
+            "drawing matches more reliably through its rendered views (method contour-views)")
+
+
 def remeshing_note(extras: dict) -> str | None:
     """What the user is told when the target could not be remeshed to ``mesh_vertices`` and was matched as
     given (:func:`match_prepared`), else None: its energy does not compare with those of meshes remeshed
@@ -987,7 +1026,8 @@ def _match_mesh(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams, to
               "model": model, "view": "side" if side is not None else "front", "asymmetry": query.asymmetry,
               "intrinsic_asymmetry": query.intrinsic_asymmetry, "mesh_seen_from_side": seen_from_side,
               "near_half": int(near), "sided": sided is not None and model == "whole",
-              "contour_points": len(query.points), "contour_points_asked": params.n_contour}
+              "contour_points": len(query.points), "contour_points_asked": params.n_contour,
+              "curve_length_ratio": curve_length_ratio(target.vertices, path.vertices, query.points)}
     certificate = SearchCertificate.of(bb, params.eps)
     yield Progress("done", 1.0, f"energy {bb.energy:.6g} after {bb.iterations} iterations, {certificate.describe()}")
     per_length = " per contour length matched to a moving curve" if params.energy.endswith("ratio") else ""

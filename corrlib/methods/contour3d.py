@@ -959,6 +959,14 @@ def on_input_vertices(result: MatchResult, coarse: Remeshed) -> MatchResult:
     return replace(result, map_xy=to_original[result.map_xy], path=path, extras=extras, energy_meaning=meaning)
 
 
+def reading_extras(model: str, signs: tuple, near: float, side_view: bool, sided: bool) -> dict:
+    """How the winning reading read the query: its shape model, the signs of its axes (``axis_reversed``: the
+    first), the view, the near half of a side view and whether a front view was matched half by half."""
+    return {"axis_reversed": bool(signs[0]) if signs else False, "axis_signs": [bool(s) for s in signs],
+            "model": model, "view": "side" if side_view else "front", "near_half": int(near),
+            "sided": sided and model == "whole"}
+
+
 def _match_mesh(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams, token):
     """:func:`match_prepared` on the mesh as given."""
     watch = Stopwatch()
@@ -1022,11 +1030,10 @@ def _match_mesh(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams, to
     path = bb.path
     matched = path.matched_vertices(graphs[bb.graph_index].m)
     model, signs, near = readings[bb.graph_index]
-    extras = {"axis_reversed": bool(signs[0]) if signs else False, "axis_signs": [bool(s) for s in signs],
-              "model": model, "view": "side" if side is not None else "front", "asymmetry": query.asymmetry,
-              "intrinsic_asymmetry": query.intrinsic_asymmetry, "mesh_seen_from_side": seen_from_side,
-              "near_half": int(near), "sided": sided is not None and model == "whole",
-              "contour_points": len(query.points), "contour_points_asked": params.n_contour,
+    extras = {**reading_extras(model, signs, near, side is not None, sided is not None),
+              "asymmetry": query.asymmetry, "intrinsic_asymmetry": query.intrinsic_asymmetry,
+              "mesh_seen_from_side": seen_from_side, "contour_points": len(query.points),
+              "contour_points_asked": params.n_contour,
               "curve_length_ratio": curve_length_ratio(target.vertices, path.vertices, query.points)}
     certificate = SearchCertificate.of(bb, params.eps)
     yield Progress("done", 1.0, f"energy {bb.energy:.6g} after {bb.iterations} iterations, {certificate.describe()}")

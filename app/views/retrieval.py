@@ -133,7 +133,8 @@ class RetrievalView(QWidget):
         self.ranking = QComboBox()
         self.ranking.addItems(list(RANKINGS))
         self.ranking.setToolTip("fused: the matching energy times the sketch's dissimilarity to each mesh's rendered "
-                                "outlines; energy: the matching energy alone (the thesis' ranking)")
+                                "outlines; energy: the matching energy alone (the thesis' ranking). Either way the "
+                                "lowest score ranks first.")
         self.run_button = QPushButton("Rank")
         self.run_button.clicked.connect(self.run_requested)
         self.gallery = QListWidget()
@@ -192,8 +193,8 @@ class RetrievalView(QWidget):
                 pix.loadFromData(png)
                 item.setIcon(QIcon(pix))
             views = f"{hit.view_distance:.3f}" if np.isfinite(hit.view_distance) else "not measured"
-            item.setToolTip(hit.error or f"{hit.path}\nscore {hit.score:.6g} (matching energy {hit.energy:.6g}, "
-                                         f"view dissimilarity {views}), {hit.seconds:.2f} s")
+            item.setToolTip(hit.error or f"{hit.path}\nscore {hit.score:.6g}, lower is closer (matching energy "
+                                         f"{hit.energy:.6g}, view dissimilarity {views}), {hit.seconds:.2f} s")
             item.setData(Qt.UserRole, str(hit.path))
             self.gallery.addItem(item)
 

@@ -621,7 +621,7 @@ class MainWindow(QMainWindow):
     def _on_loaded(self, loaded: LoadedShape) -> None:
         _path, which, then, _job = self._loading
         self._job_stopped(f"loaded {loaded.shape.name}")
-        if isinstance(loaded.shape, Contour2D):
+        if isinstance(loaded.shape, Contour2D) and which == "source":  # the query; a target contour is not one
             self.sketch.show_contour(loaded.shape)
             self.retrieval_view.set_query(loaded.shape)
         self.set_shape(loaded.shape, which, loaded.description, path=loaded.path)

@@ -136,6 +136,7 @@ class SketchPanel(QWidget):
         scale = FIT_MARGIN * min(self.area.width() / max(hi[0] - lo[0], 1e-9), self.area.height() / max(hi[1] - lo[1], 1e-9))
         centre = np.array([self.area.width(), self.area.height()]) / 2
         self.area.set_points((p - (lo + hi) / 2) * scale + centre)
+        self.status.setText(f"{contour.name}: {contour.n_points} points, loaded as the query")
 
     def contour(self) -> Contour2D:
         pts = self.area.points()

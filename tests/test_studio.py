@@ -748,3 +748,17 @@ def test_a_screenshot_run_whose_input_fails_says_so_and_exits_nonzero(tmp_path):
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode == 1, proc.stderr
     assert "missing.off" in proc.stderr and shot.stat().st_size > 10_000
+
+
+def test_a_contour_loaded_as_the_target_is_not_taken_for_the_query(qtbot, window):
+    """Found by a review: loading two silhouettes put the second, the target, in the sketch panel and made it
+    the retrieval query, and the panel called a loaded file "drawn points". The source is the query."""
+    horse, deer = SILHOUETTES / "mpeg7" / "horse-1.gif", SILHOUETTES / "mpeg7" / "deer-1.gif"
+    assert load_file(qtbot, window, horse, "source")
+    query = window.retrieval_view.query
+    assert query is window.source and "horse-1.gif" in window.sketch.status.text()
+    assert "loaded as the query" in window.sketch.status.text()
+    shown = window.sketch.area.points().copy()
+    assert load_file(qtbot, window, deer, "target")
+    assert window.retrieval_view.query is query
+    np.testing.assert_array_equal(window.sketch.area.points(), shown)

@@ -238,7 +238,7 @@ class ProductView(QWidget, FramedView):
             if values is not None:
                 grid[name] = values[index]
                 p.add_mesh(grid, scalars=name, cmap="viridis", show_scalar_bar=flat,
-                           scalar_bar_args={"title": name}, opacity=1.0 if flat else 0.75)
+                           scalar_bar_args={"title": name, "fmt": "%.3g"}, opacity=1.0 if flat else 0.75)
             else:
                 p.add_mesh(grid, color="lightgrey", opacity=1.0 if flat else 0.75)
             if flat:

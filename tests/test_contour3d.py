@@ -975,15 +975,15 @@ def test_the_curve_length_ratio_by_hand():
     from corrlib.methods.contour3d import curve_length_ratio
 
     corners = 0.5 * np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=float)
-    outline = np.array([[0, 0], [1, 0], [1, 1], [0, 1]], dtype=float)
+    outline = 4.0  # a unit square's perimeter
     assert curve_length_ratio(corners, np.array([0, 1, 2, 3]), outline) == pytest.approx(0.5)
-    assert curve_length_ratio(corners, np.array([0, 0, 1, 2, 2, 2, 3]), outline) == pytest.approx(0.5)
+    assert curve_length_ratio(corners, np.array([0, 0, 1, 2, 2, 2, 3, 0]), outline) == pytest.approx(0.5)
     assert curve_length_ratio(corners, np.array([0, 1]), outline) == pytest.approx(0.25)  # out and back
 
 
 def test_a_short_matched_curve_is_reported_as_collapsed(capsys, tmp_path):
-    """The MPEG-7 dog on the howling wolf1 is crowded onto a foreleg (a curve about a third of the outline's
-    length); on the standing wolf0 it runs round the body (three quarters) and nothing is said. Through the CLI
+    """The MPEG-7 dog on the howling wolf1 is crowded onto a foreleg (a curve 0.4 of the outline's length); on
+    the standing wolf0 it runs round the body (0.84) and nothing is said. Through the CLI
     the first is a warning."""
     from _data import SILHOUETTES
     from corrlib.cli import main

@@ -453,7 +453,6 @@ def test_the_query_contour_fills_its_viewport_after_a_resize_and_a_redraw(qtbot,
     at: right after a resize the fit was the old one, and after the next render a redraw divided by the narrow
     viewport's aspect, so the contour showed at about half its size. Its box now fills the width or the height."""
     from app.views.camera import caption_band, viewport_aspect
-    from app.views.product import CONTOUR_MARGIN
     from corrlib.io import load_mesh
 
     wolf = load_mesh(TOSCA / "wolf0.off")
@@ -468,8 +467,8 @@ def test_the_query_contour_fills_its_viewport_after_a_resize_and_a_redraw(qtbot,
         camera = renderer.camera
         half_height = np.linalg.norm(np.subtract(camera.position, camera.focal_point)) * \
             np.tan(np.radians(camera.view_angle) / 2)
-        needed = CONTOUR_MARGIN * max(1.0 / viewport_aspect(view.plotter, renderer),
-                                      2.0 / (1 - caption_band(view.plotter, renderer)))
+        needed = 1.05 * max(1.0 / viewport_aspect(view.plotter, renderer),  # fitted_camera's margin
+                            2.0 / (1 - caption_band(view.plotter, renderer)))
         return half_height == pytest.approx(needed, rel=1e-6)
 
     for size in ((1280, 720), (900, 700)):

@@ -5,7 +5,7 @@ from __future__ import annotations
 import numpy as np
 from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QVBoxLayout, QWidget
 
-from app.views.camera import DISPLAY_FRAME, FramedView, ShapeDisplay, caption_band, viewport_aspect, window_size
+from app.views.camera import DISPLAY_FRAME, FramedView, ShapeDisplay, show_preset, window_size
 from app.views.scene import (LABEL_FONT_SIZE, PLAIN_COLOR, LazyPlotter, hue_colors, lifted_curve, outward_normals,
                              polydata, polyline)
 from corrlib.viewing import outline_frame
@@ -14,8 +14,6 @@ CURVE_WIDTH = 4  # line width of the query contour
 #: what the Product tab says before a match
 PRODUCT_HINT = ("Match a contour to a mesh (2D-to-3D) to see the matched curve here. Product-torus views of contour "
                 "pairs appear when that method is available.")
-CONTOUR_MARGIN = 1.05  # the query contour fills its viewport up to this margin
-CONTOUR_VIEW_ANGLE = 30.0  # degrees: VTK's default, the contour's camera
 CURVE_TUBE_RADIUS = 0.007  # radius of the matched curve's tube, relative to the mesh's bounding-box diagonal
 #: viewports (x0, y0, x1, y1) of the contour and of the mesh: side by side, or the contour above the mesh
 SIDE_BY_SIDE = ((0.0, 0.0, 0.5, 1.0), (0.5, 0.0, 1.0, 1.0))
@@ -186,24 +184,11 @@ class ProductView(QWidget, FramedView):
             self.plotter.render()
 
     def _fit_contour(self, points: np.ndarray) -> None:
-        """The contour seen from +z, its bounding box filling the width or the height of its viewport below the
-        caption's band (:func:`~app.views.camera.caption_band`; up to :data:`CONTOUR_MARGIN`). The camera is
-        placed here from the widget's own size: VTK's reset fits a bounding sphere to the window size it last
-        rendered at, which lags a resize (too near) and, once it knows a narrow viewport, divides by its aspect
-        (the contour at half its size)."""
-        p = self.plotter
-        camera = p.renderers[0].camera
-        low, high = points[:, :2].min(axis=0), points[:, :2].max(axis=0)
-        half_width, half_height = (high - low) / 2
-        band = caption_band(p, p.renderers[0])
-        half_shown = CONTOUR_MARGIN * max(half_width / viewport_aspect(p, p.renderers[0]), half_height / (1 - band),
-                                          1e-12)
-        camera.view_angle = CONTOUR_VIEW_ANGLE
-        centre = np.append((low + high) / 2, 0.0) + [0.0, band * half_shown, 0.0]  # the contour below the band
-        camera.focal_point = centre
-        camera.position = centre + [0.0, 0.0, half_shown / np.tan(np.radians(CONTOUR_VIEW_ANGLE) / 2)]
-        camera.up = (0.0, 1.0, 0.0)
-        p.renderers[0].ResetCameraClippingRange()
+        """The contour seen from +z, fitted to its viewport below the caption's band like a mesh at its front
+        preset (:func:`~app.views.camera.show_preset`). The fit takes the widget's own size: VTK's reset fits a
+        bounding sphere to the window size it last rendered at, which lags a resize (too near) and, once it
+        knows a narrow viewport, divides by its aspect (the contour at half its size)."""
+        show_preset(self.plotter, [points], "front", [self.plotter.renderers[0]])
 
     def show_contour_pair(self, result) -> None:
         """Two contours: the product torus (3D) and the flat square, with the correspondence curve."""

@@ -45,8 +45,9 @@ def polyline(points: np.ndarray, closed: bool = True) -> pv.PolyData:
 def outward_normals(mesh) -> np.ndarray:
     """(n, 3) float: the mesh's unit vertex normals, turned outward where a closed mesh's faces are oriented
     inward (negative enclosed volume); an open mesh's as its faces give them."""
-    volume = mesh.enclosed_volume()
-    return -mesh.vertex_normals if volume is not None and volume < 0 else mesh.vertex_normals
+    from corrlib.descriptors.orientation import outward_sign
+
+    return outward_sign(mesh) * mesh.vertex_normals
 
 
 def lifted_curve(points: np.ndarray, normals: np.ndarray, path_vertices: np.ndarray, lift: float,

@@ -216,7 +216,8 @@ MIN_CONTOUR_POINTS = 10
 #: the energies on the first-order product graph (the only ones that take directed edge costs)
 FIRST_ORDER_ENERGIES = ("paper", "ratio")
 #: a matched curve shorter than this fraction of the outline, both at the scale of the match, is reported as
-#: collapsed (:func:`short_curve_note`): half the length of a curve that follows the outline
+#: collapsed (:func:`short_curve_note`): a warning threshold, below the ratios of curves that follow the outline
+#: (measured in ``docs/decisions.md``)
 SHORT_CURVE_RATIO = 0.5
 #: the resolution meshes are matched at (``mesh_vertices``): the benchmarks' meshes (TOSCA and SHREC's 5k copies,
 #: FAUST's 6.9k and the bundled meshes have 4.3k–7.2k vertices) and the speed target (a 200-point query against a
@@ -901,7 +902,7 @@ def match_prepared(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams,
     return on_input_vertices(result, coarse)
 
 
-def curve_length_ratio(mesh_vertices: np.ndarray, path_vertices: np.ndarray, outline: np.ndarray) -> float:
+def curve_length_ratio(mesh_vertices: np.ndarray, path_vertices: np.ndarray, outline_length: float) -> float:
     """Length of the matched closed curve over the length of the outline, both at the scale of the match.
 
     Parameters
@@ -909,9 +910,11 @@ def curve_length_ratio(mesh_vertices: np.ndarray, path_vertices: np.ndarray, out
     mesh_vertices : (n, 3) float
         The mesh scaled to unit area (:class:`PreparedMesh`).
     path_vertices : (p,) int
-        The matched curve's vertices in order (a vertex repeats where the curve stays on it).
-    outline : (m, 2) float
-        The query in canonical pose, enclosing ``area_ratio`` of the unit area (:class:`PreparedQuery`).
+        The matched curve's vertices in order (a vertex repeats where the curve stays on it; the last joins the
+        first).
+    outline_length : float
+        The query's length in canonical pose, enclosing ``area_ratio`` of the unit area
+        (:attr:`~corrlib.geometry.cyclic_paths.ProductGraph.curve_length`).
 
     A curve that follows the outline round the surface is about as long as the outline at this scale, the
     scale at which the filled outline is the part of the surface it shows; a curve crowded onto a limb or a
@@ -920,8 +923,7 @@ def curve_length_ratio(mesh_vertices: np.ndarray, path_vertices: np.ndarray, out
     """
     closed_path = np.r_[path_vertices, path_vertices[:1]]
     curve = float(np.linalg.norm(np.diff(mesh_vertices[closed_path], axis=0), axis=1).sum())
-    closed_outline = np.vstack([outline, outline[:1]])
-    return curve / max(float(np.linalg.norm(np.diff(closed_outline, axis=0), axis=1).sum()), 1e-300)
+    return curve / max(outline_length, 1e-300)
 
 
 def short_curve_note(extras: dict) -> str | None:
@@ -1033,8 +1035,8 @@ def _match_mesh(query: PreparedQuery, mesh: TriMesh, params: Contour3DParams, to
     extras = {**reading_extras(model, signs, near, side is not None, sided is not None),
               "asymmetry": query.asymmetry, "intrinsic_asymmetry": query.intrinsic_asymmetry,
               "mesh_seen_from_side": seen_from_side, "contour_points": len(query.points),
-              "contour_points_asked": params.n_contour,
-              "curve_length_ratio": curve_length_ratio(target.vertices, path.vertices, query.points)}
+              "contour_points_asked": params.n_contour, "curve_length_ratio": curve_length_ratio(
+                  target.vertices, path.vertices, graphs[bb.graph_index].curve_length)}
     certificate = SearchCertificate.of(bb, params.eps)
     yield Progress("done", 1.0, f"energy {bb.energy:.6g} after {bb.iterations} iterations, {certificate.describe()}")
     per_length = " per contour length matched to a moving curve" if params.energy.endswith("ratio") else ""

@@ -16,6 +16,16 @@ def _raise_stop(signum, frame):
     raise Stop(signum)
 
 
+@pytest.fixture(autouse=True)
+def python_default_sigint():
+    """Ctrl-C as Python sets it up in a foreground process. Python leaves SIGINT ignored where its parent
+    ignored it (a suite started in the background by a non-interactive shell), and these tests interrupt
+    themselves with it."""
+    previous = signal.signal(signal.SIGINT, signal.default_int_handler)
+    yield
+    signal.signal(signal.SIGINT, previous)
+
+
 @pytest.fixture
 def sigterm_raises_stop():
     previous = signal.signal(signal.SIGTERM, _raise_stop)

@@ -289,6 +289,95 @@ def test_thumbnails_are_rendered_upright_by_vtk():
     assert lower < upper  # legs below, the back above
 
 
+@pytest.mark.parametrize("seed", range(6))
+def test_gallery_thumbnails_fill_the_gallery(seed):
+    """The thumbnails' side against its definition, by brute force over every side and number of columns:
+    the largest at which every item is in sight (capped), else the one whose whole columns fill the width."""
+    from app.views.retrieval import gallery_icon_px
+
+    rng = np.random.default_rng(seed)
+    spacing, smallest, largest = 8, 120, 320
+    for _ in range(200):
+        width, height, n, caption = rng.integers(100, 2000), rng.integers(100, 1200), rng.integers(0, 40), 34
+
+        def in_sight(side):
+            return any(c * (side + spacing) <= width - spacing
+                       and -(-max(n, 1) // c) * (side + spacing + caption) <= height - spacing
+                       for c in range(1, max(n, 1) + 1))
+
+        side = gallery_icon_px(width, height, n, caption, spacing=spacing, smallest=smallest, largest=largest)
+        largest_in_sight = max((s for s in range(1, largest + 1) if in_sight(s)), default=0)
+        if largest_in_sight >= smallest:
+            assert side == largest_in_sight
+        else:
+            usable = width - spacing
+            cols = usable // (side + spacing)
+            assert side >= min(smallest, usable - spacing) and cols >= 1
+            assert usable - cols * (side + spacing) < cols  # no strip is left empty at the right
+
+
+def test_the_gallery_shows_every_thumbnail_it_can_and_follows_the_window(qtbot):
+    """Ten ranked meshes in a retrieval tab: where they fit, all are in sight at more than the smallest side and
+    larger in a larger tab; in a small tab the gallery scrolls and its columns span the width."""
+    from PySide6.QtCore import Qt
+    from PySide6.QtGui import QIcon, QPixmap
+    from PySide6.QtWidgets import QListWidgetItem
+
+    from app.views.retrieval import THUMBNAIL_MIN_PX, RetrievalView
+
+    view = keep_widget(RetrievalView())
+    view.show()
+    for i in range(10):
+        item = QListWidgetItem(f"{i + 1}. mesh{i}.off\nscore {i}")
+        pixmap = QPixmap(320, 320)
+        pixmap.fill(Qt.gray)
+        item.setIcon(QIcon(pixmap))
+        view.gallery.addItem(item)
+
+    def laid_out(width, height):
+        view.resize(width, height)
+        qtbot.waitUntil(lambda: view.gallery.width() > width - 60)
+        qtbot.wait(50)  # the list lays its items out after the resize
+        gallery = view.gallery
+        rects = [gallery.visualItemRect(gallery.item(i)) for i in range(gallery.count())]
+        return gallery.iconSize().width(), gallery.verticalScrollBar().maximum(), rects
+
+    side, scroll, rects = laid_out(1100, 800)
+    assert side > THUMBNAIL_MIN_PX and scroll == 0 and all(view.gallery.viewport().rect().contains(r) for r in rects)
+    larger, scroll, _ = laid_out(1500, 1000)
+    assert larger > side and scroll == 0
+    side, scroll, rects = laid_out(560, 560)
+    assert side >= THUMBNAIL_MIN_PX and scroll > 0
+    grid = view.gallery.gridSize().width()
+    assert view.gallery.viewport().width() - max(r.right() for r in rects) < grid  # no empty column at the right
+
+
+def test_the_compare_table_shows_every_method_in_a_small_window(qtbot):
+    """Five methods' rows in a Compare tab of a laptop's size: the table's pane grows until no row is hidden
+    (it showed two of five at 1280×720), up to half of the tab; a pane the user made taller stays so."""
+    from app.views.compare import COLUMNS, CompareView, table_item
+
+    view = keep_widget(CompareView())
+    view.resize(620, 560)
+    view.show()
+    qtbot.waitUntil(lambda: view.splitter.height() > 300)
+    for r, name in enumerate(["kernel-matching", "divergence-free", "fmap-zoomout", "descriptor-nn", "refined"]):
+        view.table.insertRow(r)
+        for c in range(len(COLUMNS)):
+            view.table.setItem(r, c, table_item(name if c == 0 else 0.000532 * (r + 1)))
+        view.fit_table()
+    qtbot.wait(50)
+    assert view.table.verticalScrollBar().maximum() == 0
+    assert all(view.table.viewport().rect().contains(view.table.visualItemRect(view.table.item(r, 0)))
+               for r in range(5))
+    views_px, table_px = view.splitter.sizes()
+    assert table_px <= (views_px + table_px) // 2 + 1
+    view.splitter.setSizes([100, views_px + table_px - 100])  # the user drags the table's pane taller
+    view.fit_table()
+    assert view.splitter.sizes()[0] == 100
+    assert view.table.item(0, 1).text() == "0.000532"  # three significant digits
+
+
 def test_each_thumbnail_is_drawn_with_its_own_camera():
     """The renderer is reused for every thumbnail of a gallery: a thumbnail must be what a fresh renderer draws
     for the same mesh, not the new mesh seen with the previous thumbnail's camera."""

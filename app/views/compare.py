@@ -24,6 +24,7 @@ from PySide6.QtWidgets import (
     QListWidgetItem,
     QPushButton,
     QSplitter,
+    QStyle,
     QTableWidget,
     QTableWidgetItem,
     QTabWidget,
@@ -87,7 +88,12 @@ class CompareView(QWidget, FramedView):
         self.table.setHorizontalHeaderLabels([name for name, _ in COLUMNS])
         for c, (_, tip) in enumerate(COLUMNS):
             self.table.horizontalHeaderItem(c).setToolTip(tip)
-        self.table.horizontalHeader().setSectionResizeMode(QHeaderView.ResizeToContents)
+        header = self.table.horizontalHeader()
+        header.setSectionResizeMode(QHeaderView.ResizeToContents)  # every figure read whole
+        header.setStretchLastSection(True)  # a wide table has no empty strip at the right
+        rows = self.table.verticalHeader()
+        rows.setVisible(False)  # a row is named by its method
+        rows.setDefaultSectionSize(self.table.fontMetrics().height() + 8)
         self.table.horizontalHeader().setSortIndicator(-1, Qt.AscendingOrder)  # insertion order until a click
         self.table.setSortingEnabled(True)
         self.figure = Figure(figsize=(4, 3), layout="constrained")  # fits labels into any size
@@ -106,13 +112,13 @@ class CompareView(QWidget, FramedView):
         self.bottom = QTabWidget()  # the table and the curves each get the full width
         self.bottom.addTab(self.table, "Table")
         self.bottom.addTab(self.canvas, "Error curves")
-        right = QSplitter(Qt.Vertical)
-        right.addWidget(views_w)
-        right.addWidget(self.bottom)
-        right.setSizes(VIEWS_BOTTOM_SPLIT)
+        self.splitter = QSplitter(Qt.Vertical)
+        self.splitter.addWidget(views_w)
+        self.splitter.addWidget(self.bottom)
+        self.splitter.setSizes(VIEWS_BOTTOM_SPLIT)
         layout = QVBoxLayout(self)
         layout.addLayout(top)
-        layout.addWidget(right, 1)
+        layout.addWidget(self.splitter, 1)
         self.rows: list[dict] = []
         self.shapes = None  # (source, target) of the current comparison
         self.displayed: Displayed | None = None  # source and target in their display frames
@@ -206,8 +212,22 @@ class CompareView(QWidget, FramedView):
         for c, v in enumerate(values):
             self.table.setItem(r, c, table_item(v))
         self.table.setSortingEnabled(True)
+        self.fit_table()
         self._draw_view(len(self.rows))
         self._draw_curves()
+
+    def fit_table(self) -> None:
+        """The table and curves tabs made tall enough for every row of the table, up to half of the tab's height
+        (a small window's grid had the table show two methods of five); a taller pane the user chose stays."""
+        table = self.table
+        rows_px = sum(table.rowHeight(r) for r in range(table.rowCount()))
+        scrollbar_px = table.style().pixelMetric(QStyle.PM_ScrollBarExtent, None, table)  # shown when narrow
+        table_px = table.horizontalHeader().sizeHint().height() + rows_px + scrollbar_px + 2 * table.frameWidth() + 2
+        needed = table_px + self.bottom.tabBar().sizeHint().height() + 4
+        views_px, bottom_px = self.splitter.sizes()
+        wanted = min(needed, (views_px + bottom_px) // 2)
+        if bottom_px < wanted:
+            self.splitter.setSizes([views_px + bottom_px - wanted, wanted])
 
     def _view_position(self, index: int) -> tuple[int, int] | None:
         """Grid cell of view ``index`` (0: the source), None beyond the grid."""
@@ -397,12 +417,12 @@ class _NumericItem(QTableWidgetItem):
 
 
 def table_item(value) -> QTableWidgetItem:
-    """A cell for a method name (text) or a figure (4 significant digits, '—' if missing)."""
+    """A cell for a method name (text) or a figure (3 significant digits, '—' if missing; sorted by its value)."""
     if isinstance(value, str):
         return QTableWidgetItem(value)
     number = float("nan") if value is None else float(value)
     text = "—" if not np.isfinite(number) else (str(int(number)) if isinstance(value, (int, np.integer))
-                                                 else f"{number:.4g}")
+                                                 else f"{number:.3g}")
     return _NumericItem(text, number if np.isfinite(number) else float("nan"))
 
 

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import io
+import math
 from pathlib import Path
 
 import numpy as np
@@ -16,12 +17,15 @@ from PySide6.QtWidgets import (
     QListWidget,
     QListWidgetItem,
     QPushButton,
+    QStyle,
     QVBoxLayout,
     QWidget,
 )
 
-THUMBNAIL_PX = 160  # gallery thumbnails are square, this many pixels wide
+THUMBNAIL_PX = 320  # gallery thumbnails are rendered square at this many pixels and shown at most this large
+THUMBNAIL_MIN_PX = 120  # a gallery scrolls rather than show its thumbnails smaller than this
 GALLERY_SPACING_PX = 8
+CAPTION_LINES = 2  # a thumbnail's caption: "rank. name" and the score
 THUMBNAIL_GREY = 0.8  # colour of the mesh in a thumbnail (the matched curve is crimson)
 CURVE_TUBE_RADIUS = 0.012  # radius of the matched curve's tube in display units (unit diagonal)
 
@@ -85,6 +89,25 @@ class ThumbnailRenderer:
             self._plotter = None
 
 
+def gallery_icon_px(width: int, height: int, n_items: int, caption_px: int, spacing: int = GALLERY_SPACING_PX,
+                    smallest: int = THUMBNAIL_MIN_PX, largest: int = THUMBNAIL_PX) -> int:
+    """Side in pixels of the square thumbnails of a gallery ``width`` × ``height`` pixels holding ``n_items``.
+
+    Every cell is the thumbnail plus ``spacing`` around it and a caption ``caption_px`` high below it. The side
+    is the largest (up to ``largest``) at which all items are in sight, over every number of columns. If even
+    ``smallest`` does not let them all be seen, the gallery scrolls, and the side is the one at which whole
+    columns of at least ``smallest`` fill the width, so that no strip is left empty at the right.
+    """
+    n_items = max(n_items, 1)
+    usable_w, usable_h = width - spacing, height - spacing
+    in_sight = max(min(usable_w // cols - spacing, usable_h // math.ceil(n_items / cols) - spacing - caption_px)
+                   for cols in range(1, n_items + 1))
+    if in_sight >= smallest:
+        return min(in_sight, largest)
+    cols = max(1, usable_w // (smallest + spacing))
+    return int(np.clip(usable_w // cols - spacing, 1, largest))
+
+
 def matched_outline(hit) -> np.ndarray | None:
     """(p, 2) float: the query's point matched to each vertex of a hit's curve; None for a failed hit."""
     if hit.error or hit.contour_points is None or hit.path_contour_index is None:
@@ -114,6 +137,16 @@ def retrieval_job(query, folder: str, params=None, ranking: str = "fused"):
     return factory
 
 
+class _Gallery(QListWidget):
+    """The ranked thumbnails; says when its size changes, so that the thumbnails can be fitted again."""
+
+    resized = Signal()
+
+    def resizeEvent(self, event) -> None:
+        super().resizeEvent(event)
+        self.resized.emit()
+
+
 class RetrievalView(QWidget):
     """Query from the sketch canvas or an image, a folder of meshes, a ranked gallery."""
 
@@ -137,11 +170,12 @@ class RetrievalView(QWidget):
                                 "lowest score ranks first.")
         self.run_button = QPushButton("Rank")
         self.run_button.clicked.connect(self.run_requested)
-        self.gallery = QListWidget()
+        self.gallery = _Gallery()
         self.gallery.setViewMode(QListWidget.IconMode)
-        self.gallery.setIconSize(QSize(THUMBNAIL_PX, THUMBNAIL_PX))
         self.gallery.setResizeMode(QListWidget.Adjust)
-        self.gallery.setSpacing(GALLERY_SPACING_PX)
+        self.gallery.setMovement(QListWidget.Static)
+        self.gallery.setWordWrap(True)
+        self.gallery.resized.connect(self.fit_thumbnails)
         self.gallery.itemDoubleClicked.connect(self._open)
         for label in (self.query_label, self.folder_label):
             label.setWordWrap(True)  # long paths and hints wrap instead of widening the window
@@ -168,7 +202,8 @@ class RetrievalView(QWidget):
 
     def set_folder(self, folder: str) -> None:
         self.folder = folder
-        self.folder_label.setText(f"folder: {folder}")
+        self.folder_label.setText(f"folder: {Path(folder).name or folder}")  # the whole path in the tooltip
+        self.folder_label.setToolTip(str(Path(folder).resolve()))
 
     def choose_folder(self) -> None:
         folder = QFileDialog.getExistingDirectory(self, "Folder of meshes")
@@ -196,7 +231,20 @@ class RetrievalView(QWidget):
             item.setToolTip(hit.error or f"{hit.path}\nscore {hit.score:.6g}, lower is closer (matching energy "
                                          f"{hit.energy:.6g}, view dissimilarity {views}), {hit.seconds:.2f} s")
             item.setData(Qt.UserRole, str(hit.path))
+            item.setTextAlignment(Qt.AlignHCenter | Qt.AlignTop)
             self.gallery.addItem(item)
+        self.fit_thumbnails()
+
+    def fit_thumbnails(self) -> None:
+        """Thumbnails as large as the gallery allows for the items it holds (:func:`gallery_icon_px`)."""
+        gallery = self.gallery
+        viewport = gallery.maximumViewportSize()  # the size without scroll bars
+        # a wrapping list lays its items out in the width left beside a vertical scroll bar, shown or not
+        width = viewport.width() - gallery.style().pixelMetric(QStyle.PM_ScrollBarExtent, None, gallery)
+        caption_px = CAPTION_LINES * gallery.fontMetrics().lineSpacing() + 4
+        side = gallery_icon_px(width, viewport.height(), gallery.count(), caption_px)
+        gallery.setIconSize(QSize(side, side))
+        gallery.setGridSize(QSize(side + GALLERY_SPACING_PX, side + caption_px + GALLERY_SPACING_PX))
 
     def ranked_names(self) -> list[str]:
         return [Path(self.gallery.item(i).data(Qt.UserRole)).name for i in range(self.gallery.count())]

@@ -574,6 +574,24 @@ def test_contour_pair_shows_the_torus(qtbot, window):
     assert {"density", "harmonic_1"} <= set(listed)  # the product-manifold refinement's functions
     view.function.setCurrentText("harmonic_1")  # redraws the torus with the localized harmonic
     assert view.function.currentText() == "harmonic_1"
+    # the flat square fills its viewport and is whole, drawn when the widget was still small and after a resize
+    # (VTK's own reset cut its sides in a laptop's window)
+    corners = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0, 0.0]])
+    for size in ((1100, 700), (1500, 700)):
+        window.resize(*size)
+        qtbot.wait(100)
+        view.plotter.render()
+        flat = view.plotter.renderers[1]
+        width, height = view.plotter.render_window.GetSize()
+        x0, y0, x1, y1 = np.array(flat.GetViewport()) * [width, height, width, height]
+        screen = []
+        for corner in corners:
+            flat.SetWorldPoint(*corner, 1.0)
+            flat.WorldToDisplay()
+            screen.append(flat.GetDisplayPoint()[:2])
+        screen = np.array(screen)
+        assert np.all(screen >= [x0 - 1, y0 - 1]) and np.all(screen <= [x1 + 1, y1 + 1]), (size, screen)
+        assert max(np.ptp(screen[:, 0]) / (x1 - x0), np.ptp(screen[:, 1]) / (y1 - y0)) > 0.8
 
 
 def test_drag_and_drop_and_recent_files(qtbot, window):

@@ -210,7 +210,7 @@ class FramedView:
         frame, view = self.preset_frame()
         self._preset_camera = show_preset(plotter, points, view, renderers, frame)
         if getattr(self, "_refit_filter", None) is None or self._refit_filter.plotter is not plotter:
-            self._refit_filter = _RefitOnResize(plotter, self._on_resized)
+            self._refit_filter = RefitOnResize(plotter, self._on_resized)
 
     def _on_resized(self) -> None:
         plotter = self.view_plotter()
@@ -237,7 +237,7 @@ class FramedView:
             plotter.render()
 
 
-class _RefitOnResize:
+class RefitOnResize:
     """Calls ``callback`` after the plotter's widget is resized (a Qt event filter)."""
 
     def __init__(self, plotter, callback):

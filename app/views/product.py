@@ -5,10 +5,11 @@ from __future__ import annotations
 import numpy as np
 from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QVBoxLayout, QWidget
 
-from app.views.camera import DISPLAY_FRAME, FramedView, ShapeDisplay, show_preset, window_size
+from app.views.camera import (DISPLAY_FRAME, FramedView, RefitOnResize, ShapeDisplay, current_camera, show_preset,
+                              window_size)
 from app.views.scene import (LABEL_FONT_SIZE, PLAIN_COLOR, LazyPlotter, hue_colors, lifted_curve, outward_normals,
                              polydata, polyline)
-from corrlib.viewing import outline_frame
+from corrlib.viewing import ViewFrame, outline_frame
 
 CURVE_WIDTH = 4  # line width of the query contour
 #: what the Product tab says before a match
@@ -46,6 +47,15 @@ def product_layout(extents: list[tuple[float, float]], window: tuple[float, floa
     return STACKED if smaller_size(STACKED) > smaller_size(SIDE_BY_SIDE) else SIDE_BY_SIDE
 
 
+#: the 3D torus seen obliquely from above (VTK's isometric direction), its axis up on the screen
+TORUS_FRAME = ViewFrame(np.array([-1.0, 1.0, 0.0]) / np.sqrt(2), np.array([-1.0, -1.0, 2.0]) / np.sqrt(6),
+                        np.array([1.0, 1.0, 1.0]) / np.sqrt(3))
+#: the flat torus' colour bar: three labels at a fixed small size (labels scaled with the bar ran into each
+#: other and into the title in a laptop's window); the title is the function's name, shown above the view
+TORUS_BAR = {"title": "", "fmt": "%.3g", "n_labels": 3, "unconstrained_font_size": True, "label_font_size": 12,
+             "height": 0.06, "position_y": 0.04}
+
+
 class ProductView(QWidget, FramedView):
     """Left: the query contour; right: the mesh with the matched curve; both coloured by contour position."""
 
@@ -73,6 +83,9 @@ class ProductView(QWidget, FramedView):
         self._contour_display: np.ndarray | None = None  # the query contour's points as drawn, (m, 3)
         self.mesh_points: np.ndarray | None = None  # the matched mesh in its display frame
         self.drawn_frame = None  # the upright view the matched curve looks most like the query from (ViewFrame)
+        self._torus_views: list = []  # (points, frame) of the 3D and the flat torus, fitted to their viewports
+        self._torus_cameras: list = []  # the cameras of that fit (a camera the user moved is not fitted again)
+        self._torus_refit = None
 
     def clear(self) -> None:
         """Forget the last match or contour pair (the inputs changed: it belongs to the previous pair)."""
@@ -125,6 +138,7 @@ class ProductView(QWidget, FramedView):
     def _draw_contour_match(self, contour_points: np.ndarray, mesh, path_vertices: np.ndarray,
                             path_contour_index: np.ndarray, energy: float) -> None:
         self._match = (contour_points, mesh, path_vertices, path_contour_index, energy)
+        self._pair, self._torus_views = None, []  # no torus to fit again
         p = self.plotter
         p.clear_actors()
         m = contour_points.shape[0]
@@ -215,6 +229,7 @@ class ProductView(QWidget, FramedView):
         p = self.plotter
         p.clear_actors()
         self._set_viewports(SIDE_BY_SIDE)
+        self._torus_views = []
         curve_uv = path_angles(path.layers, path.vertices, u, v)
         for col, flat in ((0, False), (1, True)):
             p.subplot(0, col)
@@ -223,7 +238,7 @@ class ProductView(QWidget, FramedView):
             if values is not None:
                 grid[name] = values[index]
                 p.add_mesh(grid, scalars=name, cmap="viridis", show_scalar_bar=flat,
-                           scalar_bar_args={"title": name, "fmt": "%.3g"}, opacity=1.0 if flat else 0.75)
+                           scalar_bar_args=TORUS_BAR, opacity=1.0 if flat else 0.75)
             else:
                 p.add_mesh(grid, color="lightgrey", opacity=1.0 if flat else 0.75)
             if flat:
@@ -233,19 +248,38 @@ class ProductView(QWidget, FramedView):
                 for piece in np.split(pts, cut):
                     if len(piece) > 1:
                         p.add_mesh(polyline(piece, closed=False), color="crimson", line_width=4)
-                p.add_text("flat torus (u: contour A, v: contour B)", font_size=9)
-                p.view_xy()
+                coloured = f", colour: {name}" if values is not None else ""
+                p.add_text(f"flat torus (u: contour A, v: contour B){coloured}", font_size=9)
             else:
                 pts = torus_embedding(curve_uv[:, 0], curve_uv[:, 1], 1.0, 0.41)
                 self.torus_curve = polyline(pts, closed=False)
                 p.add_mesh(self.torus_curve.tube(radius=0.015), color="crimson")
                 p.add_text("product torus A × B", font_size=9)
-            p.reset_camera()
-            if not flat:  # farther away (a zoom would widen the view angle, compounding at every redraw)
-                p.camera.Dolly(0.8)
-                p.renderer.ResetCameraClippingRange()
+            self._torus_views.append((verts, DISPLAY_FRAME if flat else TORUS_FRAME))
+        self._fit_torus()
         p.render()
         self.info.setText(f"{len(u)} × {len(v)} product torus; correspondence energy {result.energy:.4g}")
+
+    def _fit_torus(self) -> None:
+        """Each torus view fitted to its viewport's own size and shape, and again after every resize while its
+        camera is where the fit put it. VTK's reset fits a bounding sphere to the height of the size it last
+        rendered at: the widget is 100 × 30 pixels when a first result arrives, and a narrow viewport cut the
+        square and the torus at the sides."""
+        p = self.plotter
+        for renderer, (points, frame) in zip(p.renderers, self._torus_views):
+            show_preset(p, [points], "front", [renderer], frame)
+        self._torus_cameras = [current_camera(p, renderer) for renderer in p.renderers]
+        if self._torus_refit is None or self._torus_refit.plotter is not p:
+            self._torus_refit = RefitOnResize(p, self._on_torus_resized)
+
+    def _on_torus_resized(self) -> None:
+        if self._pair is None or not self._torus_views:
+            return
+        p = self.plotter
+        if all(np.allclose(current_camera(p, r).position, c.position) for r, c in zip(p.renderers,
+                                                                                       self._torus_cameras)):
+            self._fit_torus()
+            p.render()
 
     def close_plotters(self) -> None:
         self._plotter.close()

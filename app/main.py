@@ -151,6 +151,8 @@ def schedule_screenshot(app, window, args, started: bool, errors: list) -> None:
             view.slider.setValue(int(STEPS * args.sequence_t / view.t_max.value()))
         if args.torus_function:
             window.product_view.function.setCurrentText(args.torus_function)
+        while window.retrieval_view.draw_next_thumbnail():  # the gallery's thumbnails, all of them
+            pass
         for _ in range(SETTLE_EVENT_ROUNDS):
             app.processEvents()
         QTimer.singleShot(SCREENSHOT_SETTLE_MS,

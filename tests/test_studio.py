@@ -159,7 +159,9 @@ def test_retrieval_gallery_order(qtbot, window, tmp_path):
     assert len(names) == 4 and set(names[:2]) == {"wolf0.off", "wolf1.off"} and names[3] == "empty.off"
     assert window.job_panel.stage.text() == "ranked 3 meshes; 1 could not be matched (see the log)"
     assert "not ranked: empty.off: " in window.job_panel.log.toPlainText()
-    assert window.retrieval_view.gallery.item(0).icon().isNull() is False
+    gallery = window.retrieval_view.gallery
+    qtbot.waitUntil(lambda: window.retrieval_view.thumbnails_pending() == 0, timeout=30_000)
+    assert [gallery.item(i).icon().isNull() for i in range(4)] == [False, False, False, True]  # empty.off: none
     assert window.retrieval_view.ranking.currentText() == "fused"
     assert all(np.isfinite(hit.view_distance) for hit in window.retrieval_view.hits if not hit.error)
     # the thesis' ranking, chosen in the tab: by energy, no views rendered

@@ -352,6 +352,35 @@ def test_the_gallery_shows_every_thumbnail_it_can_and_follows_the_window(qtbot):
     assert view.gallery.viewport().width() - max(r.right() for r in rects) < grid  # no empty column at the right
 
 
+def test_the_ranking_is_listed_at_once_and_its_thumbnails_drawn_one_at_a_time(qtbot):
+    """A collection of many meshes froze the window while every thumbnail was drawn (about 75 ms each): the
+    ranks and scores are listed when the ranking arrives, the thumbnails follow one per turn of the event
+    loop, best first, and a new ranking drops the old one's."""
+    from types import SimpleNamespace
+
+    from app.views.retrieval import RetrievalView
+    from corrlib.io import load_mesh
+
+    wolf = load_mesh(TOSCA / "wolf0.off")
+    hits = [SimpleNamespace(name=f"wolf{i}.off", path=TOSCA / "wolf0.off", score=float(i), energy=float(i),
+                            view_distance=float("nan"), seconds=0.1, error="", path_vertices=np.arange(0, 400, 7),
+                            contour_points=None, path_contour_index=None) for i in range(4)]
+    view = keep_widget(RetrievalView())
+    view.show()
+    view.show_results(hits, [wolf] * 4)
+    gallery = view.gallery
+    assert gallery.count() == 4 and view.thumbnails_pending() == 4
+    assert all(gallery.item(i).icon().isNull() for i in range(4))
+    qtbot.waitUntil(lambda: not gallery.item(0).icon().isNull())
+    assert gallery.item(3).icon().isNull() or view.thumbnails_pending() == 0  # the best first
+    qtbot.waitUntil(lambda: view.thumbnails_pending() == 0)
+    assert not any(gallery.item(i).icon().isNull() for i in range(4))
+    view.show_results(hits[:1], [wolf])
+    view.clear_results()
+    assert view.thumbnails_pending() == 0 and gallery.count() == 0
+    qtbot.wait(100)  # the dropped ranking's timer finds nothing to draw
+
+
 def test_the_compare_table_shows_every_method_in_a_small_window(qtbot):
     """Five methods' rows in a Compare tab of a laptop's size: the table's pane grows until no row is hidden
     (it showed two of five at 1280×720), up to half of the tab; a pane the user made taller stays so."""

@@ -7,7 +7,7 @@ import math
 from pathlib import Path
 
 import numpy as np
-from PySide6.QtCore import QSize, Qt, Signal
+from PySide6.QtCore import QSize, Qt, QTimer, Signal
 from PySide6.QtGui import QIcon, QPixmap
 from PySide6.QtWidgets import (
     QComboBox,
@@ -190,6 +190,7 @@ class RetrievalView(QWidget):
         layout.addLayout(top)
         layout.addWidget(self.gallery, 1)
         self.hits = []
+        self._pending: list = []  # (item, hit, mesh) whose thumbnails are still to be drawn, best last
         self.thumbnails = ThumbnailRenderer()
         self.up = "auto"  # the up-axis setting of the 3D views (thumbnails follow it)
 
@@ -213,27 +214,48 @@ class RetrievalView(QWidget):
     def clear_results(self) -> None:
         """An empty gallery (a new ranking starts: the last folder's must not stand for it if it fails)."""
         self.hits = []
+        self._pending = []
         self.gallery.clear()
 
     def show_results(self, hits, meshes) -> None:
-        """The ranked gallery: ``hits`` (best first) and their meshes (None where loading failed)."""
+        """The ranked gallery: ``hits`` (best first) and their meshes (None where loading failed).
+
+        The ranks and scores are listed at once; the thumbnails are drawn one per turn of the event loop
+        (:meth:`draw_next_thumbnail`), best first, so that a large collection does not freeze the window.
+        """
         self.hits = hits
         self.gallery.clear()
+        self._pending = []
         for rank, (hit, mesh) in enumerate(zip(hits, meshes), 1):
-            png = b"" if mesh is None else self.thumbnails.png(mesh, hit.path_vertices, self.up, matched_outline(hit))
             text = f"{rank}. {hit.name}\n" + (f"score {hit.score:.4g}" if not hit.error else "failed")
             item = QListWidgetItem(text)
-            if png:
-                pix = QPixmap()
-                pix.loadFromData(png)
-                item.setIcon(QIcon(pix))
             views = f"{hit.view_distance:.3f}" if np.isfinite(hit.view_distance) else "not measured"
             item.setToolTip(hit.error or f"{hit.path}\nscore {hit.score:.6g}, lower is closer (matching energy "
                                          f"{hit.energy:.6g}, view dissimilarity {views}), {hit.seconds:.2f} s")
             item.setData(Qt.UserRole, str(hit.path))
             item.setTextAlignment(Qt.AlignHCenter | Qt.AlignTop)
             self.gallery.addItem(item)
+            if mesh is not None:
+                self._pending.append((item, hit, mesh))
         self.fit_thumbnails()
+        self._pending.reverse()  # popped from the end: best first
+        QTimer.singleShot(0, self.draw_next_thumbnail)
+
+    def draw_next_thumbnail(self) -> bool:
+        """Draw the next pending thumbnail; False when none is left (a new ranking drops the old ones)."""
+        if not self._pending:
+            return False
+        item, hit, mesh = self._pending.pop()
+        png = self.thumbnails.png(mesh, hit.path_vertices, self.up, matched_outline(hit))
+        pix = QPixmap()
+        pix.loadFromData(png)
+        item.setIcon(QIcon(pix))
+        if self._pending:
+            QTimer.singleShot(0, self.draw_next_thumbnail)
+        return True
+
+    def thumbnails_pending(self) -> int:
+        return len(self._pending)
 
     def fit_thumbnails(self) -> None:
         """Thumbnails as large as the gallery allows for the items it holds (:func:`gallery_icon_px`)."""
@@ -254,4 +276,5 @@ class RetrievalView(QWidget):
             self.open_pair.emit(self.query, item.data(Qt.UserRole))
 
     def close_plotters(self) -> None:
+        self._pending = []
         self.thumbnails.close()

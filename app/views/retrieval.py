@@ -255,6 +255,7 @@ class RetrievalView(QWidget):
         return True
 
     def thumbnails_pending(self) -> int:
+        """How many thumbnails of the ranking shown are still to be drawn."""
         return len(self._pending)
 
     def fit_thumbnails(self) -> None:

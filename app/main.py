@@ -150,7 +150,12 @@ def schedule_screenshot(app, window, args, started: bool, errors: list) -> None:
         if args.sequence_t is not None and view.positions is not None:
             view.slider.setValue(int(STEPS * args.sequence_t / view.t_max.value()))
         if args.torus_function:
-            window.product_view.function.setCurrentText(args.torus_function)
+            offered = [window.product_view.function.itemText(i) for i in range(window.product_view.function.count())]
+            if args.torus_function in offered:
+                window.product_view.function.setCurrentText(args.torus_function)
+            else:
+                print(f"corr-studio: the result offers no torus function {args.torus_function} (it offers: "
+                      f"{', '.join(offered) or 'none'}); the screenshot shows the default", file=sys.stderr)
         while window.retrieval_view.draw_next_thumbnail():  # the gallery's thumbnails, all of them
             pass
         for _ in range(SETTLE_EVENT_ROUNDS):
@@ -212,7 +217,9 @@ def main(argv: list[str] | None = None) -> int:
         if error is not None:
             print(f"corr-studio: {error}", file=sys.stderr)
             return 2
-    started = start_jobs(window, args)
+    errors_before = len(errors)
+    # a job refused at once (an error while starting it) is not waited for
+    started = start_jobs(window, args) and len(errors) == errors_before
     if args.screenshot:
         schedule_screenshot(app, window, args, started, errors)
     return app.exec()

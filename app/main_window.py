@@ -856,7 +856,9 @@ class MainWindow(QMainWindow):
             self.retrieval_view.show_results(hits, meshes)
             failed = [hit for hit in hits if hit.error]
             for hit in failed:  # the gallery shows why on hover only
-                self.job_panel.write(f"not ranked: {hit.name}: {hit.error}")
+                said = hit.error.removeprefix(str(hit.path)).removeprefix(hit.name).removeprefix(": ")
+                said = f"{hit.name}: {said}"  # once, the file's name in the collection
+                self.job_panel.write(f"not ranked: {said}")
             self._job_stopped(f"ranked {len(hits) - len(failed)} meshes" +
                               (f"; {len(failed)} could not be matched (see the log)" if failed else ""))
             self.result_ready.emit(hits)

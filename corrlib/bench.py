@@ -663,7 +663,8 @@ def retrieval_benchmark(queries, collection, out, *, params=None, jobs: int | No
             hits = run(retrieve(load_contour(q), meshes, params, jobs=jobs, scheduler=scheduler, root=collection,
                                 ranking=ranking))
             ranked += [{"query": name, "rank": rank, "mesh": h.name, "class": h.label, "score": h.score,
-                        "energy": h.energy, "view_distance": h.view_distance, "seconds": h.seconds, "error": h.error}
+                        "energy": h.energy, "view_distance": h.view_distance, "seconds": h.seconds, "error": h.error,
+                        "curve_length_ratio": h.curve_length_ratio}
                        for rank, h in enumerate(hits, 1)]
             labels = [h.label for h in hits]
             broken = [h for h in hits if h.error]
@@ -719,7 +720,7 @@ def write_retrieval_tables(out: Path, rows: list[dict], ranked: list[dict], prec
     tables = (("retrieval.csv", ("query", "class", "ap", "first_relevant", "margin", "top", *RANKING_MEASURES,
                                  "ap_own_left_out", "error"), rows),
               ("retrieval_ranking.csv", ("query", "rank", "mesh", "class", "score", "energy", "view_distance",
-                                         "seconds", "error"), ranked))
+                                         "seconds", "error", "curve_length_ratio"), ranked))
     for name, columns, table in tables:
         with atomic_write(out / name) as fh:
             fh.write(",".join(columns) + "\n")

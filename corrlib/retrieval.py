@@ -42,7 +42,7 @@ import numpy as np
 from corrlib.errors import CorrError, InputError, ParameterError
 from corrlib.io import MESH_SUFFIXES, load_mesh, lost_working_folder
 from corrlib.parallel import check_jobs, job_executor
-from corrlib.methods.contour3d import Contour3DParams, PreparedQuery, match_prepared, prepare_query
+from corrlib.methods.contour3d import SHORT_CURVE_RATIO, Contour3DParams, PreparedQuery, match_prepared, prepare_query
 from corrlib.outline_views import QueryOutline, query_outline, view_dissimilarity
 from corrlib.progress import CancelToken, Progress, run
 
@@ -141,11 +141,23 @@ class RetrievalHit:
     root: Path | None = None
     view_distance: float = float("nan")
     score: float = float("nan")
+    curve_length_ratio: float = float("nan")
 
     def measured(self) -> str:
-        """One line for a progress report: the mesh and what was measured on it."""
+        """One line for a progress report: the mesh and what was measured on it (a collapsed curve said so)."""
+        if self.error:
+            return f"{self.name}: not matched"
         views = f", view dissimilarity {self.view_distance:.3f}" if np.isfinite(self.view_distance) else ""
-        return f"{self.name}: energy {self.energy:.6g}{views}"
+        return f"{self.name}: energy {self.energy:.6g}{views}" + (f"; {self.collapse_note()}"
+                                                                  if self.collapse_note() else "")
+
+    def collapse_note(self) -> str:
+        """A short warning where the matched curve is shorter than
+        :data:`~corrlib.methods.contour3d.SHORT_CURVE_RATIO` of the outline (probably collapsed onto a part of the
+        mesh), else an empty string."""
+        if not self.curve_length_ratio < SHORT_CURVE_RATIO:
+            return ""
+        return f"the matched curve is {self.curve_length_ratio:.2f} of the outline's length: probably collapsed"
 
     @property
     def name(self) -> str:
@@ -173,7 +185,8 @@ def _match_one(query: PreparedQuery, path: str, params: Contour3DParams,
     except CorrError as exc:
         return RetrievalHit(Path(path), np.inf, str(exc), seconds=time.perf_counter() - start, score=np.inf)
     return RetrievalHit(Path(path), float(result.energy), "", result.path.vertices, result.path.contour_index,
-                        time.perf_counter() - start, result.path.contour_points, view_distance=view_distance)
+                        time.perf_counter() - start, result.path.contour_points, view_distance=view_distance,
+                        curve_length_ratio=float(result.extras.get("curve_length_ratio", np.nan)))
 
 
 def fused_scores(energies, view_distances) -> np.ndarray:
@@ -516,10 +529,10 @@ def write_ranking(hits, out: Path, pictures: int) -> list[Path]:
         written = [stage / out.name]
         with open(written[0], "w", encoding="utf-8", errors="surrogateescape", newline="") as fh:
             table = csv.writer(fh, delimiter="\t", lineterminator="\n")  # quotes a name with a tab or line break
-            table.writerow(["rank", "energy", "mesh", "error", "name", "score", "view_distance"])
+            table.writerow(["rank", "energy", "mesh", "error", "name", "score", "view_distance", "curve_length_ratio"])
             for rank, hit in enumerate(hits, 1):
                 table.writerow([rank, f"{hit.energy:.9g}", hit.path, hit.error, hit.name, f"{hit.score:.9g}",
-                                f"{hit.view_distance:.9g}"])
+                                f"{hit.view_distance:.9g}", f"{hit.curve_length_ratio:.4g}"])
         for rank, hit in enumerate(hits[:pictures], 1):
             if hit.error:
                 continue

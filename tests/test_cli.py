@@ -148,7 +148,7 @@ def test_retrieve_from_a_collection_with_a_folder_per_class(tmp_path, capsys):
     text = capsys.readouterr().out
     assert "average precision for class 'wolf'" in text and "cat/0.off" in text
     rows = [line.split("\t") for line in (tmp_path / "rank.tsv").read_text().strip().split("\n")]
-    assert rows[0] == ["rank", "energy", "mesh", "error", "name", "score", "view_distance"]
+    assert rows[0] == ["rank", "energy", "mesh", "error", "name", "score", "view_distance", "curve_length_ratio"]
     names = [row[4] for row in rows[1:]]
     assert sorted(names) == ["cat/0.off", "wolf/0.off", "wolf/1.off"]
     pictures = sorted(p.name for p in tmp_path.glob("rank.*.png"))

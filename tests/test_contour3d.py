@@ -998,3 +998,14 @@ def test_a_short_matched_curve_is_reported_as_collapsed(capsys, tmp_path):
     err = capsys.readouterr().err
     assert "warning: the matched curve is 0." in err and "contour-views" in err
     assert short_curve_note({"curve_length_ratio": SHORT_CURVE_RATIO}) is None and short_curve_note({}) is None
+    # a ranking says it too, in its progress, in `corr retrieve`'s table (and in the studio's gallery)
+    folder = tmp_path / "wolves"
+    folder.mkdir()
+    for name in ("wolf0.off", "wolf1.off"):
+        (folder / name).write_bytes((TOSCA / name).read_bytes())
+    assert main(["retrieve", str(SILHOUETTES / "mpeg7" / "dog-1.gif"), str(folder), "--jobs", "1"]) == 0
+    out = capsys.readouterr()
+    # at the retrieval's 100 points the dog collapses on both wolves (0.33 and 0.36 of its length)
+    table = [line for line in out.out.splitlines() if "wolf" in line]
+    assert len(table) == 2 and all("off  (the matched curve is 0.3" in line for line in table), out.out
+    assert out.err.count("probably collapsed") == 2  # in the progress lines too

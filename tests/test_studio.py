@@ -161,7 +161,8 @@ def test_retrieval_gallery_order(qtbot, window, tmp_path):
     assert "not ranked: empty.off: " in window.job_panel.log.toPlainText()
     gallery = window.retrieval_view.gallery
     qtbot.waitUntil(lambda: window.retrieval_view.thumbnails_pending() == 0, timeout=30_000)
-    assert [gallery.item(i).icon().isNull() for i in range(4)] == [False, False, False, True]  # empty.off: none
+    assert not any(gallery.item(i).icon().isNull() for i in range(4))  # empty.off: a placeholder
+    assert gallery.item(3).text().endswith("not matched")
     assert window.retrieval_view.ranking.currentText() == "fused"
     assert all(np.isfinite(hit.view_distance) for hit in window.retrieval_view.hits if not hit.error)
     # the thesis' ranking, chosen in the tab: by energy, no views rendered
@@ -576,6 +577,10 @@ def test_contour_pair_shows_the_torus(qtbot, window):
     assert {"density", "harmonic_1"} <= set(listed)  # the product-manifold refinement's functions
     view.function.setCurrentText("harmonic_1")  # redraws the torus with the localized harmonic
     assert view.function.currentText() == "harmonic_1"
+    # the new function's colour bar, drawn (bars are kept by title, and all are untitled)
+    bars = list(view.plotter.scalar_bars.values())
+    assert len(bars) == 1 and any(r.HasViewProp(bars[0]) for r in view.plotter.renderers)
+    assert bars[0].GetLookupTable().GetRange()[1] == pytest.approx(result.path.product_functions["harmonic_1"].max())
     # the flat square fills its viewport and is whole, drawn when the widget was still small and after a resize
     # (VTK's own reset cut its sides in a laptop's window)
     corners = np.array([[0.0, 0.0, 0.0], [1.0, 0.0, 0.0], [0.0, 1.0, 0.0], [1.0, 1.0, 0.0]])
@@ -768,6 +773,28 @@ def test_a_screenshot_run_whose_input_fails_says_so_and_exits_nonzero(tmp_path):
                           capture_output=True, text=True, timeout=300)
     assert proc.returncode == 1, proc.stderr
     assert "missing.off" in proc.stderr and shot.stat().st_size > 10_000
+
+
+def test_a_screenshot_run_whose_job_is_refused_does_not_wait_for_it(tmp_path):
+    """Found by a review: a comparison of two outlines is refused at once, but the screenshot run waited for a
+    result until its --timeout. It shoots and exits 1 at once; an unknown torus function is named, not ignored."""
+    import subprocess
+    import sys
+    import time
+
+    horse, deer = SILHOUETTES / "mpeg7" / "horse-1.gif", SILHOUETTES / "mpeg7" / "deer-1.gif"
+    env = {**os.environ, "QT_QPA_PLATFORM": "xcb"}
+    start = time.perf_counter()
+    proc = subprocess.run([sys.executable, "-m", "app.main", str(horse), str(deer), "--compare", "--screenshot",
+                           str(tmp_path / "c.png"), "--timeout", "100"], env=env, capture_output=True, text=True,
+                          timeout=300)
+    assert proc.returncode == 1 and "needs a source and a target mesh" in proc.stderr, proc.stderr
+    assert time.perf_counter() - start < 60 and "no result within" not in proc.stderr
+    proc = subprocess.run([sys.executable, "-m", "app.main", str(horse), str(deer), "--method", "contour2d",
+                           "--param", "n_source=40", "--param", "n_target=40", "--torus-function", "bogus",
+                           "--screenshot", str(tmp_path / "t.png"), "--timeout", "100"], env=env, capture_output=True,
+                          text=True, timeout=300)
+    assert "no torus function bogus (it offers: cost, " in proc.stderr, proc.stderr
 
 
 def test_a_contour_loaded_as_the_target_is_not_taken_for_the_query(qtbot, window):

@@ -2,6 +2,7 @@
 views, hover, shortcuts, picture exports and VTK thumbnails (real window under Xvfb)."""
 
 import os
+from pathlib import Path
 
 import numpy as np
 import pytest
@@ -355,26 +356,38 @@ def test_the_gallery_shows_every_thumbnail_it_can_and_follows_the_window(qtbot):
 def test_the_ranking_is_listed_at_once_and_its_thumbnails_drawn_one_at_a_time(qtbot):
     """A collection of many meshes froze the window while every thumbnail was drawn (about 75 ms each): the
     ranks and scores are listed when the ranking arrives, the thumbnails follow one per turn of the event
-    loop, best first, and a new ranking drops the old one's."""
-    from types import SimpleNamespace
-
+    loop, best first, and a new ranking drops the old one's. Found by a review: a collapsed curve was ranked
+    without a word, a long name hid the score, a failed mesh's caption floated in an empty cell."""
     from app.views.retrieval import RetrievalView
     from corrlib.io import load_mesh
+    from corrlib.retrieval import RetrievalHit
 
     wolf = load_mesh(TOSCA / "wolf0.off")
-    hits = [SimpleNamespace(name=f"wolf{i}.off", path=TOSCA / "wolf0.off", score=float(i), energy=float(i),
-                            view_distance=float("nan"), seconds=0.1, error="", path_vertices=np.arange(0, 400, 7),
-                            contour_points=None, path_contour_index=None) for i in range(4)]
+
+    def hit(name, score, **kwargs):
+        return RetrievalHit(Path(name), score, path_vertices=np.arange(0, 400, 7), score=score, **kwargs)
+
+    hits = [hit("wolf0.off", 1.0, curve_length_ratio=0.9), hit("wolf1.off", 2.0, curve_length_ratio=0.3),
+            hit("a_wolf_with_a_name_far_too_long_for_its_place_in_the_gallery.off", 3.0),
+            hit("wolf3.off", 4.0), RetrievalHit(Path("broken.off"), np.inf, "broken.off: no faces", score=np.inf)]
     view = keep_widget(RetrievalView())
+    view.resize(700, 600)
     view.show()
-    view.show_results(hits, [wolf] * 4)
+    view.show_results(hits, [wolf] * 4 + [None])
     gallery = view.gallery
-    assert gallery.count() == 4 and view.thumbnails_pending() == 4
+    assert gallery.count() == 5 and view.thumbnails_pending() == 4
     assert all(gallery.item(i).icon().isNull() for i in range(4))
+    assert not gallery.item(4).icon().isNull() and gallery.item(4).text() == "5. broken.off\nnot matched"
     qtbot.waitUntil(lambda: not gallery.item(0).icon().isNull())
     assert gallery.item(3).icon().isNull() or view.thumbnails_pending() == 0  # the best first
     qtbot.waitUntil(lambda: view.thumbnails_pending() == 0)
-    assert not any(gallery.item(i).icon().isNull() for i in range(4))
+    assert not any(gallery.item(i).icon().isNull() for i in range(5))
+    assert gallery.item(1).text().endswith("score 2 (short curve)")
+    assert "probably collapsed" in gallery.item(1).toolTip()
+    assert "short curve" not in gallery.item(0).text() + gallery.item(0).toolTip()
+    long_name = gallery.item(2).text().splitlines()
+    assert "…" in long_name[0] and long_name[1] == "score 3"
+    assert gallery.fontMetrics().horizontalAdvance(long_name[0]) <= gallery.iconSize().width()
     view.show_results(hits[:1], [wolf])
     view.clear_results()
     assert view.thumbnails_pending() == 0 and gallery.count() == 0
@@ -401,6 +414,21 @@ def test_the_compare_table_shows_every_method_in_a_small_window(qtbot):
                for r in range(5))
     views_px, table_px = view.splitter.sizes()
     assert table_px <= (views_px + table_px) // 2 + 1
+    # the method strip holds every method's box, wrapped onto more rows in a narrower tab
+    from types import SimpleNamespace
+
+    labels = ["Kernel matching", "Divergence-free deformation", "Functional maps + ZoomOut",
+              "Descriptor nearest neighbour", "Product-manifold refinement"]
+    view.set_methods([SimpleNamespace(name=label.lower(), label=label) for label in labels])
+    for width in (620, 500):
+        view.resize(width, 560)
+        qtbot.wait(100)
+        strip = view.methods
+        assert all(strip.viewport().rect().contains(strip.visualItemRect(strip.item(i)))
+                   for i in range(strip.count())), width
+    view.resize(620, 560)
+    qtbot.wait(100)
+    views_px, table_px = view.splitter.sizes()
     view.splitter.setSizes([100, views_px + table_px - 100])  # the user drags the table's pane taller
     view.fit_table()
     assert view.splitter.sizes()[0] == 100

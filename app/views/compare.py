@@ -15,7 +15,7 @@ import math
 import numpy as np
 from matplotlib.backends.backend_qtagg import FigureCanvasQTAgg
 from matplotlib.figure import Figure
-from PySide6.QtCore import Qt, Signal
+from PySide6.QtCore import Qt, QTimer, Signal
 from PySide6.QtWidgets import (
     QComboBox,
     QHBoxLayout,
@@ -23,6 +23,7 @@ from PySide6.QtWidgets import (
     QListWidget,
     QListWidgetItem,
     QPushButton,
+    QSizePolicy,
     QSplitter,
     QStyle,
     QTableWidget,
@@ -51,7 +52,8 @@ COLUMNS = (("method", "registered method"), ("s", "runtime in seconds"), ("energ
            ("unmatched", "source vertices left unmatched"))
 #: what the method views show
 COLOR_MODES = ("colour transfer", "error heat map")
-METHOD_LIST_ROWS = 2  # the method check list is a strip this many text lines high above the grid
+METHOD_LIST_ROWS = 2  # the method check list's height before its items are laid out (then: fit_method_strip)
+MAX_METHOD_LIST_ROWS = 4  # beyond this many rows of methods the strip scrolls
 VIEWS_BOTTOM_SPLIT = [640, 260]  # initial heights of the grid and the table/curves tabs
 LABEL_FONT_SIZE = 8
 MARKER_SIZE = 14  # point inspection: pixels of the markers
@@ -77,7 +79,8 @@ class CompareView(QWidget, FramedView):
         self.methods.setFlow(QListWidget.LeftToRight)
         self.methods.setWrapping(True)
         self.methods.setResizeMode(QListWidget.Adjust)
-        self.methods.setMaximumHeight(METHOD_LIST_ROWS * self.methods.fontMetrics().height() + 16)
+        self.methods.setSizePolicy(QSizePolicy.Expanding, QSizePolicy.Fixed)  # as high as fit_method_strip says
+        self.methods.setFixedHeight(METHOD_LIST_ROWS * self.methods.fontMetrics().height() + 16)
         self.run_button = QPushButton("Run selected")
         self.color_mode = QComboBox()
         self.color_mode.addItems(COLOR_MODES)
@@ -142,6 +145,7 @@ class CompareView(QWidget, FramedView):
             item.setFlags(item.flags() | Qt.ItemIsUserCheckable)
             item.setCheckState(Qt.Unchecked if spec.name in self.unticked else Qt.Checked)
             self.methods.addItem(item)
+        self.fit_method_strip()
 
     def selected(self) -> list[str]:
         return [self.methods.item(i).data(Qt.UserRole) for i in range(self.methods.count())
@@ -215,6 +219,22 @@ class CompareView(QWidget, FramedView):
         self.fit_table()
         self._draw_view(len(self.rows))
         self._draw_curves()
+
+    def fit_method_strip(self) -> None:
+        """The method check list as high as its wrapped rows (up to :data:`MAX_METHOD_LIST_ROWS`): a narrow window
+        wraps the methods onto a third row, which a strip of two rows half hid."""
+        strip = self.methods
+        if strip.count() == 0:
+            return
+        strip.doItemsLayout()
+        row_px = strip.visualItemRect(strip.item(0)).height()
+        bottom = max(strip.visualItemRect(strip.item(i)).bottom() + strip.verticalOffset()
+                     for i in range(strip.count()))
+        strip.setFixedHeight(min(bottom + 1, MAX_METHOD_LIST_ROWS * row_px) + 2 * strip.frameWidth() + 2)
+
+    def resizeEvent(self, event) -> None:  # noqa: N802 (Qt's name)
+        super().resizeEvent(event)
+        QTimer.singleShot(0, self.fit_method_strip)  # once the strip has its new width
 
     def fit_table(self) -> None:
         """The table and curves tabs made tall enough for every row of the table, up to half of the tab's height
@@ -377,7 +397,7 @@ class CompareView(QWidget, FramedView):
                 drawn = True
         if drawn:
             ax.set_xlabel("geodesic error")
-            ax.set_ylabel("% correspondences")
+            ax.set_ylabel("% of points")  # within the error (short: a small window cut a longer label)
             ax.set_ylim(0, 100)
             ax.grid(alpha=0.3)
             ax.legend(fontsize=7)

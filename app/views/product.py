@@ -53,7 +53,7 @@ TORUS_FRAME = ViewFrame(np.array([-1.0, 1.0, 0.0]) / np.sqrt(2), np.array([-1.0,
 #: the flat torus' colour bar: three labels at a fixed small size (labels scaled with the bar ran into each
 #: other and into the title in a laptop's window); the title is the function's name, shown above the view
 TORUS_BAR = {"title": "", "fmt": "%.3g", "n_labels": 3, "unconstrained_font_size": True, "label_font_size": 12,
-             "height": 0.06, "position_y": 0.04}
+             "height": 0.06, "position_y": 0.04, "position_x": 0.15, "width": 0.7}  # end labels kept inside
 
 
 class ProductView(QWidget, FramedView):
@@ -69,13 +69,16 @@ class ProductView(QWidget, FramedView):
         self.function.currentTextChanged.connect(self._redraw_pair)
         top = QHBoxLayout()
         top.addWidget(self.info, 1)
-        top.addWidget(QLabel("function"))
+        self.function.setSizeAdjustPolicy(QComboBox.AdjustToContents)  # "harmonic_1", not "harmonic"
+        self.function_label = QLabel("function")
+        top.addWidget(self.function_label)
         top.addWidget(self.function)
         layout = QVBoxLayout(self)
         layout.addLayout(top)
         plot_box = QVBoxLayout()
         layout.addLayout(plot_box, 1)
         self._plotter = LazyPlotter(self, plot_box, shape=(1, 2))
+        self._offer_functions([])
         self.curve = None  # the matched curve's polydata (for tests)
         self.torus_curve = None  # the correspondence curve on the torus (for tests)
         self._pair = None
@@ -93,9 +96,7 @@ class ProductView(QWidget, FramedView):
             return
         self._match = self._pair = None
         self.mesh_points = self.drawn_frame = self.curve = self.torus_curve = None
-        self.function.blockSignals(True)
-        self.function.clear()
-        self.function.blockSignals(False)
+        self._offer_functions([])
         self.plotter.clear_actors()
         self.plotter.render()
         self.info.setText(PRODUCT_HINT)
@@ -209,11 +210,18 @@ class ProductView(QWidget, FramedView):
         names = list(result.path.product_functions)
         self._pair = result
         self._match, self.mesh_points, self.drawn_frame = None, None, None  # no mesh: no presets on the torus
+        self._offer_functions(names)
+        self._redraw_pair()
+
+    def _offer_functions(self, names: list[str]) -> None:
+        """The torus' product functions in the box (shown only where there are some: a 2D-to-3D match has
+        none), without drawing."""
         self.function.blockSignals(True)
         self.function.clear()
         self.function.addItems(names)
         self.function.blockSignals(False)
-        self._redraw_pair()
+        self.function.setVisible(bool(names))
+        self.function_label.setVisible(bool(names))
 
     def _redraw_pair(self, *_args) -> None:
         from corrlib.geometry.torus import arclength_angles, path_angles, torus_embedding, torus_grid
@@ -228,6 +236,8 @@ class ProductView(QWidget, FramedView):
         values = np.asarray(path.product_functions[name], dtype=np.float64).ravel() if name else None
         p = self.plotter
         p.clear_actors()
+        for title in list(p.scalar_bars.keys()):  # bars are kept by title, and every function's bar has none
+            p.remove_scalar_bar(title)
         self._set_viewports(SIDE_BY_SIDE)
         self._torus_views = []
         curve_uv = path_angles(path.layers, path.vertices, u, v)

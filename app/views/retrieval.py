@@ -26,6 +26,7 @@ THUMBNAIL_PX = 320  # gallery thumbnails are rendered square at this many pixels
 THUMBNAIL_MIN_PX = 120  # a gallery scrolls rather than show its thumbnails smaller than this
 GALLERY_SPACING_PX = 8
 CAPTION_LINES = 2  # a thumbnail's caption: "rank. name" and the score
+CAPTION_ROLE = Qt.UserRole + 1  # a gallery item's caption lines in full (the shown text is elided to its cell)
 THUMBNAIL_GREY = 0.8  # colour of the mesh in a thumbnail (the matched curve is crimson)
 CURVE_TUBE_RADIUS = 0.012  # radius of the matched curve's tube in display units (unit diagonal)
 
@@ -87,6 +88,22 @@ class ThumbnailRenderer:
         if self._plotter is not None:
             self._plotter.close()
             self._plotter = None
+
+
+def placeholder_pixmap() -> QPixmap:
+    """The gallery's picture for a mesh that could not be matched: a light grey square saying so."""
+    from PySide6.QtGui import QColor, QFont, QPainter
+
+    pixmap = QPixmap(THUMBNAIL_PX, THUMBNAIL_PX)
+    pixmap.fill(QColor(236, 236, 236))
+    painter = QPainter(pixmap)
+    font = QFont()
+    font.setPixelSize(THUMBNAIL_PX // 10)
+    painter.setFont(font)
+    painter.setPen(QColor(110, 110, 110))
+    painter.drawText(pixmap.rect(), Qt.AlignCenter, "not matched")
+    painter.end()
+    return pixmap
 
 
 def gallery_icon_px(width: int, height: int, n_items: int, caption_px: int, spacing: int = GALLERY_SPACING_PX,
@@ -227,11 +244,17 @@ class RetrievalView(QWidget):
         self.gallery.clear()
         self._pending = []
         for rank, (hit, mesh) in enumerate(zip(hits, meshes), 1):
-            text = f"{rank}. {hit.name}\n" + (f"score {hit.score:.4g}" if not hit.error else "failed")
-            item = QListWidgetItem(text)
+            figure = "not matched" if hit.error else f"score {hit.score:.4g}" + (" (short curve)"
+                                                                                 if hit.collapse_note() else "")
+            item = QListWidgetItem(f"{rank}. {hit.name}\n{figure}")
+            item.setData(CAPTION_ROLE, (f"{rank}. {hit.name}", figure))
+            if mesh is None:  # a placeholder keeps the caption below the picture's place, as in the other cells
+                item.setIcon(QIcon(placeholder_pixmap()))
             views = f"{hit.view_distance:.3f}" if np.isfinite(hit.view_distance) else "not measured"
+            collapsed = f"\n{hit.collapse_note()}" if hit.collapse_note() else ""
             item.setToolTip(hit.error or f"{hit.path}\nscore {hit.score:.6g}, lower is closer (matching energy "
-                                         f"{hit.energy:.6g}, view dissimilarity {views}), {hit.seconds:.2f} s")
+                                         f"{hit.energy:.6g}, view dissimilarity {views}), {hit.seconds:.2f} s"
+                                         f"{collapsed}")
             item.setData(Qt.UserRole, str(hit.path))
             item.setTextAlignment(Qt.AlignHCenter | Qt.AlignTop)
             self.gallery.addItem(item)
@@ -268,6 +291,11 @@ class RetrievalView(QWidget):
         side = gallery_icon_px(width, viewport.height(), gallery.count(), caption_px)
         gallery.setIconSize(QSize(side, side))
         gallery.setGridSize(QSize(side + GALLERY_SPACING_PX, side + caption_px + GALLERY_SPACING_PX))
+        metrics = gallery.fontMetrics()
+        for i in range(gallery.count()):  # a long name shortened in its middle, so that the score stays in sight
+            item = gallery.item(i)
+            lines = item.data(CAPTION_ROLE) or (item.text(),)
+            item.setText("\n".join(metrics.elidedText(line, Qt.ElideMiddle, side) for line in lines))
 
     def ranked_names(self) -> list[str]:
         return [Path(self.gallery.item(i).data(Qt.UserRole)).name for i in range(self.gallery.count())]

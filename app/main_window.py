@@ -118,6 +118,7 @@ class JobPanel(QWidget):
         self.max_stall_stage = ""
         self.bar.setRange(0, PROGRESS_STEPS)
         self.bar.setValue(0)
+        self.bar.setFormat("%p%")
         self.stage.setText(text)
         self.cancel.setEnabled(True)
         self.timer.start()
@@ -133,10 +134,12 @@ class JobPanel(QWidget):
         if report.message:
             self.write(progress_text(report))
 
-    def stopped(self, text: str, still_running: tuple[str, ...] = ()) -> None:
-        """A job ended (``text`` says how); ``still_running`` names the jobs that go on, which keep Cancel."""
+    def stopped(self, text: str, still_running: tuple[str, ...] = (), finished: bool = True) -> None:
+        """A job ended (``text`` says how); ``still_running`` names the jobs that go on, which keep Cancel. A job
+        that failed or was cancelled (not ``finished``) leaves the bar empty with ``text`` in it, not at 100 %."""
         self.bar.setRange(0, PROGRESS_STEPS)
-        self.bar.setValue(PROGRESS_STEPS)
+        self.bar.setValue(PROGRESS_STEPS if finished else 0)
+        self.bar.setFormat("%p%" if finished else text)
         took = time.perf_counter() - self._start if self._start else 0.0
         self.write(f"{text} ({took:.2f} s; longest GUI stall {1000 * self.max_stall:.0f} ms)")
         if still_running:
@@ -822,12 +825,13 @@ class MainWindow(QMainWindow):
     def _on_progress(self, key: str, report) -> None:
         self.job_panel.report(report)
 
-    def _job_stopped(self, text: str) -> None:
+    def _job_stopped(self, text: str, finished: bool = True) -> None:
         """The job panel told that a job ended, and which go on (the panel is shared by every kind of job)."""
-        self.job_panel.stopped(text, tuple(name for key, name in JOB_NAMES.items() if self.runner.is_running(key)))
+        self.job_panel.stopped(text, tuple(name for key, name in JOB_NAMES.items() if self.runner.is_running(key)),
+                               finished)
 
     def _on_failed(self, key: str, message: str) -> None:
-        self._job_stopped("failed")
+        self._job_stopped("failed", finished=False)
         if key == COMPARE_KEY:  # one method failing leaves the others of the comparison to run
             self.show_error(f"{self._compare_current}: {message}")
             self._next_compare()
@@ -841,7 +845,7 @@ class MainWindow(QMainWindow):
             self._next_load()
 
     def _on_cancelled(self, key: str) -> None:
-        self._job_stopped("cancelled")
+        self._job_stopped("cancelled", finished=False)
         if key == LOAD_KEY:
             self._next_load()
         else:
@@ -859,7 +863,8 @@ class MainWindow(QMainWindow):
                 said = hit.error.removeprefix(str(hit.path)).removeprefix(hit.name).removeprefix(": ")
                 said = f"{hit.name}: {said}"  # once, the file's name in the collection
                 self.job_panel.write(f"not ranked: {said}")
-            self._job_stopped(f"ranked {len(hits) - len(failed)} meshes" +
+            ranked = len(hits) - len(failed)
+            self._job_stopped(f"ranked {ranked} mesh{'es' if ranked != 1 else ''}" +
                               (f"; {len(failed)} could not be matched (see the log)" if failed else ""))
             self.result_ready.emit(hits)
             return

@@ -180,6 +180,8 @@ def test_retrieval_gallery_order(qtbot, window, tmp_path):
     window.run_retrieval()
     qtbot.waitUntil(lambda: not window.runner.is_running("retrieval"), timeout=30_000)
     assert messages and window.retrieval_view.ranked_names() == []
+    bar = window.job_panel.bar  # a failed job does not leave the bar at 100 %
+    assert bar.value() == 0 and bar.text() == "failed"
 
 
 @pytest.mark.slow

@@ -135,7 +135,8 @@ def cmd_retrieve(args) -> int:
     written = write_ranking(hits, Path(args.output), args.top if args.pictures else 0) if args.output else []
     print(f"{'rank':>4}  {'score':>8}  {'energy':>12}  {'views':>7}  {'seconds':>7}  mesh")
     for rank, hit in enumerate(hits[: args.top], 1):
-        extra = f"  ({hit.error or hit.collapse_note()})" if hit.error or hit.collapse_note() else ""
+        said = hit.error or hit.collapse_note()
+        extra = f"  ({said})" if said else ""
         views = f"{hit.view_distance:.4f}" if np.isfinite(hit.view_distance) else "-"  # not measured
         print(f"{rank:>4}  {hit.score:>8.4g}  {hit.energy:>12.6g}  {views:>7}  {hit.seconds:>7.2f}  {hit.name}{extra}")
     query_class = class_of(args.query)

@@ -42,7 +42,7 @@ import numpy as np
 from corrlib.errors import CorrError, InputError, ParameterError
 from corrlib.io import MESH_SUFFIXES, load_mesh, lost_working_folder
 from corrlib.parallel import check_jobs, job_executor
-from corrlib.methods.contour3d import SHORT_CURVE_RATIO, Contour3DParams, PreparedQuery, match_prepared, prepare_query
+from corrlib.methods.contour3d import Contour3DParams, PreparedQuery, curve_collapsed, match_prepared, prepare_query
 from corrlib.outline_views import QueryOutline, query_outline, view_dissimilarity
 from corrlib.progress import CancelToken, Progress, run
 
@@ -148,14 +148,13 @@ class RetrievalHit:
         if self.error:
             return f"{self.name}: not matched"
         views = f", view dissimilarity {self.view_distance:.3f}" if np.isfinite(self.view_distance) else ""
-        return f"{self.name}: energy {self.energy:.6g}{views}" + (f"; {self.collapse_note()}"
-                                                                  if self.collapse_note() else "")
+        collapsed = self.collapse_note()
+        return f"{self.name}: energy {self.energy:.6g}{views}" + (f"; {collapsed}" if collapsed else "")
 
     def collapse_note(self) -> str:
-        """A short warning where the matched curve is shorter than
-        :data:`~corrlib.methods.contour3d.SHORT_CURVE_RATIO` of the outline (probably collapsed onto a part of the
-        mesh), else an empty string."""
-        if not self.curve_length_ratio < SHORT_CURVE_RATIO:
+        """A short warning where the matched curve has probably collapsed onto a part of the mesh
+        (:func:`~corrlib.methods.contour3d.curve_collapsed`), else an empty string."""
+        if not curve_collapsed(self.curve_length_ratio):
             return ""
         return f"the matched curve is {self.curve_length_ratio:.2f} of the outline's length: probably collapsed"
 

@@ -998,6 +998,10 @@ def test_a_short_matched_curve_is_reported_as_collapsed(capsys, tmp_path):
     err = capsys.readouterr().err
     assert "warning: the matched curve is 0." in err and "contour-views" in err
     assert short_curve_note({"curve_length_ratio": SHORT_CURVE_RATIO}) is None and short_curve_note({}) is None
+    from corrlib.methods.contour3d import curve_collapsed
+
+    assert curve_collapsed(0.49) and not curve_collapsed(SHORT_CURVE_RATIO)
+    assert not curve_collapsed(float("nan")) and not curve_collapsed(None)  # not measured: not called collapsed
     # a ranking says it too, in its progress, in `corr retrieve`'s table (and in the studio's gallery)
     folder = tmp_path / "wolves"
     folder.mkdir()

@@ -161,7 +161,7 @@ def test_retrieval_gallery_order(qtbot, window, tmp_path):
     assert "not ranked: empty.off: " in window.job_panel.log.toPlainText()
     gallery = window.retrieval_view.gallery
     qtbot.waitUntil(lambda: window.retrieval_view.thumbnails_pending() == 0, timeout=30_000)
-    assert not any(gallery.item(i).icon().isNull() for i in range(4))  # empty.off: a placeholder
+    assert not any(gallery.item(i).icon().isNull() for i in range(4))  # empty.off: a "not matched" picture
     assert gallery.item(3).text().endswith("not matched")
     assert window.retrieval_view.ranking.currentText() == "fused"
     assert all(np.isfinite(hit.view_distance) for hit in window.retrieval_view.hits if not hit.error)

@@ -90,7 +90,7 @@ class ThumbnailRenderer:
             self._plotter = None
 
 
-def placeholder_pixmap() -> QPixmap:
+def not_matched_pixmap() -> QPixmap:
     """The gallery's picture for a mesh that could not be matched: a light grey square saying so."""
     from PySide6.QtGui import QColor, QFont, QPainter
 
@@ -248,8 +248,8 @@ class RetrievalView(QWidget):
                                                                                  if hit.collapse_note() else "")
             item = QListWidgetItem(f"{rank}. {hit.name}\n{figure}")
             item.setData(CAPTION_ROLE, (f"{rank}. {hit.name}", figure))
-            if mesh is None:  # a placeholder keeps the caption below the picture's place, as in the other cells
-                item.setIcon(QIcon(placeholder_pixmap()))
+            if mesh is None:  # a picture saying so keeps the caption below the picture's place, as in other cells
+                item.setIcon(QIcon(not_matched_pixmap()))
             views = f"{hit.view_distance:.3f}" if np.isfinite(hit.view_distance) else "not measured"
             collapsed = f"\n{hit.collapse_note()}" if hit.collapse_note() else ""
             item.setToolTip(hit.error or f"{hit.path}\nscore {hit.score:.6g}, lower is closer (matching energy "

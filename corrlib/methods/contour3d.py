@@ -926,12 +926,18 @@ def curve_length_ratio(mesh_vertices: np.ndarray, path_vertices: np.ndarray, out
     return curve / max(outline_length, 1e-300)
 
 
+def curve_collapsed(ratio: float | None) -> bool:
+    """Whether a matched curve of :func:`curve_length_ratio` ``ratio`` is short enough to have collapsed (below
+    :data:`SHORT_CURVE_RATIO`; an unknown ratio, None or NaN, is not)."""
+    return ratio is not None and ratio < SHORT_CURVE_RATIO
+
+
 def short_curve_note(extras: dict) -> str | None:
     """A warning when the matched curve is shorter than :data:`SHORT_CURVE_RATIO` of the outline
     (:func:`curve_length_ratio`), else None: the search proves the curve optimal for the energy, not that the
     energy found the outline's place."""
     ratio = (extras or {}).get("curve_length_ratio")
-    if ratio is None or ratio >= SHORT_CURVE_RATIO:
+    if not curve_collapsed(ratio):
         return None
     return (f"the matched curve is {ratio:.2f} of the outline's length at the scale of the match: it has probably "
             "collapsed onto a part of the mesh instead of running round the outline's place (the curve is optimal "

@@ -14,7 +14,7 @@ import numpy as np
 
 from corrlib.errors import CorrError, FileFormatError, MeshError
 from corrlib.progress import Progress
-from corrlib.shapes import Contour2D, TriMesh
+from corrlib.shapes import Contour2D, TriMesh, plane_coordinates, sketch_outline
 
 #: geodesic distance method of the studio's error figures: the one `corr bench` reports (and faster than the heat
 #: method's one solve per ground-truth partner); the heat method where a pinched vertex rules it out
@@ -77,13 +77,22 @@ def read_shape(path: str) -> TriMesh | Contour2D:
         raise FileFormatError(f"{path}: cannot load: {exc}") from exc
 
 
-def load_job(path: str):
-    """Job factory: read and validate ``path``; returns a :class:`LoadedShape`."""
+def load_job(path: str, as_query: bool = False):
+    """Job factory: read and validate ``path``; returns a :class:`LoadedShape`.
+
+    ``as_query`` (the source slot): a planar triangulated sketch is read as the query it draws, its outline
+    (:func:`corrlib.shapes.sketch_outline`), as ``corr match-contour`` reads it; a mesh that is not flat stays a
+    mesh, and so does a flat closed one (no outline)."""
 
     def factory(_token):
         yield Progress("loading", -1.0, str(path))
         shape = read_shape(path)
         yield Progress("validating", -1.0, shape.name)
+        if as_query and isinstance(shape, TriMesh) and shape.boundary_loops and plane_coordinates(
+                shape.vertices) is not None:
+            outline, _loop = sketch_outline(shape)
+            return LoadedShape(str(path), outline, f"{describe(outline)}\n  the outline of a planar sketch mesh "
+                                                   f"({shape.n_vertices} vertices), the 2D query")
         return LoadedShape(str(path), shape, describe(shape))
 
     return factory

@@ -619,7 +619,7 @@ class MainWindow(QMainWindow):
         path, which, _then, job = self._loading
         # a running method goes on: set_shape cancels it once a shape is replaced (a load can fail)
         self.job_panel.started(f"loading {which}: {Path(path).name}")
-        self.runner.start(LOAD_KEY, load_job(path) if job is None else job)
+        self.runner.start(LOAD_KEY, load_job(path, as_query=which == "source") if job is None else job)
 
     def _on_loaded(self, loaded: LoadedShape) -> None:
         _path, which, then, _job = self._loading

@@ -17,9 +17,9 @@ from corrlib.cli_common import (add_output, add_scale_out, check_output_stem, co
 from corrlib.errors import CorrError, FileFormatError
 
 
-#: help of the retrieval commands' --n-contour (the value is corrlib.retrieval.RETRIEVAL_N_CONTOUR; not imported
-#: here, so that `corr --help` does not load the method)
-RETRIEVAL_N_CONTOUR_HELP = "contour resampling (default 100, the retrieval default of the studio and the CLI)"
+#: help of the contour commands' --n-contour (the value is Contour3DParams.n_contour; not imported here, so that
+#: `corr --help` does not load the method)
+N_CONTOUR_HELP = "contour resampling (default 200, the method's)"
 
 
 #: corrlib.retrieval.RANKINGS, named here so that building the parser does not import the retrieval module
@@ -37,16 +37,11 @@ def query_contour(path: str, labels: str | None = None):
     """The query of a 2D-to-3D command: a contour file, SVG or image, or a planar sketch mesh (its longest
     boundary loop), with its part labels from ``labels`` (one per contour point or per sketch vertex)."""
     from corrlib.io import load_shape
-    from corrlib.shapes import Contour2D, TriMesh
+    from corrlib.shapes import Contour2D, TriMesh, sketch_outline
 
     contour = sketch = load_shape(path)
     if isinstance(sketch, TriMesh):
-        # a planar triangulated sketch: its boundary loop is the contour
-        loops = sketch.boundary_loops
-        if not loops:
-            raise FileFormatError(f"{path}: the sketch mesh has no boundary to use as a contour")
-        loop = max(loops, key=len)
-        contour = Contour2D(sketch.vertices[loop, :2], name=Path(path).name)
+        contour, loop = sketch_outline(sketch)
     if labels:
         from corrlib.io import load_labels
 
@@ -229,7 +224,7 @@ def add_retrieve_parser(sub) -> None:
     p.add_argument("--eps", type=float, default=0.0,
                    help="approximation factor (default 0: rank by the exact optima)")
     p.add_argument("--k", type=int)
-    p.add_argument("--n-contour", dest="n_contour", type=int, help=RETRIEVAL_N_CONTOUR_HELP)
+    p.add_argument("--n-contour", dest="n_contour", type=int, help=N_CONTOUR_HELP)
     p.add_argument("--param", action="append", metavar="NAME=VALUE")
     add_ranking(p)
     p.add_argument("--pictures", action="store_true",
@@ -247,7 +242,7 @@ def add_match_contour_parser(sub) -> None:
     p.add_argument("mesh")
     p.add_argument("--eps", type=float, help="approximation factor (0 = global optimum)")
     p.add_argument("--k", type=int, help="Laplace-Beltrami eigenpairs for the features (default 25)")
-    p.add_argument("--n-contour", dest="n_contour", type=int, help="contour resampling (default 200)")
+    p.add_argument("--n-contour", dest="n_contour", type=int, help=N_CONTOUR_HELP)
     p.add_argument("--query-labels", help="part label per contour point (or per sketch-mesh vertex)")
     p.add_argument("--mesh-labels", help="part label per mesh vertex")
     p.add_argument("--param", action="append", metavar="NAME=VALUE", help="other method parameter")
@@ -264,7 +259,7 @@ def add_contour_bench_parsers(sub) -> None:
     add_scale_out(p)
     p.add_argument("--eps", type=float, default=0.0,
                    help="approximation factor (default 0: rank by the exact optima)")
-    p.add_argument("--n-contour", dest="n_contour", type=int, help=RETRIEVAL_N_CONTOUR_HELP)
+    p.add_argument("--n-contour", dest="n_contour", type=int, help=N_CONTOUR_HELP)
     p.add_argument("--param", action="append", metavar="KEY=VALUE", help="another contour3d parameter (repeatable)")
     p.add_argument("--own-meshes", dest="own_meshes", metavar="FILE",
                    help="lines 'QUERY MESH': the mesh of the collection each listed query was made from (e.g. "

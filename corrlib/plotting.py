@@ -247,9 +247,11 @@ def save_torus_pictures(path, result) -> Path:
     from matplotlib import cm
 
     hue = cm.hsv(np.arange(m) / m)[:, :3]
-    offset = np.array([1.2 * np.ptp(a[:, 0]) + 0.2 * np.ptp(b[:, 0]), 0.0]) + a.mean(0) - b.mean(0)
-    ax.scatter(a[:, 0], a[:, 1], c=hue, s=8)
-    ax.scatter(b[result.map_xy, 0] + offset[0], b[result.map_xy, 1] + offset[1], c=hue, s=8)
+    from corrlib.viewing import contours_side_by_side
+
+    shown_a, shown_b = contours_side_by_side(a, b)
+    ax.scatter(shown_a[:, 0], shown_a[:, 1], c=hue, s=8)
+    ax.scatter(shown_b[result.map_xy, 0], shown_b[result.map_xy, 1], c=hue, s=8)
     ax.set_aspect("equal")
     ax.set_axis_off()
     ax.set_title("A and B, coloured by the position on A")

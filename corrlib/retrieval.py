@@ -46,24 +46,20 @@ from corrlib.methods.contour3d import Contour3DParams, PreparedQuery, curve_coll
 from corrlib.outline_views import QueryOutline, query_outline, view_dissimilarity
 from corrlib.progress import CancelToken, Progress, run
 
-#: contour points of a retrieval query (the method's default is 200): a ranking matches the query to every mesh
-#: of a collection, and half the points halve the time of each match. The command line, the studio and
-#: ``corr bench-retrieval`` share it, so that they rank alike.
-RETRIEVAL_N_CONTOUR = 100
-
 #: how :func:`retrieve` ranks: by the product of the two measures, or by the matching energy alone
 RANKINGS = ("fused", "energy")
 
 
 def retrieval_params(**overrides) -> Contour3DParams:
-    """The ``contour3d`` parameters a retrieval uses: the method's defaults with
-    :data:`RETRIEVAL_N_CONTOUR` points and the view decided by the outline alone
-    (``view="outline"``: one reading of the query for every mesh, so that its
-    energies compare; the default ``"auto"`` also asks each mesh), then
-    ``overrides`` (named errors for bad values)."""
+    """The ``contour3d`` parameters a retrieval uses: the method's defaults with the
+    view decided by the outline alone (``view="outline"``: one reading of the query
+    for every mesh, so that its energies compare; the default ``"auto"`` also asks
+    each mesh), then ``overrides`` (named errors for bad values). The command line,
+    the studio and ``corr bench-retrieval`` share them, so that they rank alike, and
+    a hit opened in the studio shows the curve the ranking scored."""
     from corrlib.methods.base import make_params
 
-    return make_params(Contour3DParams, **{"n_contour": RETRIEVAL_N_CONTOUR, "view": "outline", **overrides})
+    return make_params(Contour3DParams, **{"view": "outline", **overrides})
 
 
 def class_of(path, root=None) -> str:

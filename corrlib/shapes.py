@@ -958,3 +958,63 @@ class Contour2D:
         r = np.array([[c, -s], [s, c]])
         p = scale * self.points @ r.T + np.asarray(translation, dtype=np.float64)
         return Contour2D(p, name=self.name, min_points=3, validate=False, labels=self.labels)
+
+
+# ----------------------------------------------------------------------------- planar sketch meshes
+
+#: a mesh is a planar sketch when its vertices lie within this fraction of its bounding-box diagonal of a plane
+PLANAR_TOLERANCE = 1e-6
+
+
+def plane_coordinates(points) -> np.ndarray | None:
+    """2D coordinates of 3D points in the plane they lie in, or None where they lie in none.
+
+    A plane normal to a coordinate axis keeps the other two axes in their order (a sketch drawn in the
+    xy plane stays as drawn); another plane is described by the points' two principal directions.
+
+    Parameters
+    ----------
+    points : (n, 3) array of float
+
+    Returns
+    -------
+    (n, 2) array of float, or None if some point is farther than :data:`PLANAR_TOLERANCE` times the bounding-box
+    diagonal from the points' least-squares plane.
+    """
+    points = np.asarray(points, dtype=np.float64)
+    centred = points - points.mean(0)
+    diagonal = float(np.linalg.norm(np.ptp(points, axis=0)))
+    tolerance = PLANAR_TOLERANCE * max(diagonal, np.finfo(float).tiny)
+    extent = np.ptp(points, axis=0)
+    flat_axis = int(np.argmin(extent))
+    if extent[flat_axis] <= tolerance:
+        return points[:, [a for a in range(3) if a != flat_axis]].copy()
+    _, _, directions = np.linalg.svd(centred, full_matrices=False)  # rows: principal directions, largest first
+    if np.abs(centred @ directions[2]).max() > tolerance:
+        return None
+    return centred @ directions[:2].T
+
+
+def sketch_outline(mesh: TriMesh) -> tuple[Contour2D, np.ndarray]:
+    """The outline of a planar triangulated sketch: its longest boundary loop in the sketch's plane.
+
+    Returns
+    -------
+    contour : Contour2D
+        Named after the mesh.
+    loop : (m,) int array
+        The mesh vertex of every contour point (to carry per-vertex labels over).
+
+    Raises
+    ------
+    MeshError
+        The mesh does not lie in a plane, or has no boundary.
+    """
+    flat = plane_coordinates(mesh.vertices)
+    if flat is None:
+        raise MeshError(f"{mesh.name}: not a planar sketch: its vertices do not lie in a plane (a 2D query is a "
+                        "contour file, an SVG, a silhouette image or a flat triangulated sketch)")
+    if not mesh.boundary_loops:
+        raise MeshError(f"{mesh.name}: the sketch mesh has no boundary to use as a contour")
+    loop = max(mesh.boundary_loops, key=len)
+    return Contour2D(flat[loop], name=mesh.name), loop

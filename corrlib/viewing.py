@@ -261,3 +261,25 @@ def fitted_camera(vertices: np.ndarray, frame: ViewFrame, view: str = "front", a
     distance = max(float(np.max(np.maximum(across, np.maximum(below_band, above_bottom)))), 1e-12)
     focal = centre + (top * distance * tan_half / margin) * screen_up
     return Camera(tuple(focal + distance * toward), tuple(focal), tuple(screen_up), view_angle)
+
+
+def contours_side_by_side(points_a: np.ndarray, points_b: np.ndarray, gap: float = 0.2) -> tuple[np.ndarray,
+                                                                                                  np.ndarray]:
+    """Two contours placed for a picture of their correspondence: B scaled to A's height and put to A's right,
+    ``gap`` times the wider width apart, both centred on one horizontal line.
+
+    Parameters
+    ----------
+    points_a : (m, 2) float
+    points_b : (n, 2) float
+
+    Returns
+    -------
+    (m, 2) and (n, 2) float: the two contours as drawn.
+    """
+    a = np.asarray(points_a, dtype=np.float64)
+    b = np.asarray(points_b, dtype=np.float64)
+    a = a - (a.min(0) + a.max(0)) / 2
+    b = (b - (b.min(0) + b.max(0)) / 2) * (np.ptp(a[:, 1]) / max(np.ptp(b[:, 1]), 1e-300))
+    width_a, width_b = np.ptp(a[:, 0]), np.ptp(b[:, 0])
+    return a, b + [(width_a + width_b) / 2 + gap * max(width_a, width_b), 0.0]

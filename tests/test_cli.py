@@ -249,24 +249,49 @@ def test_match_contours(tmp_path, capsys):
     assert "takes contour + contour" in capsys.readouterr().err
 
 
+def test_a_query_mesh_that_is_not_flat_is_refused_by_name(tmp_path, capsys):
+    """A 2D query may be a flat triangulated sketch; a 3D mesh given as the query is named, not cut to its x and y
+    coordinates (its longest boundary loop was taken as drawn in the xy plane, whatever its shape)."""
+    from _data import SKETCH2D
+
+    half = tmp_path / "half_wolf.off"  # an open 3D mesh: it has a boundary loop, but no plane
+    from corrlib.io import load_mesh, save_mesh
+
+    wolf = load_mesh(TOSCA / "wolf0.off")
+    keep = wolf.faces[wolf.vertices[wolf.faces].mean(1)[:, 2] > np.median(wolf.vertices[:, 2])]
+    used = np.unique(keep)
+    save_mesh(half, wolf.vertices[used], np.searchsorted(used, keep))
+    for query in (half, TOSCA / "wolf1.off"):
+        assert main(["match-contour", str(query), str(TOSCA / "wolf0.off"), "-o", str(tmp_path / "r"), "-q"]) == 2
+        assert f"{query.name}: not a planar sketch: its vertices do not lie in a plane" in capsys.readouterr().err
+    assert not list(tmp_path.glob("r*"))
+    turned = tmp_path / "turned_sketch.off"  # the sketch in another plane is still the sketch
+    sketch = load_mesh(SKETCH2D / "human_sketch_a.off")
+    save_mesh(turned, sketch.vertices[:, [0, 2, 1]], sketch.faces)
+    from corrlib.cli_contour import query_contour
+
+    assert np.allclose(query_contour(str(turned)).segment_lengths, query_contour(str(SKETCH2D / "human_sketch_a.off"))
+                       .segment_lengths)
+
+
 def test_retrieval_defaults_are_shared(capsys):
     """`corr retrieve`, `corr bench-retrieval`, the library and the studio rank with the same parameters."""
     import argparse
 
-    from corrlib.cli_contour import RETRIEVAL_N_CONTOUR_HELP, contour3d_params
+    from corrlib.cli_contour import N_CONTOUR_HELP, contour3d_params
     from corrlib.errors import ParameterError
-    from corrlib.retrieval import RETRIEVAL_N_CONTOUR, retrieval_params
+    from corrlib.retrieval import retrieval_params
 
-    assert f"default {RETRIEVAL_N_CONTOUR}" in RETRIEVAL_N_CONTOUR_HELP
     args = argparse.Namespace(param=None, eps=0.0, k=None, n_contour=None)
     assert contour3d_params(args, retrieval=True) == retrieval_params()
-    assert retrieval_params().n_contour == RETRIEVAL_N_CONTOUR
-    assert contour3d_params(args).n_contour != RETRIEVAL_N_CONTOUR  # a single match keeps the method's default
+    single = contour3d_params(args)  # a ranking matches as one match does, with the view read from the outline
+    assert retrieval_params().n_contour == single.n_contour and f"default {single.n_contour}," in N_CONTOUR_HELP
+    assert retrieval_params().view == "outline" != single.view
     args.n_contour, args.param = 70, ["axis_weight=0.5"]
     assert contour3d_params(args, retrieval=True) == retrieval_params(n_contour=70, axis_weight=0.5)
     with pytest.raises(ParameterError, match="n_contour"):
         retrieval_params(n_contour=3)
-    for command in ("retrieve", "bench-retrieval"):
+    for command in ("retrieve", "bench-retrieval", "match-contour"):
         with pytest.raises(SystemExit):
             main([command, "--help"])
-        assert f"default {RETRIEVAL_N_CONTOUR}" in capsys.readouterr().out
+        assert f"default {single.n_contour}," in capsys.readouterr().out

@@ -287,3 +287,60 @@ def test_complex_coordinates_and_indices_beyond_int64_are_refused_by_name():
         TriMesh(TETRA_V, faces[:-1] + [[0, 1, 2 ** 70]])
     with pytest.raises(ContourError, match="complex numbers"):
         Contour2D(square() + 1j)
+
+
+# ----------------------------------------------------------------------------- planar sketch meshes
+
+
+def _sketch():
+    from _data import SKETCH2D
+    from corrlib.io import load_mesh
+
+    return load_mesh(SKETCH2D / "human_sketch_a.off")
+
+
+def test_plane_coordinates_keep_a_coordinate_plane_and_are_isometric_in_any_plane():
+    from scipy.spatial.transform import Rotation
+
+    from corrlib.shapes import plane_coordinates
+
+    rng = np.random.default_rng(0)
+    flat = rng.standard_normal((50, 2))
+    for axis in range(3):  # normal to x, y or z: the other two axes, in order
+        points = np.insert(flat, axis, 7.0, axis=1)
+        assert np.array_equal(plane_coordinates(points), flat)
+    turned = np.insert(flat, 2, 0.0, axis=1) @ Rotation.from_euler("xyz", [0.4, -0.7, 1.1]).as_matrix().T + 3.0
+    mapped = plane_coordinates(turned)
+    pairwise = lambda p: np.linalg.norm(p[:, None] - p[None], axis=-1)  # noqa: E731
+    assert mapped.shape == (50, 2) and np.allclose(pairwise(mapped), pairwise(flat))
+    bumped = turned.copy()
+    bumped[7] += 1e-3 * Rotation.from_euler("xyz", [0.4, -0.7, 1.1]).as_matrix()[:, 2]  # off the plane
+    assert plane_coordinates(bumped) is None
+    assert plane_coordinates(rng.standard_normal((20, 3))) is None
+
+
+def test_a_sketch_mesh_outline_is_its_boundary_in_its_plane_wherever_the_plane_is():
+    from scipy.spatial.transform import Rotation
+
+    from corrlib.shapes import sketch_outline
+
+    sketch = _sketch()
+    outline, loop = sketch_outline(sketch)
+    assert loop.size == max(len(b) for b in sketch.boundary_loops) and outline.name == sketch.name
+    assert np.array_equal(outline.points, sketch.vertices[loop, :2])  # drawn in the xy plane: kept as drawn
+    rotation = Rotation.from_euler("xyz", [1.0, 0.3, -0.5]).as_matrix()
+    turned, turned_loop = sketch_outline(TriMesh(sketch.vertices @ rotation.T, sketch.faces, name="turned"))
+    assert np.array_equal(turned_loop, loop)
+    assert np.allclose(turned.segment_lengths, outline.segment_lengths)  # the same outline, moved in its plane
+    assert abs(turned.area - outline.area) < 1e-9 * outline.area
+
+
+def test_a_mesh_that_is_not_flat_or_has_no_boundary_is_no_sketch(wolf_pair):
+    from corrlib.shapes import sketch_outline
+
+    with pytest.raises(MeshError, match="wolf0.off: not a planar sketch: its vertices do not lie in a plane"):
+        sketch_outline(wolf_pair[0])
+    square = np.array([[0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0]], dtype=float)
+    two_sided = TriMesh(square, [[0, 1, 2], [0, 2, 3], [0, 2, 1], [0, 3, 2]], name="two-sided", validate=False)
+    with pytest.raises(MeshError, match="two-sided: the sketch mesh has no boundary"):
+        sketch_outline(two_sided)

@@ -345,6 +345,9 @@ def test_the_gallery_shows_every_thumbnail_it_can_and_follows_the_window(qtbot):
 
     side, scroll, rects = laid_out(1100, 800)
     assert side > THUMBNAIL_MIN_PX and scroll == 0 and all(view.gallery.viewport().rect().contains(r) for r in rects)
+    side, scroll, rects = laid_out(1600, 450)  # the height limits the side: the columns spread over the width
+    # (what is left is the scroll bar's room, which a wrapping list keeps: 35 px here, 111 px before)
+    assert scroll == 0 and view.gallery.viewport().width() - max(r.right() for r in rects) < 0.4 * side
     larger, scroll, _ = laid_out(1500, 1000)
     assert larger > side and scroll == 0
     side, scroll, rects = laid_out(560, 560)
@@ -594,6 +597,25 @@ def test_a_mesh_is_shown_alone_until_the_other_comes(qtbot, window):
     assert view.info.text() == "The source is a contour: a 2D-to-3D match is shown in the Product tab."
 
 
+def test_a_planar_sketch_mesh_is_the_query_as_a_source_and_a_mesh_as_a_target(qtbot, window):
+    """The paper's sketches are flat triangulated meshes: ``corr match-contour`` takes one as the query (its
+    outline), and so does the studio's source; as the target it stays the mesh it is."""
+    from corrlib.shapes import Contour2D, TriMesh
+
+    sketch = ROOT / "resources" / "data" / "sketch2d" / "human_sketch_a.off"
+    window.load_file(str(TOSCA / "wolf0.off"), "target")
+    window.load_file(str(sketch), "source")
+    wait_loaded(qtbot, window)
+    assert isinstance(window.source, Contour2D) and window.source.name == "human_sketch_a.off"
+    assert "the outline of a planar sketch mesh (895 vertices)" in window.source_info.text()
+    assert window.sketch.status.text() == f"human_sketch_a.off: {window.source.n_points} points, loaded as the query"
+    assert window.retrieval_view.query is window.source
+    assert "contour3d" in [window.method_box.itemData(i) for i in range(window.method_box.count())]
+    window.load_file(str(sketch), "target")
+    wait_loaded(qtbot, window)
+    assert isinstance(window.target, TriMesh) and window.target.n_vertices == 895
+
+
 def test_the_query_contour_fills_its_viewport_after_a_resize_and_a_redraw(qtbot, window):
     """Found by fuzzing: the contour's camera came from VTK's reset, which fits the window size VTK last rendered
     at: right after a resize the fit was the old one, and after the next render a redraw divided by the narrow
@@ -624,6 +646,39 @@ def test_the_query_contour_fills_its_viewport_after_a_resize_and_a_redraw(qtbot,
         view.plotter.render()
         view.redraw()
         assert fills_its_viewport(), size
+
+
+def test_captions_side_by_side_have_one_size_and_are_shortened_to_their_view(qtbot, window):
+    """The query's short caption and the mesh's long one were drawn at different sizes (VTK's corner annotation
+    shrinks a long line to its view). Both now have the caption's pixel size: measured on the rendered picture,
+    the text rows of the two views' top bands are equally high; a line wider than its view ends in an ellipsis."""
+    from corrlib.io import load_mesh
+
+    wolf = load_mesh(TOSCA / "wolf0.off")
+    angles = np.linspace(0, 2 * np.pi, 40, endpoint=False)
+    view = window.product_view
+    window.tabs.setCurrentWidget(view)
+    window.resize(1280, 720)
+    view.show_contour_match(np.column_stack([np.cos(angles), 2 * np.sin(angles)]), wolf, np.arange(40),
+                            np.arange(40), 12.5)
+    qtbot.wait(300)
+    view.plotter.render()
+    image = np.asarray(view.plotter.screenshot(return_img=True))
+    heights = []
+    for renderer in view.plotter.renderers[:2]:
+        x0, y0, x1, y1 = renderer.GetViewport()
+        h, w = image.shape[:2]
+        band = image[int((1 - y1) * h):int((1 - y1) * h) + 30, int(x0 * w):int(x1 * w)]
+        rows = np.flatnonzero((band.min(axis=2) < 128).any(axis=1))  # dark text on the light background
+        heights.append(rows.max() - rows.min() + 1)
+    assert abs(heights[0] - heights[1]) <= 1 and heights[0] >= 9, heights  # a pixel for the letters' ascenders
+
+    from app.views.scene import elided_caption
+
+    assert elided_caption("query contour", 400, 13) == "query contour"
+    cut = elided_caption("matched curve, energy 12.5: a mesh with a very long file name.off", 200, 13)
+    assert cut.endswith("…") and len(cut) == int(200 / (0.55 * 13)) - 1
+    assert elided_caption("a long first line of a caption\nshort", 100, 13).split("\n")[1] == "short"
 
 
 def test_the_methods_unticked_for_a_comparison_stay_unticked_for_the_next_pair(qtbot, window):

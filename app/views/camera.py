@@ -100,7 +100,7 @@ def viewport_aspect(plotter, renderer=None) -> float:
 
 def caption_band(plotter, renderer) -> float:
     """The share of ``renderer``'s viewport height that its one-line caption (``add_text`` at the upper left, in
-    :data:`~app.views.scene.LABEL_FONT_SIZE`) takes: :data:`CAPTION_BAND_PX`, at most :data:`MAX_CAPTION_BAND`."""
+    :data:`~app.views.scene.CAPTION_FONT_PX`) takes: :data:`CAPTION_BAND_PX`, at most :data:`MAX_CAPTION_BAND`."""
     x0, y0, x1, y1 = renderer.GetViewport()
     height = max((y1 - y0) * window_size(plotter)[1], 1.0)
     return min(CAPTION_BAND_PX / height, MAX_CAPTION_BAND)

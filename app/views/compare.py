@@ -37,6 +37,7 @@ from app.views.camera import Displayed, FramedView, enable_hover, picked_vertex
 from app.views.scene import (
     ERROR_COLOR_MAX,
     PLAIN_COLOR,
+    add_caption,
     close_plotter,
     coordinate_colors,
     make_plotter,
@@ -44,8 +45,9 @@ from app.views.scene import (
     transfer_colors,
 )
 
-#: table columns: header and tooltip
-COLUMNS = (("method", "registered method"), ("s", "runtime in seconds"), ("energy", "the method's own objective"),
+#: table columns: header and tooltip. The methods' own objectives are not a column: they measure different
+#: things and do not sort against each other; each is in its method's tooltip (:func:`objective_tip`).
+COLUMNS = (("method", "registered method (its own objective in the tooltip)"), ("s", "runtime in seconds"),
            ("mean", "mean geodesic error / sqrt(area) against the ground truth"),
            ("mean sym", "the same, a match to the mirror-image partner also accepted (needs <target>.sym.vts)"),
            ("≤0.05", "fraction of ground-truth points within 0.05"), ("AUC", "area under the cumulative curve"),
@@ -55,7 +57,7 @@ COLOR_MODES = ("colour transfer", "error heat map")
 METHOD_LIST_ROWS = 2  # the method check list's height before its items are laid out (then: fit_method_strip)
 MAX_METHOD_LIST_ROWS = 4  # beyond this many rows of methods the strip scrolls
 VIEWS_BOTTOM_SPLIT = [640, 260]  # initial heights of the grid and the table/curves tabs
-LABEL_FONT_SIZE = 8
+CAPTION_PX = 12  # the grid's views are small: a pixel less than the other views' captions
 MARKER_SIZE = 14  # point inspection: pixels of the markers
 PARTNER_COLOR = "black"  # the method's partner of the inspected vertex
 TRUE_PARTNER_COLOR = "lime"  # its ground-truth partner
@@ -201,7 +203,7 @@ class CompareView(QWidget, FramedView):
         every source vertex with ground truth, NaN elsewhere (the heat map).
         """
         summary = report.summary() if report is not None else {}
-        row = {"method": result.method, "runtime": result.timings.get("total", np.nan), "energy": result.energy,
+        row = {"method": result.method, "runtime": result.timings.get("total", np.nan),
                "mean": summary.get("mean", np.nan), "mean_sym": summary.get("mean_sym", np.nan),
                "within": summary.get("within_0.05", np.nan), "auc": summary.get("auc", np.nan),
                "unmatched": n_unmatched, "result": result, "report": report, "per_vertex": per_vertex}
@@ -211,10 +213,10 @@ class CompareView(QWidget, FramedView):
         self.table.setSortingEnabled(False)  # rows are filled at their insertion position
         r = self.table.rowCount()
         self.table.insertRow(r)
-        values = (row["method"], row["runtime"], row["energy"], row["mean"], row["mean_sym"], row["within"],
-                  row["auc"], n_unmatched)
+        values = (row["method"], row["runtime"], row["mean"], row["mean_sym"], row["within"], row["auc"], n_unmatched)
         for c, v in enumerate(values):
             self.table.setItem(r, c, table_item(v))
+        self.table.item(r, 0).setToolTip(objective_tip(result))
         self.table.setSortingEnabled(True)
         self.fit_table()
         self._draw_view(len(self.rows))
@@ -333,7 +335,7 @@ class CompareView(QWidget, FramedView):
 
     def _caption(self, index: int, text: str) -> None:
         self.captions[index] = text
-        self.plotter.add_text(text, font_size=LABEL_FONT_SIZE)
+        add_caption(self.plotter, text, CAPTION_PX)
 
     def _marker(self, point: np.ndarray, color: str) -> None:
         self.plotter.add_points(np.asarray(point, dtype=np.float64)[None], color=color, point_size=MARKER_SIZE,
@@ -434,6 +436,13 @@ class _NumericItem(QTableWidgetItem):
             a, b = self.value, other.value
             return (not math.isnan(a) and (math.isnan(b) or a < b))
         return super().__lt__(other)
+
+
+def objective_tip(result) -> str:
+    """The method's own objective, named, for its row's tooltip (it compares runs of one method only)."""
+    energy = float("nan") if result.energy is None else float(result.energy)
+    meaning = result.energy_meaning or "objective"
+    return f"{result.method}: {meaning} {energy:.6g}" if np.isfinite(energy) else f"{result.method}: no objective"
 
 
 def table_item(value) -> QTableWidgetItem:

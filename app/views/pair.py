@@ -9,10 +9,10 @@ from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QVBoxLayout, QWidg
 
 from app.views.camera import Displayed, FramedView, enable_hover, picked_vertex
 from app.views.scene import (
-    LABEL_FONT_SIZE,
     ERROR_COLOR_MAX,
     PLAIN_COLOR,
     UNMATCHED_GREY,
+    add_caption,
     close_plotter,
     coordinate_colors,
     make_plotter,
@@ -165,14 +165,14 @@ class PairView(QWidget, FramedView):
             self._draw_lines(src, tgt)
             return
         p.subplot(0, 0)
-        p.add_text(f"source: {self.source.name}", font_size=LABEL_FONT_SIZE)
+        add_caption(p, f"source: {self.source.name}")
         if mode == "texture":
             self._draw_texture(src, tgt_points)
         elif mode == "error" and self.errors is not None:
             self._draw_errors(src, tgt)
         else:
             self._draw_colors(src, tgt, mode)
-        p.add_text(f"target: {self.target.name}", font_size=LABEL_FONT_SIZE)
+        add_caption(p, f"target: {self.target.name}")
         p.link_views()
         self.shown_points = [src_points, tgt_points]
         self.fit_preset()
@@ -192,12 +192,12 @@ class PairView(QWidget, FramedView):
         self.displayed = Displayed.of([shape for _, _, shape in halves], self.up, reuse=self.displayed)
         for (index, which, shape), points in zip(halves, self.displayed.points):
             p.subplot(0, index)
-            p.add_text(f"{which}: {shape.name}", font_size=LABEL_FONT_SIZE)
+            add_caption(p, f"{which}: {shape.name}")
             p.add_mesh(polydata(points, shape.faces), color=PLAIN_COLOR)
         if len(halves) == 1:
             p.subplot(0, 1 - halves[0][0])
             other = ("source", "target")[1 - halves[0][0]]
-            p.add_text(f"{other}: {self.absent.get(other, 'none loaded')}", font_size=LABEL_FONT_SIZE)
+            add_caption(p, f"{other}: {self.absent.get(other, 'none loaded')}")
         p.link_views()
         self.shown_points = list(self.displayed.points)
         self.fit_preset()
@@ -292,7 +292,7 @@ class PairView(QWidget, FramedView):
                 p.add_mesh(self.lines, color="black", line_width=LINE_WIDTH)
                 p.add_points(np.vstack([starts, ends]), scalars=np.vstack([colors[shown]] * 2), rgb=True,
                              point_size=POINT_SIZE, render_points_as_spheres=True)
-        p.add_text("click the source to add a correspondence line", font_size=LABEL_FONT_SIZE)
+        add_caption(p, "click the source to add a correspondence line")
         if not getattr(self, "_picking", False):
             p.enable_point_picking(callback=self._on_pick, show_message=False, use_picker=True,
                                    left_clicking=True, show_point=False)

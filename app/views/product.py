@@ -1,4 +1,5 @@
-"""Product view: a 2D-to-3D match (contour and mesh with the matched closed curve, coloured by position)."""
+"""Product view: a 2D-to-3D match (contour and mesh with the matched closed curve, coloured by position), or two
+contours matched on their product torus (the contours' correspondence above, the 3D and the flat torus below)."""
 
 from __future__ import annotations
 
@@ -7,8 +8,8 @@ from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QVBoxLayout, QWidg
 
 from app.views.camera import (DISPLAY_FRAME, FramedView, RefitOnResize, ShapeDisplay, current_camera, show_preset,
                               window_size)
-from app.views.scene import (LABEL_FONT_SIZE, PLAIN_COLOR, LazyPlotter, hue_colors, lifted_curve, outward_normals,
-                             polydata, polyline)
+from app.views.scene import (PLAIN_COLOR, UNMATCHED_GREY, LazyPlotter, add_caption, hue_colors, lifted_curve,
+                             outward_normals, polydata, polyline)
 from corrlib.viewing import ViewFrame, outline_frame
 
 CURVE_WIDTH = 4  # line width of the query contour
@@ -19,6 +20,12 @@ CURVE_TUBE_RADIUS = 0.007  # radius of the matched curve's tube, relative to the
 #: viewports (x0, y0, x1, y1) of the contour and of the mesh: side by side, or the contour above the mesh
 SIDE_BY_SIDE = ((0.0, 0.0, 0.5, 1.0), (0.5, 0.0, 1.0, 1.0))
 STACKED = ((0.0, 0.5, 1.0, 1.0), (0.0, 0.0, 1.0, 0.5))
+#: viewports of a contour pair: the two contours and their correspondence above, the 3D and the flat torus below
+CONTOUR_PAIR = ((0.0, 0.45, 1.0, 1.0), (0.0, 0.0, 0.5, 0.45), (0.5, 0.0, 1.0, 0.45))
+#: the viewport of a view a layout does not use
+HIDDEN = (0.0, 0.0, 0.0, 0.0)
+#: corresponding points joined by a line in the contour pair's view (evenly spaced on contour A)
+CORRESPONDENCE_LINES = 16
 
 
 def drawn_scale(extent: tuple[float, float], viewport: tuple[float, float]) -> float:
@@ -77,16 +84,17 @@ class ProductView(QWidget, FramedView):
         layout.addLayout(top)
         plot_box = QVBoxLayout()
         layout.addLayout(plot_box, 1)
-        self._plotter = LazyPlotter(self, plot_box, shape=(1, 2))
+        self._plotter = LazyPlotter(self, plot_box, shape=(1, 3))
         self._offer_functions([])
         self.curve = None  # the matched curve's polydata (for tests)
         self.torus_curve = None  # the correspondence curve on the torus (for tests)
+        self.contours_shown = None  # a contour pair's two contours as drawn beside each other, (m + n, 3)
         self._pair = None
         self._match = None  # the arguments of the last show_contour_match (redrawn on a new up axis)
         self._contour_display: np.ndarray | None = None  # the query contour's points as drawn, (m, 3)
         self.mesh_points: np.ndarray | None = None  # the matched mesh in its display frame
         self.drawn_frame = None  # the upright view the matched curve looks most like the query from (ViewFrame)
-        self._torus_views: list = []  # (points, frame) of the 3D and the flat torus, fitted to their viewports
+        self._pair_views: list = []  # (points, frame) of a contour pair's three views, fitted to their viewports
         self._torus_cameras: list = []  # the cameras of that fit (a camera the user moved is not fitted again)
         self._torus_refit = None
 
@@ -95,7 +103,7 @@ class ProductView(QWidget, FramedView):
         if self._match is None and self._pair is None:
             return
         self._match = self._pair = None
-        self.mesh_points = self.drawn_frame = self.curve = self.torus_curve = None
+        self.mesh_points = self.drawn_frame = self.curve = self.torus_curve = self.contours_shown = None
         self._offer_functions([])
         self.plotter.clear_actors()
         self.plotter.render()
@@ -139,7 +147,7 @@ class ProductView(QWidget, FramedView):
     def _draw_contour_match(self, contour_points: np.ndarray, mesh, path_vertices: np.ndarray,
                             path_contour_index: np.ndarray, energy: float) -> None:
         self._match = (contour_points, mesh, path_vertices, path_contour_index, energy)
-        self._pair, self._torus_views = None, []  # no torus to fit again
+        self._pair, self._pair_views, self.contours_shown = None, [], None  # no torus to fit again
         p = self.plotter
         p.clear_actors()
         m = contour_points.shape[0]
@@ -147,7 +155,7 @@ class ProductView(QWidget, FramedView):
         line = polyline(contour_points)
         line["position"] = np.arange(m) / m
         p.add_mesh(line, scalars=hue_colors(np.arange(m) / m), rgb=True, line_width=CURVE_WIDTH)
-        p.add_text("query contour", font_size=LABEL_FONT_SIZE)
+        add_caption(p, "query contour")
         p.subplot(0, 1)
         display = ShapeDisplay.of(mesh.vertices, self.up)
         self.mesh_points = display.points(mesh.vertices)
@@ -161,7 +169,7 @@ class ProductView(QWidget, FramedView):
         else:  # a curve without length (every step on one vertex): its vertices, as points
             p.add_points(self.mesh_points[np.unique(path_vertices)], color="red", point_size=12,
                          render_points_as_spheres=True)
-        p.add_text(f"{mesh.name}: matched curve (energy {energy:.4g})", font_size=LABEL_FONT_SIZE)
+        add_caption(p, f"matched curve, energy {energy:.4g}: {mesh.name}")  # the name may be elided
         self.drawn_frame = None
         if np.unique(path_vertices).size > 2:
             self.drawn_frame = outline_frame(self.mesh_points[path_vertices], contour_points[path_contour_index],
@@ -183,8 +191,9 @@ class ProductView(QWidget, FramedView):
         self._set_viewports(product_layout(extents, window_size(self.plotter)))
 
     def _set_viewports(self, viewports) -> None:
-        for renderer, viewport in zip(self.plotter.renderers, viewports):
-            renderer.SetViewport(*viewport)
+        """The layout's viewports; views it does not name are hidden."""
+        for i, renderer in enumerate(self.plotter.renderers):
+            renderer.SetViewport(*(viewports[i] if i < len(viewports) else HIDDEN))
 
     def _on_resized(self) -> None:
         """Lay the match out again for the new size, and refit the mesh (while at its preset) and the contour to
@@ -206,7 +215,8 @@ class ProductView(QWidget, FramedView):
         show_preset(self.plotter, [points], "front", [self.plotter.renderers[0]])
 
     def show_contour_pair(self, result) -> None:
-        """Two contours: the product torus (3D) and the flat square, with the correspondence curve."""
+        """Two contours: their point correspondence, the product torus (3D) and the flat square, with the
+        correspondence curve."""
         names = list(result.path.product_functions)
         self._pair = result
         self._match, self.mesh_points, self.drawn_frame = None, None, None  # no mesh: no presets on the torus
@@ -238,10 +248,12 @@ class ProductView(QWidget, FramedView):
         p.clear_actors()
         for title in list(p.scalar_bars.keys()):  # bars are kept by title, and every function's bar has none
             p.remove_scalar_bar(title)
-        self._set_viewports(SIDE_BY_SIDE)
-        self._torus_views = []
+        self._set_viewports(CONTOUR_PAIR)
+        p.subplot(0, 0)
+        self.contours_shown = self._draw_contour_correspondence(path.contour_points, path.target_points, result)
+        self._pair_views = [(self.contours_shown, DISPLAY_FRAME)]
         curve_uv = path_angles(path.layers, path.vertices, u, v)
-        for col, flat in ((0, False), (1, True)):
+        for col, flat in ((1, False), (2, True)):
             p.subplot(0, col)
             verts, faces, index = torus_grid(u, v, flat=flat)
             grid = polydata(verts, faces)
@@ -259,31 +271,51 @@ class ProductView(QWidget, FramedView):
                     if len(piece) > 1:
                         p.add_mesh(polyline(piece, closed=False), color="crimson", line_width=4)
                 coloured = f", colour: {name}" if values is not None else ""
-                p.add_text(f"flat torus (u: contour A, v: contour B){coloured}", font_size=9)
+                add_caption(p, f"flat torus (u: A, v: B){coloured}")
             else:
                 pts = torus_embedding(curve_uv[:, 0], curve_uv[:, 1], 1.0, 0.41)
                 self.torus_curve = polyline(pts, closed=False)
                 p.add_mesh(self.torus_curve.tube(radius=0.015), color="crimson")
-                p.add_text("product torus A × B", font_size=9)
-            self._torus_views.append((verts, DISPLAY_FRAME if flat else TORUS_FRAME))
+                add_caption(p, "product torus A × B")
+            self._pair_views.append((verts, DISPLAY_FRAME if flat else TORUS_FRAME))
         self._fit_torus()
         p.render()
         self.info.setText(f"{len(u)} × {len(v)} product torus; correspondence energy {result.energy:.4g}")
 
-    def _fit_torus(self) -> None:
-        """Each torus view fitted to its viewport's own size and shape, and again after every resize while its
-        camera is where the fit put it. VTK's reset fits a bounding sphere to the height of the size it last
-        rendered at: the widget is 100 × 30 pixels when a first result arrives, and a narrow viewport cut the
-        square and the torus at the sides."""
+    def _draw_contour_correspondence(self, points_a: np.ndarray, points_b: np.ndarray, result) -> np.ndarray:
+        """Contour A coloured by its position, B beside it in the colour of its matched point of A (grey where
+        unmatched), and lines between :data:`CORRESPONDENCE_LINES` points of A and their partners. Returns the
+        points drawn, (m + n, 3)."""
+        from corrlib.viewing import contours_side_by_side
+
         p = self.plotter
-        for renderer, (points, frame) in zip(p.renderers, self._torus_views):
+        shown_a, shown_b = (np.column_stack([c, np.zeros(len(c))]) for c in contours_side_by_side(points_a, points_b))
+        m = len(points_a)
+        hue = hue_colors(np.arange(m) / m)
+        colours_b = np.where((result.map_yx >= 0)[:, None], hue[np.maximum(result.map_yx, 0)], UNMATCHED_GREY)
+        for points, colours in ((shown_a, hue), (shown_b, colours_b)):
+            p.add_mesh(polyline(points), scalars=colours, rgb=True, line_width=CURVE_WIDTH)
+        rows = np.linspace(0, m, CORRESPONDENCE_LINES, endpoint=False).astype(np.int64)
+        rows = rows[result.map_xy[rows] >= 0]
+        ends = np.stack([shown_a[rows], shown_b[result.map_xy[rows]]], axis=1).reshape(-1, 3)
+        p.add_lines(ends, color="darkgrey", width=1)
+        add_caption(p, "A and B, coloured by the position on A")
+        return np.vstack([shown_a, shown_b])
+
+    def _fit_torus(self) -> None:
+        """Each view of a contour pair (the contours, the torus, the square) fitted to its viewport's own size and
+        shape, and again after every resize while its camera is where the fit put it. VTK's reset fits a bounding
+        sphere to the height of the size it last rendered at: the widget is 100 × 30 pixels when a first result
+        arrives, and a narrow viewport cut the square and the torus at the sides."""
+        p = self.plotter
+        for renderer, (points, frame) in zip(p.renderers, self._pair_views):
             show_preset(p, [points], "front", [renderer], frame)
         self._torus_cameras = [current_camera(p, renderer) for renderer in p.renderers]
         if self._torus_refit is None or self._torus_refit.plotter is not p:
             self._torus_refit = RefitOnResize(p, self._on_torus_resized)
 
     def _on_torus_resized(self) -> None:
-        if self._pair is None or not self._torus_views:
+        if self._pair is None or not self._pair_views:
             return
         p = self.plotter
         if all(np.allclose(current_camera(p, r).position, c.position) for r, c in zip(p.renderers,

@@ -213,10 +213,10 @@ class RetrievalView(QWidget):
 
     def set_query(self, contour) -> None:
         self.query = contour
-        from corrlib.retrieval import RETRIEVAL_N_CONTOUR
+        from corrlib.retrieval import retrieval_params
 
         self.query_label.setText(f"query: {contour.name} ({contour.n_points} points, matched at "
-                                 f"{RETRIEVAL_N_CONTOUR})")
+                                 f"{retrieval_params().n_contour})")
 
     def set_folder(self, folder: str) -> None:
         self.folder = folder
@@ -290,7 +290,12 @@ class RetrievalView(QWidget):
         caption_px = CAPTION_LINES * gallery.fontMetrics().lineSpacing() + 4
         side = gallery_icon_px(width, viewport.height(), gallery.count(), caption_px)
         gallery.setIconSize(QSize(side, side))
-        gallery.setGridSize(QSize(side + GALLERY_SPACING_PX, side + caption_px + GALLERY_SPACING_PX))
+        # where the height limits the side, the columns are spread over the width (each thumbnail centred in a
+        # wider cell) instead of leaving a strip empty at the right
+        usable = width - GALLERY_SPACING_PX
+        cols = max(1, min(gallery.count(), usable // (side + GALLERY_SPACING_PX)))
+        gallery.setGridSize(QSize(max(side + GALLERY_SPACING_PX, usable // cols),
+                                  side + caption_px + GALLERY_SPACING_PX))
         metrics = gallery.fontMetrics()
         for i in range(gallery.count()):  # a long name shortened in its middle, so that the score stays in sight
             item = gallery.item(i)

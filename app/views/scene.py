@@ -11,7 +11,14 @@ from corrlib.plotting import coordinate_colors  # noqa: F401  (re-exported for t
 UNMATCHED_GREY = 0.7
 #: colour of a shape drawn without any data
 PLAIN_COLOR = "lightgrey"
-LABEL_FONT_SIZE = 9
+#: pixel height of a caption at the top left of a 3D view, the same in every view and window: VTK's corner
+#: annotation scales its text with the viewport and shrinks a long line, so that two captions side by side
+#: differed in size
+CAPTION_FONT_PX = 13
+#: the corner of VTK's corner annotation that holds a caption (vtkCornerAnnotation::UpperLeft)
+UPPER_LEFT = 2
+#: a caption character's mean advance in units of the font's pixel height (to shorten a caption to its view)
+CAPTION_CHAR_WIDTH = 0.55
 #: top of the error colour scale of every heat map (geodesic error / sqrt(area))
 ERROR_COLOR_MAX = 0.15
 
@@ -146,3 +153,29 @@ class LazyPlotter:
     def close(self) -> None:
         if self._plotter is not None:
             close_plotter(self._plotter)
+
+
+def elided_caption(text: str, width_px: float, font_px: int = CAPTION_FONT_PX) -> str:
+    """Each line of ``text`` cut to fit ``width_px`` pixels at ``font_px`` (an estimate from
+    :data:`CAPTION_CHAR_WIDTH`), its end replaced by an ellipsis where it is cut: the start names the shape."""
+    fits = max(int(width_px / (CAPTION_CHAR_WIDTH * font_px)) - 1, 2)  # a character's margin at the left edge
+    return "\n".join(line if len(line) <= fits else line[:fits - 1].rstrip() + "…" for line in text.split("\n"))
+
+
+def add_caption(plotter, text: str, font_px: int = CAPTION_FONT_PX):
+    """Write ``text`` at the top left of the plotter's active view at ``font_px`` pixels, whatever the size of the
+    view and the length of the line. Each line is shortened to the view's width (:func:`elided_caption`) as the
+    view is rendered: a view's size is known only then (a new widget measures 100 × 30 before it is laid out).
+    Returns the actor."""
+    renderer = plotter.renderer
+    actor = plotter.add_text(text, position="upper_left", font_size=font_px)
+    actor.SetMinimumFontSize(font_px)
+    actor.SetMaximumFontSize(font_px)
+
+    def fit_to_view(*_args):
+        width = renderer.GetSize()[0]
+        if width > 0:
+            actor.SetText(UPPER_LEFT, elided_caption(text, width, font_px))
+
+    renderer.AddObserver("StartEvent", fit_to_view)
+    return actor

@@ -19,7 +19,7 @@ from PySide6.QtWidgets import (
 )
 
 from app.views.camera import FramedView, ShapeDisplay
-from app.views.scene import LABEL_FONT_SIZE, LazyPlotter, coordinate_colors, polydata
+from app.views.scene import LazyPlotter, add_caption, coordinate_colors, polydata
 from corrlib.methods.divergence_free import SEQUENCE_T_MAX
 
 STEPS = 1000  # slider positions from t = 0 to t max
@@ -165,7 +165,7 @@ class SequenceView(QWidget, FramedView):
         self.display = ShapeDisplay.of(source.vertices, self.up)
         self.mesh = polydata(self.display.points(source.vertices), source.faces)
         self.plotter.add_mesh(self.mesh, scalars=coordinate_colors(source.vertices), rgb=True)
-        self.plotter.add_text(self.caption or source.name, font_size=LABEL_FONT_SIZE)
+        add_caption(self.plotter, self.caption or source.name)
         self.ends = self._framed_poses()
         self.fit_preset()
         self.slider.setValue(0)

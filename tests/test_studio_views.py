@@ -681,6 +681,22 @@ def test_captions_side_by_side_have_one_size_and_are_shortened_to_their_view(qtb
     assert elided_caption("a long first line of a caption\nshort", 100, 13).split("\n")[1] == "short"
 
 
+def test_a_view_keeps_one_caption_observer_however_often_it_is_captioned():
+    """A caption is fitted to its view at every render; a view captioned again (the Compare grid at every
+    inspected vertex) must not keep fitting the captions it had."""
+    import pyvista as pv
+
+    from app.views.scene import add_caption
+
+    plotter = pv.Plotter(off_screen=True)
+    renderer = plotter.renderer
+    for i in range(5):
+        add_caption(plotter, f"caption {i}")
+    renderer.RemoveObserver(renderer._caption_observer)
+    assert not renderer.HasObserver("StartEvent")  # the four before it were removed as it came
+    plotter.close()
+
+
 def test_the_methods_unticked_for_a_comparison_stay_unticked_for_the_next_pair(qtbot, window):
     """Found by fuzzing the studio: every load ticked every method of the Compare tab again, the slow ones too."""
     from PySide6.QtCore import Qt

@@ -166,7 +166,7 @@ def add_caption(plotter, text: str, font_px: int = CAPTION_FONT_PX):
     """Write ``text`` at the top left of the plotter's active view at ``font_px`` pixels, whatever the size of the
     view and the length of the line. Each line is shortened to the view's width (:func:`elided_caption`) as the
     view is rendered: a view's size is known only then (a new widget measures 100 × 30 before it is laid out).
-    Returns the actor."""
+    A view has one caption: the one it had is no longer fitted. Returns the actor."""
     renderer = plotter.renderer
     actor = plotter.add_text(text, position="upper_left", font_size=font_px)
     actor.SetMinimumFontSize(font_px)
@@ -177,5 +177,9 @@ def add_caption(plotter, text: str, font_px: int = CAPTION_FONT_PX):
         if width > 0:
             actor.SetText(UPPER_LEFT, elided_caption(text, width, font_px))
 
-    renderer.AddObserver("StartEvent", fit_to_view)
+    # one caption per view: the observer of the caption it replaces goes (views are redrawn many times)
+    previous = getattr(renderer, "_caption_observer", None)
+    if previous is not None:
+        renderer.RemoveObserver(previous)
+    renderer._caption_observer = renderer.AddObserver("StartEvent", fit_to_view)  # pyvista allows _ names
     return actor

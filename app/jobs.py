@@ -7,6 +7,7 @@ the GUI-thread slots turn them into widgets and VTK objects without computing an
 
 from __future__ import annotations
 
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
@@ -22,6 +23,17 @@ ERROR_GEODESICS = "exact"
 FALLBACK_ERROR_GEODESICS = "heat"
 #: eigenpairs computed for the pair view's "function" mode (the second one is drawn)
 FUNCTION_EIGENPAIRS = 3
+
+
+#: a word of the Shapes panel longer than this (a long file name) is shortened in its middle: a label wraps only
+#: between words, and one long word widened the panel past its edge and cut every line of it
+SHAPES_WORD_CHARS = 30
+
+
+def shortened_words(text: str, longest: int = SHAPES_WORD_CHARS) -> str:
+    """``text`` with every word longer than ``longest`` characters shortened in its middle ("…")."""
+    keep = (longest - 1) // 2
+    return re.sub(rf"\S{{{longest + 1},}}", lambda m: m.group()[:keep] + "…" + m.group()[-keep:], text)
 
 
 def describe(shape) -> str:

@@ -31,7 +31,8 @@ from PySide6.QtWidgets import (
 
 import corrlib
 from app.gui_gc import STUDIO_THREAD_PREFIX, collect_on_gui_thread
-from app.jobs import LoadedShape, MethodOutcome, contour_reading, describe, load_job, map_job, method_job, repair_job
+from app.jobs import (LoadedShape, MethodOutcome, contour_reading, describe, load_job, map_job, method_job, repair_job,
+                      shortened_words)
 from app.param_form import ParamForm
 from app.sketch import SketchPanel
 from app.views import TAB_NAMES
@@ -643,12 +644,13 @@ class MainWindow(QMainWindow):
         self._cancel_method_jobs()
         text = describe(shape) if description is None else description
         self.shape_paths[which] = None if path is None else Path(path)
+        label = self.source_info if which == "source" else self.target_info
+        label.setText(shortened_words(text))
+        label.setToolTip(text)  # the whole names
         if which == "source":
             self.source = shape
-            self.source_info.setText(text)
         else:
             self.target = shape
-            self.target_info.setText(text)
         self.gt = None
         self.last_result = None
         self.map_files = []

@@ -572,9 +572,17 @@ def test_bundled_shapes_and_retrieved_pair(qtbot, window):
 
 
 def test_contour_pair_shows_the_torus(qtbot, window):
+    from app.views.product import TORUS_BAR, TORUS_BAR_BAND
+
     assert load_file(qtbot, window, SILHOUETTES / "mpeg7" / "dog-1.gif", "source")
     assert load_file(qtbot, window, SILHOUETTES / "mpeg7" / "horse-1.gif", "target")
     assert window.method_box.currentData() == "contour2d"
+    # the other tabs say where the match is and that a match of contours has no motion
+    from app.views.sequence import SEQUENCE_HINT
+
+    assert window.pair_view.info.text() == "Both inputs are contours: their correspondence is shown in the Product tab."
+    seq = window.sequence_view
+    assert seq.kind.text() == SEQUENCE_HINT and seq.motion.isHidden() and not seq.play_button.isEnabled()
     set_params(window, "contour2d", n_source=50, n_target=50)
     result = run_and_wait(qtbot, window, "contour2d")
     view = window.product_view
@@ -597,7 +605,9 @@ def test_contour_pair_shows_the_torus(qtbot, window):
         view.plotter.render()
         width, height = view.plotter.render_window.GetSize()
         # the flat square, and the two contours side by side (their points' correspondence) above the tori
-        for renderer, points in ((view.plotter.renderers[2], corners),
+        # the square is fitted with the band of its colour bar below it
+        square = np.vstack([corners, [[0.5, -TORUS_BAR_BAND, 0.0]]])
+        for renderer, points in ((view.plotter.renderers[2], square),
                                  (view.plotter.renderers[0], view.contours_shown)):
             x0, y0, x1, y1 = np.array(renderer.GetViewport()) * [width, height, width, height]
             screen = []
@@ -608,6 +618,8 @@ def test_contour_pair_shows_the_torus(qtbot, window):
             screen = np.array(screen)
             assert np.all(screen >= [x0 - 1, y0 - 1]) and np.all(screen <= [x1 + 1, y1 + 1]), (size, screen)
             assert max(np.ptp(screen[:, 0]) / (x1 - x0), np.ptp(screen[:, 1]) / (y1 - y0)) > 0.8
+            if renderer is view.plotter.renderers[2]:  # the bar is under the square, not over it
+                assert screen[:4, 1].min() > y0 + (TORUS_BAR["position_y"] + TORUS_BAR["height"]) * (y1 - y0)
     a, b = view.contours_shown[:50], view.contours_shown[50:]
     assert a.shape == (50, 3) and b.shape == (50, 3) and a[:, 0].max() < b[:, 0].min()  # B to the right of A
     assert np.ptp(a[:, 1]) == pytest.approx(np.ptp(b[:, 1]))  # at one height

@@ -681,6 +681,22 @@ def test_captions_side_by_side_have_one_size_and_are_shortened_to_their_view(qtb
     assert elided_caption("a long first line of a caption\nshort", 100, 13).split("\n")[1] == "short"
 
 
+def test_a_long_file_name_is_shortened_in_the_shapes_panel(qtbot, window, tmp_path):
+    """A label wraps only between words: one long file name widened the Shapes panel past its edge and cut every
+    line of it. Words longer than the panel's share are shortened in their middle; the tooltip has them whole."""
+    from app.jobs import SHAPES_WORD_CHARS, shortened_words
+
+    assert shortened_words("human0.off: 4876 vertices") == "human0.off: 4876 vertices"
+    name = "a_very_long_file_name_for_a_mesh_to_test_captions.off"
+    short = shortened_words(f"{name}: 4876 vertices")
+    assert short == "a_very_long_fi…_captions.off: 4876 vertices" and len(short.split()[0]) <= SHAPES_WORD_CHARS
+    (tmp_path / name).write_bytes((TOSCA / "wolf0.off").read_bytes())
+    window.load_file(str(tmp_path / name), "source")
+    wait_loaded(qtbot, window)
+    assert window.source_info.text().startswith("a_very_long_fi…_captions.off: 4344 vertices")
+    assert window.source_info.toolTip().startswith(f"{name}: 4344 vertices")
+
+
 def test_a_view_keeps_one_caption_observer_however_often_it_is_captioned():
     """A caption is fitted to its view at every render; a view captioned again (the Compare grid at every
     inspected vertex) must not keep fitting the captions it had."""

@@ -89,6 +89,8 @@ class PairView(QWidget, FramedView):
         contours = [which for which, shape in inputs.items() if shape is not None and which in self.absent]
         if not self.absent:
             self.info.setText("Run a method to see the correspondence.")
+        elif len(contours) == 2:
+            self.info.setText("Both inputs are contours: their correspondence is shown in the Product tab.")
         elif contours == ["target"] and self.source is not None:
             self.info.setText("The target is a contour: a 2D-to-3D match takes the contour as the source.")
         elif contours:

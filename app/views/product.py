@@ -59,6 +59,9 @@ TORUS_FRAME = ViewFrame(np.array([-1.0, 1.0, 0.0]) / np.sqrt(2), np.array([-1.0,
                         np.array([1.0, 1.0, 1.0]) / np.sqrt(3))
 #: the flat torus' colour bar: three labels at a fixed small size (labels scaled with the bar ran into each
 #: other and into the title in a laptop's window); the title is the function's name, shown above the view
+#: the band below the flat square kept for that bar, in units of the square's side: the square is fitted together
+#: with a point this far below it, so that the bar and its labels are drawn under the square, not over it
+TORUS_BAR_BAND = 0.25
 TORUS_BAR = {"title": "", "fmt": "%.3g", "n_labels": 3, "unconstrained_font_size": True, "label_font_size": 12,
              "height": 0.06, "position_y": 0.04, "position_x": 0.15, "width": 0.7}  # end labels kept inside
 
@@ -270,14 +273,15 @@ class ProductView(QWidget, FramedView):
                 for piece in np.split(pts, cut):
                     if len(piece) > 1:
                         p.add_mesh(polyline(piece, closed=False), color="crimson", line_width=4)
-                coloured = f", colour: {name}" if values is not None else ""
-                add_caption(p, f"flat torus (u: A, v: B){coloured}")
+                coloured = f": {name}" if values is not None else ""
+                add_caption(p, f"flat torus A × B{coloured}")
             else:
                 pts = torus_embedding(curve_uv[:, 0], curve_uv[:, 1], 1.0, 0.41)
                 self.torus_curve = polyline(pts, closed=False)
                 p.add_mesh(self.torus_curve.tube(radius=0.015), color="crimson")
                 add_caption(p, "product torus A × B")
-            self._pair_views.append((verts, DISPLAY_FRAME if flat else TORUS_FRAME))
+            shown = np.vstack([verts, [[0.5, -TORUS_BAR_BAND, 0.0]]]) if flat and values is not None else verts
+            self._pair_views.append((shown, DISPLAY_FRAME if flat else TORUS_FRAME))
         self._fit_torus()
         p.render()
         self.info.setText(f"{len(u)} × {len(v)} product torus; correspondence energy {result.energy:.4g}")

@@ -29,6 +29,9 @@ SPEED_RANGE = (0.05, 5.0)  # playback speed, t per second
 DEFAULT_SPEED = 0.5
 FRAME_INTERVAL_MS = 30  # playback timer period
 PICTURE_STRIP_FRAMES = 6
+#: what the tab says while it has no motion to show
+SEQUENCE_HINT = ("Run a method on two meshes to see the source move to the target here (a match of contours has "
+                 "no motion).")
 #: the motion box's words for the kinds of :func:`app.jobs.sequence_options`
 MOTION_NAMES = {"flow": "the method's flow", "rigid": "as rigid as possible", "linear": "linear"}
 
@@ -75,7 +78,8 @@ class SequenceView(QWidget, FramedView):
         row.addWidget(self.slider, 1)
         layout = QVBoxLayout(self)
         top = QHBoxLayout()
-        top.addWidget(QLabel("motion"))
+        self.motion_label = QLabel("motion")
+        top.addWidget(self.motion_label)
         top.addWidget(self.motion)
         top.addWidget(self.kind, 1)
         layout.addLayout(top)
@@ -94,6 +98,8 @@ class SequenceView(QWidget, FramedView):
         #: farthest extrapolated pose (t max)
         self.ends: list[np.ndarray] = []
         self.options: dict[str, tuple] = {}  # kind -> (positions, description) the motion box offers
+        self._controls = (self.play_button, self.t_max, self.speed, self.loop, self.slider)
+        self.clear()
 
     def view_plotter(self):
         return self._plotter.get() if self.mesh is not None else None
@@ -115,7 +121,9 @@ class SequenceView(QWidget, FramedView):
         """Forget the sequence (a new shape was loaded: the last pair's motion no longer fits it)."""
         self.source = self.positions = self.mesh = self.display = None
         self.ends, self.description, self.caption = [], "", ""
-        self.kind.setText("")
+        if self.timer.isActive():
+            self.toggle_play()  # stopped, the button saying Play again
+        self.kind.setText(SEQUENCE_HINT)
         self._offer({})
         if self._plotter.created:
             self.plotter.clear_actors()
@@ -137,6 +145,10 @@ class SequenceView(QWidget, FramedView):
             self.motion.addItem(MOTION_NAMES.get(kind, kind), kind)
         self.motion.blockSignals(False)
         self.motion.setEnabled(len(self.options) > 1)
+        self.motion.setVisible(bool(self.options))  # an empty box floated above an empty view
+        self.motion_label.setVisible(bool(self.options))
+        for control in self._controls:  # nothing to play or scrub without a motion
+            control.setEnabled(bool(self.options))
 
     def choose_motion(self, kind: str) -> bool:
         """Show the motion ``kind`` ("flow", "rigid", "linear"); False where the result does not offer it."""

@@ -59,15 +59,16 @@ TORUS_FRAME = ViewFrame(np.array([-1.0, 1.0, 0.0]) / np.sqrt(2), np.array([-1.0,
                         np.array([1.0, 1.0, 1.0]) / np.sqrt(3))
 #: the flat torus' colour bar: three labels at a fixed small size (labels scaled with the bar ran into each
 #: other and into the title in a laptop's window); the title is the function's name, shown above the view
+TORUS_BAR = {"title": "", "fmt": "%.3g", "n_labels": 3, "unconstrained_font_size": True, "label_font_size": 12,
+             "height": 0.06, "position_y": 0.04, "position_x": 0.15, "width": 0.7}  # end labels kept inside
 #: the band below the flat square kept for that bar, in units of the square's side: the square is fitted together
 #: with a point this far below it, so that the bar and its labels are drawn under the square, not over it
 TORUS_BAR_BAND = 0.25
-TORUS_BAR = {"title": "", "fmt": "%.3g", "n_labels": 3, "unconstrained_font_size": True, "label_font_size": 12,
-             "height": 0.06, "position_y": 0.04, "position_x": 0.15, "width": 0.7}  # end labels kept inside
 
 
 class ProductView(QWidget, FramedView):
-    """Left: the query contour; right: the mesh with the matched curve; both coloured by contour position."""
+    """A 2D-to-3D match: the query contour and the mesh with the matched curve (side by side or stacked), both
+    coloured by contour position. Two contours: their correspondence above the 3D and the flat product torus."""
 
     def __init__(self, parent=None):
         super().__init__(parent)

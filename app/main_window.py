@@ -828,7 +828,10 @@ class MainWindow(QMainWindow):
         self.job_panel.report(report)
 
     def _job_stopped(self, text: str, finished: bool = True) -> None:
-        """The job panel told that a job ended, and which go on (the panel is shared by every kind of job)."""
+        """The job panel told that a job ended, and which go on (the panel is shared by every kind of job); a
+        finished job's word also replaces the status bar's hint, which asked for the run just made."""
+        if finished:
+            self.statusBar().showMessage(text)
         self.job_panel.stopped(text, tuple(name for key, name in JOB_NAMES.items() if self.runner.is_running(key)),
                                finished)
 

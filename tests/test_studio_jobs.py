@@ -344,6 +344,7 @@ def test_a_failed_load_keeps_the_running_method_and_cancel_stays_for_a_job_that_
     gate.set()
     qtbot.waitUntil(lambda: bool(ready), timeout=30_000)  # the run finished and its result stands
     assert window.pair_view.result is not None and not window.job_panel.cancel.isEnabled()
+    assert window.statusBar().currentMessage().endswith(" finished")  # not "press Run" any more
     window.load_file(str(TOSCA / "wolf0.off"), "source")
     wait_loaded(qtbot, window)
     assert window.statusBar().currentMessage() == "Pick a method and press Run."

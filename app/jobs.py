@@ -15,7 +15,7 @@ import numpy as np
 
 from corrlib.errors import CorrError, FileFormatError, MeshError
 from corrlib.progress import Progress
-from corrlib.shapes import Contour2D, TriMesh, plane_coordinates, sketch_outline
+from corrlib.shapes import Contour2D, TriMesh, sketch_outline
 
 #: geodesic distance method of the studio's error figures: the one `corr bench` reports (and faster than the heat
 #: method's one solve per ground-truth partner); the heat method where a pinched vertex rules it out
@@ -100,11 +100,14 @@ def load_job(path: str, as_query: bool = False):
         yield Progress("loading", -1.0, str(path))
         shape = read_shape(path)
         yield Progress("validating", -1.0, shape.name)
-        if as_query and isinstance(shape, TriMesh) and shape.boundary_loops and plane_coordinates(
-                shape.vertices) is not None:
-            outline, _loop = sketch_outline(shape)
-            return LoadedShape(str(path), outline, f"{describe(outline)}\n  the outline of a planar sketch mesh "
-                                                   f"({shape.n_vertices} vertices), the 2D query")
+        if as_query and isinstance(shape, TriMesh) and shape.boundary_loops:
+            try:
+                outline, _loop = sketch_outline(shape)
+            except MeshError:  # not flat: the mesh it is (a degenerate flat outline still fails, by name)
+                pass
+            else:
+                return LoadedShape(str(path), outline, f"{describe(outline)}\n  the outline of a planar sketch "
+                                                       f"mesh ({shape.n_vertices} vertices), the 2D query")
         return LoadedShape(str(path), shape, describe(shape))
 
     return factory

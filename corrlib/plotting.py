@@ -249,12 +249,12 @@ def save_torus_pictures(path, result) -> Path:
     hue = cm.hsv(np.arange(m) / m)[:, :3]
     from corrlib.viewing import contours_side_by_side
 
-    shown_a, shown_b = contours_side_by_side(a, b)
+    shown_a, shown_b, mirrored = contours_side_by_side(a, b, result.map_xy)
     ax.scatter(shown_a[:, 0], shown_a[:, 1], c=hue, s=8)
     ax.scatter(shown_b[result.map_xy, 0], shown_b[result.map_xy, 1], c=hue, s=8)
     ax.set_aspect("equal")
     ax.set_axis_off()
-    ax.set_title("A and B, coloured by the position on A")
+    ax.set_title("A and B" + (" (mirrored)" if mirrored else "") + ", coloured by the position on A")
     ax = fig.add_subplot(1, 3, 2)
     ax.imshow(np.asarray(matched.product_functions["cost"]).T, origin="lower", extent=(0, 1, 0, 1), aspect="auto",
               cmap="viridis")

@@ -25,7 +25,10 @@ come from the layout: a mesh in a subfolder belongs to the class named by the
 subfolder (``collection/cat/0.off`` is class ``cat``, as class-per-folder
 benchmarks are laid out); a mesh directly in the folder to the class its name
 gives without suffix, trailing digits and separators (``cat0`` and ``cat-12``
-are class ``cat``).
+are class ``cat``). A flat mesh in it (a triangulated 2D sketch, such as the
+bundled ``sketch2d`` files) is not ranked: it is a drawing, not a 3D shape,
+and would match a drawing of its class as no view of a surface can; its hit
+fails with :data:`FLAT_CANDIDATE`.
 """
 
 from __future__ import annotations
@@ -39,15 +42,19 @@ from pathlib import Path
 
 import numpy as np
 
-from corrlib.errors import CorrError, InputError, ParameterError
+from corrlib.errors import CorrError, InputError, MeshError, ParameterError
 from corrlib.io import MESH_SUFFIXES, load_mesh, lost_working_folder
 from corrlib.parallel import check_jobs, job_executor
 from corrlib.methods.contour3d import Contour3DParams, PreparedQuery, curve_collapsed, match_prepared, prepare_query
 from corrlib.outline_views import QueryOutline, query_outline, view_dissimilarity
 from corrlib.progress import CancelToken, Progress, run
+from corrlib.shapes import plane_coordinates
 
 #: how :func:`retrieve` ranks: by the product of the two measures, or by the matching energy alone
 RANKINGS = ("fused", "energy")
+#: why a flat mesh of a collection is not ranked: it is a drawing (a query), not a shape a drawing is a view of
+FLAT_CANDIDATE = ("a flat mesh (all its vertices in one plane) is a 2D sketch, not a 3D shape; retrieval ranks "
+                  "3D shapes (use it as the query instead)")
 
 
 def retrieval_params(**overrides) -> Contour3DParams:
@@ -174,6 +181,8 @@ def _match_one(query: PreparedQuery, path: str, params: Contour3DParams,
     start = time.perf_counter()
     try:
         mesh = load_mesh(path)
+        if plane_coordinates(mesh.vertices) is not None:
+            raise MeshError(f"{path}: {FLAT_CANDIDATE}")
         # a mesh that cannot be remeshed is not matched as given: its energy would not compare with the others'
         result = run(match_prepared(query, mesh, params, CancelToken(), as_given_if_unremeshable=False))
         view_distance = float("nan") if outline is None else view_dissimilarity(outline, mesh)

@@ -11,7 +11,10 @@ the shape's extent along it (its *bottom slab*) cover some share of the
 shape's footprint (convex hulls of their projections onto the perpendicular
 plane). Four paws or two feet spread over the footprint; a nose, a tail tip,
 a head or a hand does not. The direction whose slab covers the largest share
-is down. A user can override it (``+x`` … ``-z``).
+is down. A flat shape (a triangulated 2D sketch in a coordinate plane) stands
+on an edge: its footprint seen along an axis of its plane is a segment, and
+the share is that of the segment's length; its up axis lies in its plane, so
+its front view faces the drawing. A user can override it (``+x`` … ``-z``).
 
 **Views.** With ``up`` fixed, the horizontal principal axes of the vertices
 give the long and the short horizontal extent. ``front`` looks at the broad
@@ -38,6 +41,8 @@ UP_AXES = ("auto", "+x", "-x", "+y", "-y", "+z", "-z")
 VIEWS = ("front", "side", "top")
 #: thickness of the bottom slab of the automatic up axis, a fraction of the extent
 SUPPORT_SLAB = 0.03
+#: a shape whose extent along a coordinate axis is at most this fraction of its bounding-box diagonal is flat
+FLAT_EXTENT = 1e-6
 
 
 def axis_vector(name: str) -> np.ndarray:
@@ -60,10 +65,18 @@ def _hull_area(points_2d: np.ndarray) -> float:
         return 0.0
 
 
+def _hull_length(points_2d: np.ndarray, line: np.ndarray) -> float:
+    """The length of the points' span along ``line`` (2,): the 1D hull of points of a flat shape seen edge-on."""
+    return float(np.ptp(points_2d @ line)) if points_2d.shape[0] else 0.0
+
+
 def support_shares(vertices: np.ndarray) -> dict[str, float]:
     """Share of the footprint covered by the bottom slab, for each of ``+x`` … ``-z`` as up (see the module)."""
     v = np.asarray(vertices, dtype=np.float64)
     v = v - v.mean(axis=0)
+    extents = np.ptp(v, axis=0)
+    flat_axis = int(np.argmin(extents))
+    flat = extents[flat_axis] <= FLAT_EXTENT * max(float(np.linalg.norm(extents)), np.finfo(float).tiny)
     shares = {}
     for name in UP_AXES[1:]:
         up = axis_vector(name)
@@ -72,8 +85,12 @@ def support_shares(vertices: np.ndarray) -> dict[str, float]:
         height = v @ up
         extent = float(np.ptp(height))
         slab = v[height <= height.min() + SUPPORT_SLAB * extent, :][:, others] if extent > 0 else v[:0, others]
-        footprint = _hull_area(v[:, others])
-        shares[name] = _hull_area(slab) / footprint if footprint > 0 else 0.0
+        if flat and axis != flat_axis:  # a flat shape rests on an edge: its footprint is a segment
+            line = np.array([float(a != flat_axis) for a in others])
+            footprint, covered = _hull_length(v[:, others], line), _hull_length(slab, line)
+        else:
+            footprint, covered = _hull_area(v[:, others]), _hull_area(slab)
+        shares[name] = covered / footprint if footprint > 0 and extent > 0 else 0.0
     return shares
 
 
@@ -263,23 +280,38 @@ def fitted_camera(vertices: np.ndarray, frame: ViewFrame, view: str = "front", a
     return Camera(tuple(focal + distance * toward), tuple(focal), tuple(screen_up), view_angle)
 
 
-def contours_side_by_side(points_a: np.ndarray, points_b: np.ndarray, gap: float = 0.2) -> tuple[np.ndarray,
-                                                                                                  np.ndarray]:
+def contours_side_by_side(points_a: np.ndarray, points_b: np.ndarray, map_xy: np.ndarray | None = None,
+                          gap: float = 0.2) -> tuple[np.ndarray, np.ndarray, bool]:
     """Two contours placed for a picture of their correspondence: B scaled to A's height and put to A's right,
     ``gap`` times the wider width apart, both centred on one horizontal line.
+
+    Given the correspondence, B is drawn mirrored left to right where that puts its points nearer their
+    partners' horizontal places: of B as drawn and its mirror image, the one whose matched points' horizontal
+    coordinates fit A's better by least squares with a shift, ``min Σ (x_a − s x_b − t)²`` over ``s = ±1``, i.e.
+    the sign of their covariance. Two outlines facing opposite ways (a horse drawn looking right, a dog looking
+    left) are then drawn facing one way, and the lines between partners do not cross the picture.
 
     Parameters
     ----------
     points_a : (m, 2) float
     points_b : (n, 2) float
+    map_xy : (m,) int, optional
+        The point of B matched to each point of A (negative: unmatched).
 
     Returns
     -------
-    (m, 2) and (n, 2) float: the two contours as drawn.
+    (m, 2) and (n, 2) float: the two contours as drawn; and whether B is drawn mirrored.
     """
     a = np.asarray(points_a, dtype=np.float64)
     b = np.asarray(points_b, dtype=np.float64)
     a = a - (a.min(0) + a.max(0)) / 2
     b = (b - (b.min(0) + b.max(0)) / 2) * (np.ptp(a[:, 1]) / max(np.ptp(b[:, 1]), 1e-300))
+    mirrored = False
+    if map_xy is not None:
+        matched = np.asarray(map_xy) >= 0
+        xa, xb = a[matched, 0], b[np.asarray(map_xy)[matched], 0]
+        mirrored = bool(matched.sum() > 1 and np.dot(xa - xa.mean(), xb - xb.mean()) < 0)
+    if mirrored:
+        b = b * [-1.0, 1.0]
     width_a, width_b = np.ptp(a[:, 0]), np.ptp(b[:, 0])
-    return a, b + [(width_a + width_b) / 2 + gap * max(width_a, width_b), 0.0]
+    return a, b + [(width_a + width_b) / 2 + gap * max(width_a, width_b), 0.0], mirrored

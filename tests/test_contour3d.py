@@ -704,6 +704,25 @@ def test_retrieval_reports_broken_meshes(tmp_path):
     assert hits[0].path.name == "wolf0.off" and np.isinf(hits[1].energy) and "broken3.off" in hits[1].error
 
 
+def test_retrieval_does_not_rank_flat_sketches(tmp_path):
+    """A flat triangulated sketch in a collection is a drawing, not a 3D shape: it fails with a named reason,
+    also when its plane is turned away from the coordinate axes, and the 3D meshes are ranked as before."""
+    from corrlib.io import save_mesh
+    from corrlib.resources import resource
+    from corrlib.retrieval import FLAT_CANDIDATE
+
+    sketch = load_mesh(resource("data/sketch2d/human_sketch_a.off"))
+    turn = np.linalg.qr(np.random.default_rng(3).normal(size=(3, 3)))[0]
+    save_mesh(tmp_path / "turned_sketch.off", sketch.vertices @ turn.T, sketch.faces)
+    t = np.linspace(0, 2 * np.pi, 60, endpoint=False)
+    query = Contour2D(np.column_stack([np.cos(t), 0.4 * np.sin(t)]))
+    hits = run(retrieve(query, [resource("data/sketch2d/human_sketch_a.off"), tmp_path / "turned_sketch.off",
+                                TOSCA / "wolf0.off"], jobs=1, ranking="energy"))
+    assert hits[0].path.name == "wolf0.off" and np.isfinite(hits[0].energy)
+    for hit in hits[1:]:
+        assert np.isinf(hit.score) and FLAT_CANDIDATE in hit.error and hit.path.name in hit.error
+
+
 def test_average_precision_by_hand():
     assert class_of("cat0.off") == "cat" and class_of("lion-00.off") == "lion" and class_of("x/dog_12.ply") == "dog"
     assert average_precision(["a", "b", "a"], "a") == pytest.approx((1 + 2 / 3) / 2)

@@ -36,6 +36,21 @@ def test_the_up_axis_follows_the_file_axes(perm, signs):
     assert np.array_equal(axis_vector(detect_up(moved)), expected)
 
 
+@pytest.mark.parametrize("perm, signs", [((0, 1, 2), (1, 1, 1)), ((0, 2, 1), (1, 1, 1)), ((2, 0, 1), (-1, 1, 1))])
+def test_a_flat_sketch_stands_on_its_feet_and_faces_the_camera(perm, signs):
+    """A triangulated 2D sketch (a person drawn in the xy plane, feet down) lies in a coordinate plane: its
+    up axis is the drawing's up, in its plane, whichever axes the file uses, and its front view looks at the
+    drawing face-on (before, every flat shape had all shares 0 and was stood on +x, drawn lying on its side)."""
+    for name in ("human_sketch_a", "human_sketch_b"):
+        sketch = load_mesh(resource(f"data/sketch2d/{name}.off")).vertices
+        moved = sketch[:, perm] * np.array(signs) * 0.3 + 5.0
+        drawn_up = np.array([0.0, 1.0, 0.0])[list(perm)] * np.array(signs)
+        assert np.array_equal(axis_vector(detect_up(moved)), drawn_up), name
+        normal = np.zeros(3)
+        normal[int(np.argmin(np.ptp(moved, axis=0)))] = 1.0
+        assert abs(view_frame(moved).toward @ normal) == pytest.approx(1.0)
+
+
 def test_support_shares_prefer_feet_to_a_nose():
     shares = support_shares(load_mesh(TOSCA / "cat0.off").vertices)
     assert shares["+z"] > 3 * max(v for k, v in shares.items() if k != "+z")
@@ -179,3 +194,27 @@ def test_a_fitted_camera_keeps_the_top_free_for_a_caption(view, aspect):
     assert y.max() <= 1.0 - 2 * 0.2 and y.min() >= -1.0
     with pytest.raises(ParameterError, match="top"):
         fitted_camera(points, frame, view, top=1.0)
+
+
+def test_contours_side_by_side_face_one_way_where_their_partners_do():
+    """B drawn mirrored exactly where its matched points run the other way along the horizontal: a contour
+    against its own mirror image (partners by index) is drawn unmirrored beside it, so every line between
+    partners has the same length; the same contour against itself is not mirrored; with no map B is as drawn.
+    B stands to A's right at A's height either way."""
+    from corrlib.viewing import contours_side_by_side
+
+    t = np.linspace(0, 2 * np.pi, 80, endpoint=False)
+    a = np.column_stack([np.cos(t) + 0.4 * np.cos(2 * t), 0.6 * np.sin(t)])  # a lopsided, left-right asymmetric loop
+    partners = np.arange(80)
+    for b, expected in ((a * [-2.0, 2.0] + 5.0, True), (a * 3.0, False)):
+        shown_a, shown_b, mirrored = contours_side_by_side(a, b, partners)
+        assert mirrored is expected
+        lines = shown_b[partners] - shown_a
+        assert np.allclose(lines, lines[0])  # parallel and equally long: no line crosses another
+        assert shown_a[:, 0].max() < shown_b[:, 0].min() and np.ptp(shown_b[:, 1]) == pytest.approx(np.ptp(a[:, 1]))
+    shown_a, shown_b, mirrored = contours_side_by_side(a, a * [-1.0, 1.0])
+    assert not mirrored and np.allclose(shown_b - shown_b.mean(0), a * [-1.0, 1.0] - (a * [-1.0, 1.0]).mean(0))
+    unmatched = np.full(80, -1)
+    unmatched[:3] = [0, 1, 2]
+    assert contours_side_by_side(a, a * [-1.0, 1.0], unmatched)[2] is True  # the matched points decide
+    assert contours_side_by_side(a, a, np.full(80, -1))[2] is False

@@ -288,13 +288,15 @@ class ProductView(QWidget, FramedView):
         self.info.setText(f"{len(u)} × {len(v)} product torus; correspondence energy {result.energy:.4g}")
 
     def _draw_contour_correspondence(self, points_a: np.ndarray, points_b: np.ndarray, result) -> np.ndarray:
-        """Contour A coloured by its position, B beside it in the colour of its matched point of A (grey where
+        """Contour A coloured by its position, B beside it (mirrored where its partners face the other way,
+        :func:`~corrlib.viewing.contours_side_by_side`) in the colour of its matched point of A (grey where
         unmatched), and lines between :data:`CORRESPONDENCE_LINES` points of A and their partners. Returns the
         points drawn, (m + n, 3)."""
         from corrlib.viewing import contours_side_by_side
 
         p = self.plotter
-        shown_a, shown_b = (np.column_stack([c, np.zeros(len(c))]) for c in contours_side_by_side(points_a, points_b))
+        *shown, mirrored = contours_side_by_side(points_a, points_b, result.map_xy)
+        shown_a, shown_b = (np.column_stack([c, np.zeros(len(c))]) for c in shown)
         m = len(points_a)
         hue = hue_colors(np.arange(m) / m)
         colours_b = np.where((result.map_yx >= 0)[:, None], hue[np.maximum(result.map_yx, 0)], UNMATCHED_GREY)
@@ -304,7 +306,7 @@ class ProductView(QWidget, FramedView):
         rows = rows[result.map_xy[rows] >= 0]
         ends = np.stack([shown_a[rows], shown_b[result.map_xy[rows]]], axis=1).reshape(-1, 3)
         p.add_lines(ends, color="darkgrey", width=1)
-        add_caption(p, "A and B, coloured by the position on A")
+        add_caption(p, "A and B" + (" (mirrored)" if mirrored else "") + ", coloured by the position on A")
         return np.vstack([shown_a, shown_b])
 
     def _fit_torus(self) -> None:

@@ -9,8 +9,14 @@ B is the discretised torus A × B, and the globally optimal closed path on it
 (branch-and-bound over the start point on B) is the correspondence. The path
 must wind once around both factors: B is unrolled twice with forward moves
 only, and a path from ``(0, s)`` must end at ``(m, s + n)``, so every
-matching is an orientation-preserving bijection of the curves (no
-collapse onto a few points). The path's map is then refined on the product
+matching is a bijection of the curves that keeps their order (no collapse
+onto a few points). A silhouette has no front and back: a dog seen from its
+left and a horse seen from its right face opposite ways, and the matching
+between them reverses the order of the points. With ``mirror`` (the
+default) B is also read in reverse order, its mirror image's (the features
+do not change under a reflection), and one branch-and-bound over both tori
+(:func:`~corrlib.geometry.cyclic_paths.branch_and_bound_union`) keeps the
+cheaper reading, with the guarantee of each. The path's map is then refined on the product
 manifold (``refine``, :mod:`.product_manifold`): its matches diffused on
 the torus and extracted by assignment (optionally followed by localized
 Dirichlet harmonics on shrinking ``bands``); the density and the first
@@ -29,7 +35,7 @@ from dataclasses import dataclass
 import numpy as np
 import scipy.sparse as sp
 
-from corrlib.geometry.cyclic_paths import ProductGraph, branch_and_bound
+from corrlib.geometry.cyclic_paths import ProductGraph, branch_and_bound_union
 from corrlib.methods.base import ContourPath, MatchResult, SearchCertificate, param
 from corrlib.methods.contour3d import Contour3DParams, PreparedQuery, node_costs, prepare_query
 from corrlib.methods.registry import MethodSpec, register
@@ -44,6 +50,9 @@ class Contour2DParams:
     n_scales: int = param(100, label="Scales", low=2, high=500, help="Times of the HKS, energies of the WKS.")
     eps: float = param(0.0, label="Approximation ε", low=0.0, high=0.9,
                        help="0: global optimum; ε > 0: within a factor 1 + ε.")
+    mirror: bool = param(True, label="Mirror image of B",
+                         help="Also match B's mirror image (its points in reverse order) and keep the cheaper: "
+                              "two silhouettes facing opposite ways correspond in reverse order.")
     refine: bool = param(True, label="Product refinement",
                          help="Refine the path's map on the product manifold (diffusion, assignment, "
                               "localized harmonics on shrinking bands).")
@@ -112,6 +121,14 @@ def torus_maps(path, m: int, n: int) -> tuple[np.ndarray, np.ndarray, np.ndarray
     return vertices, map_xy, map_yx
 
 
+def reading_maps(vertices: np.ndarray, map_xy: np.ndarray, map_yx: np.ndarray, order: np.ndarray):
+    """:func:`torus_maps`' maps of a torus whose B was read in ``order`` ((n,) int: the point of B at each place),
+    as points of B as given."""
+    given_yx = np.empty_like(map_yx)
+    given_yx[order] = map_yx
+    return order[vertices], np.where(map_xy >= 0, order[np.maximum(map_xy, 0)], -1), given_yx
+
+
 def solve_contour2d(source, target, params: Contour2DParams, token):
     watch = Stopwatch()
     yield Progress("features", 0.0)
@@ -121,19 +138,20 @@ def solve_contour2d(source, target, params: Contour2DParams, token):
         cost = node_costs(qa.features, qb.features)
     token.raise_if_cancelled()
     n = params.n_target
-    graph = torus_graph(cost, qa.points, qb.points)
-    yield Progress("branch and bound", 0.1, f"{graph.m} x {graph.n} torus")
+    orders = [np.arange(n), np.arange(n)[::-1]] if params.mirror else [np.arange(n)]  # B as given, B mirrored
+    graphs = [torus_graph(cost[:, order], qa.points, qb.points[order]) for order in orders]
+    yield Progress("branch and bound", 0.1, f"{graphs[0].m} x {graphs[0].n} torus, {len(graphs)} reading(s) of B")
     with watch("search"):
-        bb = yield from branch_and_bound(graph, eps=params.eps, token=token)
-    path = bb.path
-    vertices, map_xy, map_yx = torus_maps(path, graph.m, n)
+        bb = yield from branch_and_bound_union(graphs, eps=params.eps, token=token)
+    path, order = bb.path, orders[bb.graph_index]
+    vertices, map_xy, map_yx = reading_maps(*torus_maps(path, graphs[0].m, n), order)
     functions = {"cost": cost.astype(np.float32)}
-    extras = {}
+    extras = {"b_mirrored": bool(bb.graph_index == 1)}
     if params.refine:
         extras["path_map_xy"] = map_xy.copy()
         map_xy, map_yx = yield from _refine_on_torus(qa.contour.points, qb.contour.points, map_xy, params, token,
                                                      watch, functions, extras)
-    path = ContourPath(qa.contour.points, vertices, path.layers % graph.m, path.layers,
+    path = ContourPath(qa.contour.points, vertices, path.layers % graphs[0].m, path.layers,
                        target_points=qb.contour.points, product_functions=functions)
     yield Progress("done", 1.0, f"energy {bb.energy:.6g}")
     return MatchResult("contour2d", map_xy, map_yx, bb.energy, watch.times, path=path,

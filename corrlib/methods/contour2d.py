@@ -42,6 +42,10 @@ from corrlib.methods.registry import MethodSpec, register
 from corrlib.progress import Progress, Stopwatch
 
 
+#: the orders B is read in: as given, and reversed (its mirror image's order)
+READINGS = ("as given", "mirrored")
+
+
 @dataclass(frozen=True, kw_only=True)
 class Contour2DParams:
     n_source: int = param(120, label="Points on A", low=10, high=2000, help="Resampling of the first contour.")
@@ -140,7 +144,7 @@ def solve_contour2d(source, target, params: Contour2DParams, token):
     n = params.n_target
     orders = [np.arange(n), np.arange(n)[::-1]] if params.mirror else [np.arange(n)]  # B as given, B mirrored
     graphs = [torus_graph(cost[:, order], qa.points, qb.points[order]) for order in orders]
-    yield Progress("branch and bound", 0.1, f"{graphs[0].m} x {graphs[0].n} torus, {len(graphs)} reading(s) of B")
+    yield Progress("branch and bound", 0.1, f"{graphs[0].m} x {n} torus, B read {' and '.join(READINGS[:len(graphs)])}")
     with watch("search"):
         bb = yield from branch_and_bound_union(graphs, eps=params.eps, token=token)
     path, order = bb.path, orders[bb.graph_index]

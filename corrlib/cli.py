@@ -412,7 +412,7 @@ def _morph_result(args, source, target):
 def cmd_morph(args) -> int:
     import numpy as np
 
-    from corrlib.morph import describe_sequence, export_sequence, frame_positions, largest_volume_change
+    from corrlib.morph import describe_sequence, export_sequence, frame_positions, frame_times, largest_volume_change
     from corrlib.shapes import TriMesh
 
     _check_morph_options(args)
@@ -431,7 +431,7 @@ def cmd_morph(args) -> int:
     if not (isinstance(source, TriMesh) and isinstance(target, TriMesh)):
         raise CorrError("corr morph takes two meshes")
     result = _morph_result(args, source, target)
-    times = np.linspace(0.0, args.t_max, args.frames)
+    times = frame_times(args.frames, args.t_max)
     frames = frame_positions(result, source, target, times, interpolation=args.interpolation)
     with staged_output(out, replaces=replaced) as stage:  # the result and every frame, or nothing
         if args.map is None:  # a given map is the user's file already
@@ -609,7 +609,8 @@ def _add_morph_parser(sub) -> None:
     from corrlib.formats import suffixes
 
     p = command(sub, "morph", "deform the source into the target, export the frames",
-                 "Deform the source into the target and export interpolated and extrapolated meshes.",
+                 "Deform the source into the target and export the meshes in between (and beyond, with --t-max "
+                 "above 1).",
                  func=cmd_morph)
     p.add_argument("source")
     p.add_argument("target")
@@ -622,9 +623,11 @@ def _add_morph_parser(sub) -> None:
                    help="auto (default): the method's flow if it has one, else rigid; rigid: as rigid as possible "
                         "(every face turns and stretches by a share of its deformation); linear: vertex positions "
                         "(shrinks what turns)")
-    p.add_argument("--frames", type=int, default=11, help="number of frames (default 11)")
-    p.add_argument("--t-max", dest="t_max", type=float, default=1.5,
-                   help="last time: 1 is the target, above 1 extrapolates, at most 3 (default 1.5)")
+    p.add_argument("--frames", type=int, default=11,
+                   help="number of frames, evenly spaced from t = 0 (default 11; one more where a --t-max above 1 "
+                        "leaves none at t = 1, the target)")
+    p.add_argument("--t-max", dest="t_max", type=float, default=1.0,
+                   help="last time: 1 is the target (default), above 1 extrapolates along the motion, at most 3")
     p.add_argument("--format", default="obj", choices=[s.lstrip(".") for s in suffixes("mesh", writable=True)],
                    help="mesh format of the frames")
     p.add_argument("--param", action="append", metavar="NAME=VALUE", help="method parameter (repeatable)")

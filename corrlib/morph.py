@@ -1,6 +1,9 @@
 """Shape sequences between a source and a target.
 
-A method with a deformation model (the divergence-free flow) moves the source along it. For any other
+A method with a deformation model (the divergence-free flow) moves the source along it. The flow starts at the
+source pre-aligned to the target (turned, moved and brought to its size, which a volume-preserving flow cannot
+change); the sequence undoes that alignment by the share ``1 − t`` (``Frames.alignment_undone``), so that every
+kind of sequence starts at the source as given and ends at the target's place at t = 1. For any other
 point-to-point map the sequence is the as-rigid-as-possible interpolation of the source towards the map's
 image (:mod:`corrlib.deformation.rigid_interpolation`): each face turns and stretches by a share of its own
 deformation, so a limb that swings keeps its length and the body its volume. Linear interpolation of the
@@ -15,7 +18,8 @@ import numpy as np
 from corrlib.errors import InputError
 
 #: how the studio and the CLI describe each kind of sequence
-FLOW_DESCRIPTION = "divergence-free flow (volume preserving; t > 1 extrapolates along the same field)"
+FLOW_DESCRIPTION = ("divergence-free flow (volume preserving; from the source as given to its alignment with the "
+                    "target by t = 1; t > 1 extrapolates along the same field)")
 RIGID_DESCRIPTION = ("as-rigid-as-possible interpolation through the map (each face turns and stretches by a share "
                      "of its own deformation; t > 1 extrapolates)")
 LINEAR_DESCRIPTION = ("linear vertex interpolation through the map (shrinks what turns, folds where the map "
@@ -104,8 +108,18 @@ def sequence_positions(result, source, target, t_max: float = 1.5, interpolation
     """
     kind = sequence_kind(result, interpolation)
     if kind == "flow":
-        return result.deformation.source_interpolator(source.vertices, t_max)
+        flowed, frames = result.deformation.source_interpolator(source.vertices, t_max), result.deformation.frames
+        return lambda t: frames.alignment_undone(flowed(t), t)
     return _through_map(result, source, target, kind)
+
+
+def frame_times(count: int, t_max: float) -> np.ndarray:
+    """The times of exported frames: ``count`` evenly spaced from 0 to ``t_max``, and t = 1 (the target) added
+    where they extrapolate past it without a frame at it ((count,) or (count + 1,) float, increasing)."""
+    times = np.linspace(0.0, t_max, count)
+    if t_max > 1.0 and not np.any(np.isclose(times, 1.0, rtol=0.0, atol=1e-9)):
+        times = np.sort(np.append(times, 1.0))
+    return times
 
 
 def frame_positions(result, source, target, times, interpolation: str = "auto") -> list[np.ndarray]:
@@ -119,7 +133,9 @@ def frame_positions(result, source, target, times, interpolation: str = "auto") 
         raise InputError(f"times must be finite, got {float(times[~np.isfinite(times)][0])!r}")
     kind = sequence_kind(result, interpolation)
     if kind == "flow":
-        return [result.deformation.positions(source.vertices, float(t)) for t in times]
+        deformation = result.deformation
+        return [deformation.frames.alignment_undone(deformation.positions(source.vertices, float(t)), float(t))
+                for t in times]
     positions = _through_map(result, source, target, kind)
     return [positions(float(t)) for t in times]
 

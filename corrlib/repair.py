@@ -11,7 +11,8 @@ has one obvious repair, the one mesh editors offer (MeshLab's "merge close verti
 4. the largest connected component by surface area kept (a scan's loose fragments, a second body), and the
    vertices dropped that no face uses;
 5. a closed surface turned inside out (every face) so that its normals point outward (MeshLab's "invert faces
-   orientation"; the methods do not need it, but renderers and other tools read a negative volume as inside out).
+   orientation"; the loader does it too, :meth:`~corrlib.shapes.TriMesh.from_arrays`, as normals, descriptors
+   that tell left from right, renderers and other tools read a negative volume as inside out).
 
 What has no safe repair (NaN coordinates, indices out of range, edges of three faces) is refused, naming it.
 Every kept vertex keeps its index in the input (:attr:`Repaired.source_index`), so that ground truth and maps
@@ -97,13 +98,11 @@ def repaired(vertices, faces, *, name: str = "mesh") -> Repaired:
         notes.append(f"dropped {_count(v.shape[0] - used.size, 'vertex', 'vertices')} that no face uses")
     if mesh.original_indices is not None:
         source = source[mesh.original_indices]
-    faces = np.asarray(mesh.faces)
-    warnings = [fd for fd in mesh.report() if fd.level == "warning" and fd.code != "reoriented"]
-    volume = mesh.enclosed_volume()  # a non-orientable surface has no inside
-    if volume is not None and volume < 0 and not any(fd.code == "orientation" for fd in warnings):
-        faces = faces[:, ::-1]
+    found = mesh.report()
+    if any(fd.code == "inside-out" for fd in found):  # turned by the loader
         notes.append("turned every face so that the normals point outward (the closed surface was inside out)")
-    return Repaired(np.asarray(mesh.vertices), np.ascontiguousarray(faces), source, notes,
+    warnings = [fd for fd in found if fd.level == "warning" and fd.code not in ("reoriented", "inside-out")]
+    return Repaired(np.asarray(mesh.vertices), np.ascontiguousarray(mesh.faces), source, notes,
                     [fd.message for fd in warnings])
 
 

@@ -26,9 +26,9 @@ subfolder (``collection/cat/0.off`` is class ``cat``, as class-per-folder
 benchmarks are laid out); a mesh directly in the folder to the class its name
 gives without suffix, trailing digits and separators (``cat0`` and ``cat-12``
 are class ``cat``). A flat mesh in it (a triangulated 2D sketch, such as the
-bundled ``sketch2d`` files) is not ranked: it is a drawing, not a 3D shape,
-and would match a drawing of its class as no view of a surface can; its hit
-fails with :data:`FLAT_CANDIDATE`.
+bundled ``sketch2d`` files) is left out of the ranking, said in the progress
+reports: it is a drawing, not a 3D shape, and would match a drawing of its
+class as no view of a surface can (:data:`FLAT_CANDIDATE`).
 """
 
 from __future__ import annotations
@@ -42,7 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
-from corrlib.errors import CorrError, InputError, MeshError, ParameterError
+from corrlib.errors import CorrError, InputError, ParameterError
 from corrlib.io import MESH_SUFFIXES, load_mesh, lost_working_folder
 from corrlib.parallel import check_jobs, job_executor
 from corrlib.methods.contour3d import Contour3DParams, PreparedQuery, curve_collapsed, match_prepared, prepare_query
@@ -53,8 +53,8 @@ from corrlib.shapes import plane_coordinates
 #: how :func:`retrieve` ranks: by the product of the two measures, or by the matching energy alone
 RANKINGS = ("fused", "energy")
 #: why a flat mesh of a collection is not ranked: it is a drawing (a query), not a shape a drawing is a view of
-FLAT_CANDIDATE = ("a flat mesh (all its vertices in one plane) is a 2D sketch, not a 3D shape; retrieval ranks "
-                  "3D shapes (use it as the query instead)")
+FLAT_CANDIDATE = ("a flat mesh (all its vertices in one plane) is a 2D sketch, not a 3D shape to rank (use it as "
+                  "a query instead)")
 
 
 def retrieval_params(**overrides) -> Contour3DParams:
@@ -132,6 +132,9 @@ class RetrievalHit:
     score : float
         What the ranking sorts by (lower first): :func:`fused_scores` (energy times view dissimilarity) or the
         energy (``inf`` for a failed hit).
+    left_out : bool
+        The mesh is not a candidate (a flat sketch, :data:`FLAT_CANDIDATE`, the reason in :attr:`error`):
+        :func:`retrieve` reports it and leaves it out of the ranking.
     """
 
     path: Path
@@ -145,9 +148,12 @@ class RetrievalHit:
     view_distance: float = float("nan")
     score: float = float("nan")
     curve_length_ratio: float = float("nan")
+    left_out: bool = False
 
     def measured(self) -> str:
         """One line for a progress report: the mesh and what was measured on it (a collapsed curve said so)."""
+        if self.left_out:
+            return f"{self.name}: left out, {FLAT_CANDIDATE}"
         if self.error:
             return f"{self.name}: not matched"
         views = f", view dissimilarity {self.view_distance:.3f}" if np.isfinite(self.view_distance) else ""
@@ -182,7 +188,7 @@ def _match_one(query: PreparedQuery, path: str, params: Contour3DParams,
     try:
         mesh = load_mesh(path)
         if plane_coordinates(mesh.vertices) is not None:
-            raise MeshError(f"{path}: {FLAT_CANDIDATE}")
+            return RetrievalHit(Path(path), np.inf, f"{path}: {FLAT_CANDIDATE}", score=np.inf, left_out=True)
         # a mesh that cannot be remeshed is not matched as given: its energy would not compare with the others'
         result = run(match_prepared(query, mesh, params, CancelToken(), as_given_if_unremeshable=False))
         view_distance = float("nan") if outline is None else view_dissimilarity(outline, mesh)
@@ -264,7 +270,13 @@ def retrieve(query_contour, meshes: Iterable, params: Contour3DParams | None = N
     Returns
     -------
     list of RetrievalHit
-        Sorted by increasing :attr:`RetrievalHit.score` (failed meshes last, with their error).
+        Sorted by increasing :attr:`RetrievalHit.score` (failed meshes last, with their error); flat meshes
+        left out (reported in the progress).
+
+    Raises
+    ------
+    InputError
+        Every mesh is flat: nothing to rank.
     """
     if ranking not in RANKINGS:
         raise ParameterError(f"ranking must be one of {', '.join(RANKINGS)}, got {ranking!r}")
@@ -305,6 +317,9 @@ def retrieve(query_contour, meshes: Iterable, params: Contour3DParams | None = N
             finally:
                 for fut in pending:
                     fut.cancel()
+    if all(hit.left_out for hit in hits):
+        raise InputError(f"no 3D mesh to rank: every one of the {len(hits)} meshes is flat ({FLAT_CANDIDATE})")
+    hits = [hit for hit in hits if not hit.left_out]
     energies = [h.energy for h in hits]
     scores = fused_scores(energies, [h.view_distance for h in hits]) if ranking == "fused" else energies
     for hit, score in zip(hits, scores):

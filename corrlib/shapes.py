@@ -543,18 +543,29 @@ class TriMesh:
 
         Faces whose windings disagree with their neighbours' (half of a file's faces turned by an exporter) are
         turned to agree (:func:`consistently_oriented`; normals, descriptors that tell left from right and the
-        orientation terms all need one winding), and :meth:`report` says how many.
+        orientation terms all need one winding), and :meth:`report` says how many. A closed surface wound
+        inwards (its enclosed volume negative: an exporter's inside-out file, or a mirror image whose faces were
+        not turned with it) has all its faces turned, so that its normals point out as every method assumes.
         """
         mesh = cls._from_arrays(vertices, faces, name=name, largest_component=largest_component)
-        if not any(fd.code == "orientation" for fd in mesh.report()):
-            return mesh
-        faces, turned = consistently_oriented(mesh.faces, mesh.n_vertices)
-        if not turned:  # a non-orientable surface: the warning stays
+        findings = []
+        if any(fd.code == "orientation" for fd in mesh.report()):
+            faces, turned = consistently_oriented(mesh.faces, mesh.n_vertices)
+            if not turned:  # a non-orientable surface: the warning stays
+                return mesh
+            findings.append(Finding("warning", "reoriented", f"{turned} faces were turned to agree with their "
+                                    "neighbours (the file's face orientation was inconsistent)"))
+        else:
+            faces = mesh.faces
+        if mesh.is_closed and signed_volume(mesh.vertices, faces) < 0:
+            faces = faces[:, ::-1]
+            findings.append(Finding("warning", "inside-out", "the closed surface was wound inwards (negative "
+                                    "enclosed volume); every face was turned so that the normals point out"))
+        if not findings:
             return mesh
         oriented = cls(mesh.vertices, faces, name=name)
         oriented.original_indices = mesh.original_indices
-        oriented._findings.append(Finding("warning", "reoriented", f"{turned} faces were turned to agree with "
-                                          "their neighbours (the file's face orientation was inconsistent)"))
+        oriented._findings.extend(findings)
         return oriented
 
     @classmethod

@@ -101,7 +101,8 @@ def rest_pose(spacing: float = 0.025, bones=BONES, joints=None):
         d = _segment_distance(grid, joints[a], joints[b]) - radius
         sdf = d if sdf is None else _smooth_min(sdf, d)
     vertices, faces, _, _ = marching_cubes(sdf, 0.0, spacing=(spacing,) * 3)
-    mesh = trimesh.Trimesh(vertices + lo, faces[:, ::-1], process=True)
+    # the faces as marching cubes winds them: outwards for this SDF, negative inside (turned, they were inside out)
+    mesh = trimesh.Trimesh(vertices + lo, faces, process=True)
     mesh = max(mesh.split(only_watertight=False), key=lambda c: len(c.faces))
     return np.asarray(mesh.vertices), np.asarray(mesh.faces)
 

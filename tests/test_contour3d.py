@@ -705,8 +705,9 @@ def test_retrieval_reports_broken_meshes(tmp_path):
 
 
 def test_retrieval_does_not_rank_flat_sketches(tmp_path):
-    """A flat triangulated sketch in a collection is a drawing, not a 3D shape: it fails with a named reason,
-    also when its plane is turned away from the coordinate axes, and the 3D meshes are ranked as before."""
+    """A flat triangulated sketch in a collection is a drawing, not a 3D shape: it is left out of the ranking with
+    its reason in the progress, also when its plane is turned away from the coordinate axes; a collection of
+    flat meshes alone is refused by name."""
     from corrlib.io import save_mesh
     from corrlib.resources import resource
     from corrlib.retrieval import FLAT_CANDIDATE
@@ -716,11 +717,14 @@ def test_retrieval_does_not_rank_flat_sketches(tmp_path):
     save_mesh(tmp_path / "turned_sketch.off", sketch.vertices @ turn.T, sketch.faces)
     t = np.linspace(0, 2 * np.pi, 60, endpoint=False)
     query = Contour2D(np.column_stack([np.cos(t), 0.4 * np.sin(t)]))
-    hits = run(retrieve(query, [resource("data/sketch2d/human_sketch_a.off"), tmp_path / "turned_sketch.off",
-                                TOSCA / "wolf0.off"], jobs=1, ranking="energy"))
-    assert hits[0].path.name == "wolf0.off" and np.isfinite(hits[0].energy)
-    for hit in hits[1:]:
-        assert np.isinf(hit.score) and FLAT_CANDIDATE in hit.error and hit.path.name in hit.error
+    flat = [resource("data/sketch2d/human_sketch_a.off"), tmp_path / "turned_sketch.off"]
+    said = []
+    hits = run(retrieve(query, [*flat, TOSCA / "wolf0.off"], jobs=1, ranking="energy"), callback=said.append)
+    assert [hit.path.name for hit in hits] == ["wolf0.off"] and np.isfinite(hits[0].energy)
+    for path in flat:
+        assert any(f"{path.name}: left out, {FLAT_CANDIDATE}" in report.message for report in said)
+    with pytest.raises(InputError, match="no 3D mesh to rank"):
+        run(retrieve(query, flat, jobs=1))
 
 
 def test_average_precision_by_hand():

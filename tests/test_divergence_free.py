@@ -472,6 +472,33 @@ def test_a_target_in_other_units_gives_the_same_map(wolf_pair):
     assert abs(scaled.extras["volume_change"]) < 0.01  # against the source's volume at the target's size
 
 
+def test_a_morph_starts_at_the_source_as_given(wolf_pair):
+    """The flow starts at the source pre-aligned to the target (turned, moved, at the target's size); a morph's
+    frames undo that alignment by the share 1 − t, so frame 0 is the source as given, in its own units, place
+    and turn, t = 1 is the flow's end and t > 1 the flow's extrapolation. In between the size grows
+    geometrically (the flow keeps the volume): V(t) = V(0) s^{3t}. Before, frame 0 was the aligned source."""
+    from scipy.spatial.transform import Rotation
+
+    from corrlib.morph import frame_positions, sequence_positions
+    from corrlib.shapes import signed_volume
+
+    wolf0, wolf1 = wolf_pair
+    turn = Rotation.from_euler("xyz", [0.4, -1.1, 0.3]).as_matrix()
+    source = TriMesh(wolf0.vertices @ turn.T * 0.01 + [3.0, -2.0, 7.0], wolf0.faces, name="wolf0 turned, in metres")
+    result = solve("divergence-free", source, wolf1, n_fields=150, n_samples=400, max_iter=5)
+    times = [0.0, 0.5, 1.0, 1.5]
+    frames = frame_positions(result, source, wolf1, times)
+    assert np.allclose(frames[0], source.vertices, atol=1e-9 * source.bbox_diagonal)
+    for t, frame in zip(times[2:], frames[2:]):
+        assert np.allclose(frame, result.deformation.positions(source.vertices, t))
+    size = float(np.cbrt(np.linalg.det(result.deformation.frames.linear)))
+    volumes = np.array([signed_volume(f, source.faces) for f in frames[:3]])
+    assert volumes / volumes[0] == pytest.approx(size ** (3 * np.array(times[:3])), rel=0.02)
+    scrub = sequence_positions(result, source, wolf1)
+    assert np.allclose(scrub(0.0), source.vertices, atol=1e-9 * source.bbox_diagonal)
+    assert np.allclose(scrub(1.0), frames[2], atol=1e-6 * wolf1.bbox_diagonal)
+
+
 @pytest.mark.parametrize("name,value", [("n_fields", 0), ("n_steps", 0), ("sigma2", 0.0), ("sigma2", -1.0),
                                         ("outlier", 1.0), ("features", "hks")])
 def test_absurd_parameters_are_rejected(name, value):
@@ -570,7 +597,9 @@ def test_sequence_export_glb_and_volumes(warped_wolf, warped_result, tmp_path):
     assert len(written["frames"]) == 7
     assert np.allclose(load_mesh(written["frames"][4]).vertices, frames[4], atol=1e-4)
     vols = np.array(written["volume"])
-    assert np.abs(vols / vols[0] - 1).max() < 0.01  # interpolation and extrapolation keep the volume
+    # the flow keeps the volume; the size the pre-alignment gave the source is reached by t = 1
+    size = float(np.cbrt(np.linalg.det(warped_result.deformation.frames.linear)))
+    assert np.abs(vols / (vols[0] * size ** (3 * np.minimum(times, 1.0))) - 1).max() < 0.01
     faces, glb_frames, glb_times = load_glb_frames(written["animation"])
     assert np.array_equal(faces, wolf0.faces) and np.allclose(glb_times, times)
     assert all(np.allclose(a, b, atol=1e-3) for a, b in zip(glb_frames, frames))
@@ -596,11 +625,26 @@ def test_cli_morph(tmp_path):
                  "-o", str(out), "-q", "--param", "n_samples=400", "--param", "n_fields=150",
                  "--param", "max_iter=4"])
     assert code == 0
-    frames = sorted(out.glob("frame_*.obj"))
-    assert len(frames) == 5 and load_mesh(frames[-1]).n_vertices == load_mesh(TOSCA / "wolf0.off").n_vertices
+    frames = sorted(out.glob("frame_*.obj"))  # t = 0, 0.375, 0.75, 1 (the target, added), 1.125, 1.5
+    assert len(frames) == 6 and load_mesh(frames[-1]).n_vertices == load_mesh(TOSCA / "wolf0.off").n_vertices
+    assert [row.split(",")[1] for row in (out / "volumes.csv").read_text().splitlines()[1:]][3] in ("1", "1.0")
+    assert np.allclose(load_mesh(frames[0]).vertices, load_mesh(TOSCA / "wolf0.off").vertices, atol=1e-5)
     assert (out / "animation.glb").exists() and (out / "volumes.csv").exists()
     assert (out / "result.npz").exists() and (out / "result.png").exists()
     assert main(["morph", str(TOSCA / "wolf0.off"), str(TOSCA / "wolf1.off"), "--frames", "1", "-q",
                  "-o", str(out)]) == 2
     assert main(["morph", str(TOSCA / "wolf0.off"), str(TOSCA / "wolf1.off"), "-q", "-o", str(out),
                  "--param", "n_steps=0"]) == 2
+
+
+def test_frame_times_keep_the_target():
+    """Exported frames are evenly spaced from 0; a t max above 1 without a frame at 1 gets one there, so the
+    target's pose is always among them (11 frames to 1.5 gave t = 0.9 and 1.05)."""
+    from corrlib.morph import frame_times
+
+    assert np.allclose(frame_times(11, 1.0), np.linspace(0, 1, 11))
+    assert np.allclose(frame_times(7, 1.5), np.linspace(0, 1.5, 7))  # 1.0 is the fifth already
+    times = frame_times(11, 1.5)
+    assert len(times) == 12 and np.count_nonzero(times == 1.0) == 1 and np.all(np.diff(times) > 0)
+    assert np.allclose(np.delete(times, np.flatnonzero(times == 1.0)), np.linspace(0, 1.5, 11))
+    assert np.allclose(frame_times(5, 0.5), np.linspace(0, 0.5, 5))

@@ -858,11 +858,13 @@ def test_both_starts_hold_on_non_isometric_and_noisy_pairs(case):
 def test_a_pair_in_different_units_is_matched_as_the_same_pair(wolf_pair, wolf_result):
     """wolf1 in millimetres against wolf0 in metres: the times are relative to each shape's area and the final
     steps search partners in unit-area bases, so the map is the one of the pair in one unit (the steps in the
-    raw bases gave the cats 0.030 instead of 0.019 at a factor of 1000)."""
+    raw bases gave the cats 0.030 instead of 0.019 at a factor of 1000). Its energy is the same too: it is
+    reported at unit areas (before, the target in millimetres reported a millionth of it)."""
     x, y = wolf_pair
     plain = wolf_result.map_xy  # the pair in one unit, default parameters
-    scaled = solve("kernel-matching", x, TriMesh(y.vertices * 1e3, y.faces, name="wolf1-mm")).map_xy
-    assert np.mean(plain == scaled) > 0.99
+    scaled = solve("kernel-matching", x, TriMesh(y.vertices * 1e3, y.faces, name="wolf1-mm"))
+    assert np.mean(plain == scaled.map_xy) > 0.99
+    assert scaled.energy == pytest.approx(wolf_result.energy, rel=1e-3)
 
 
 @pytest.mark.slow

@@ -178,6 +178,34 @@ def test_a_loaded_mesh_with_turned_faces_is_reoriented_and_says_so(tmp_path):
                      "orientation was inconsistent)"]
 
 
+def test_a_closed_mesh_wound_inwards_is_turned_out_and_says_so(tmp_path):
+    """A closed surface whose faces all wind inwards (negative enclosed volume: an inside-out export, or a mirror
+    image whose faces were not rewound) is turned so that its normals point out, with a note; so is one whose
+    majority winding is inward (first made consistent, then turned); an open surface has no inside and is
+    kept as it is. The synthetic people were generated inside out until this check showed it."""
+    from corrlib.io import load_mesh, save_mesh
+
+    sphere = trimesh.creation.icosphere(3)
+    outward = np.asarray(sphere.faces)
+    save_mesh(tmp_path / "inside_out.off", sphere.vertices, outward[:, ::-1])
+    save_mesh(tmp_path / "mirrored.off", sphere.vertices * [-1.0, 1.0, 1.0], outward)
+    mostly_inward = outward[:, ::-1].copy()
+    mostly_inward[::5] = outward[::5]
+    save_mesh(tmp_path / "mostly_inward.off", sphere.vertices, mostly_inward)
+    for name in ("inside_out", "mirrored", "mostly_inward"):
+        mesh = load_mesh(tmp_path / f"{name}.off")
+        assert mesh.enclosed_volume() > 0 and "inside-out" in [fd.code for fd in mesh.report()], name
+    assert np.array_equal(load_mesh(tmp_path / "inside_out.off").faces, outward[:, ::-1][:, ::-1])
+    assert "reoriented" in [fd.code for fd in load_mesh(tmp_path / "mostly_inward.off").report()]
+    save_mesh(tmp_path / "outward.off", sphere.vertices, outward)
+    assert not {"inside-out", "reoriented"} & {fd.code for fd in load_mesh(tmp_path / "outward.off").report()}
+    cap = outward[sphere.vertices[outward].mean(axis=1)[:, 2] > 0]  # the upper half: open
+    used, cap = np.unique(cap, return_inverse=True)
+    save_mesh(tmp_path / "cap.off", sphere.vertices[used], cap.reshape(-1, 3)[:, ::-1])
+    cap_mesh = load_mesh(tmp_path / "cap.off")
+    assert cap_mesh.enclosed_volume() is None and "inside-out" not in [fd.code for fd in cap_mesh.report()]
+
+
 def square(n=40, side=2.0):
     t = np.linspace(0, 4, n, endpoint=False)
     pts = []

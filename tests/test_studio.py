@@ -535,7 +535,7 @@ def test_lines_function_texture_and_sequence_exports(qtbot, window, tmp_path, mo
     window.load_texture(str(tmp_path / "tex.png"))
     assert view.mode.currentText() == "texture" and view.texture_image.shape == (32, 32, 3)
     paths = window.export_frames(".ply", folder=str(tmp_path))
-    assert len(paths) == 11
+    assert len(paths) == 12  # 11 evenly spaced to t max 1.5, and t = 1 (the target)
     last = load_mesh(paths[-1])
     from corrlib.morph import frame_positions
 
@@ -710,10 +710,11 @@ def test_divergence_free_sequence_uses_the_flow(qtbot, window, tmp_path):
     view.slider.setValue(view.slider.maximum())  # t = t max extrapolates along the flow
     assert np.allclose(view.mesh.points, view.display.points(view.positions(view.t_max.value())), atol=1e-6)
     paths = window.export_frames(".obj", folder=str(tmp_path))
-    assert len(paths) == 11 and (tmp_path / "animation.glb").exists()
+    assert len(paths) == 12 and (tmp_path / "animation.glb").exists()  # t = 1 added to the 11 to t max 1.5
+    assert "\n7,1," in (tmp_path / "volumes.csv").read_text()  # t = 0, 0.15, …, 0.9, 1
     assert np.allclose(load_mesh(paths[0]).vertices, view.positions(0.0), atol=1e-4)
     _faces, frames, _times = load_glb_frames(tmp_path / "animation.glb")
-    assert len(frames) == 11
+    assert len(frames) == 12
     assert "volume change" in window.job_panel.log.toPlainText()
 
 

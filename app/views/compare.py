@@ -35,6 +35,7 @@ from PySide6.QtWidgets import (
 
 from app.views.camera import Displayed, FramedView, enable_hover, picked_vertex
 from app.views.scene import (
+    ERROR_BAR_TITLE,
     ERROR_COLOR_MAX,
     PLAIN_COLOR,
     add_caption,
@@ -297,7 +298,7 @@ class CompareView(QWidget, FramedView):
             mesh["error"] = spread_to_matched(source.vertices, per_vertex, map_xy)
             self.plotter.add_mesh(mesh, scalars="error", cmap="inferno", clim=(0, ERROR_COLOR_MAX),
                                   nan_color=PLAIN_COLOR, show_scalar_bar=index == 1,
-                                  scalar_bar_args={"title": "error", "n_labels": 4, "vertical": True,
+                                  scalar_bar_args={"title": ERROR_BAR_TITLE, "n_labels": 4, "vertical": True,
                                                    "position_x": 0.85, "position_y": 0.15, "height": 0.7,
                                                    "width": 0.05, "label_font_size": 10, "title_font_size": 10})
             caption = f"{row['method']} (error on the source)"

@@ -9,6 +9,7 @@ from PySide6.QtWidgets import QComboBox, QHBoxLayout, QLabel, QVBoxLayout, QWidg
 
 from app.views.camera import Displayed, FramedView, enable_hover, picked_vertex
 from app.views.scene import (
+    ERROR_BAR_TITLE,
     ERROR_COLOR_MAX,
     PLAIN_COLOR,
     UNMATCHED_GREY,
@@ -121,6 +122,9 @@ class PairView(QWidget, FramedView):
                      f"within {ERROR_WITHIN}" if known.size else ", no ground-truth vertex is matched")
         if n_unmatched:
             text += f"; {n_unmatched} source vertices unmatched (grey, left out of the error)"
+        if errors is not None and result.map_xy is not None and len(result.map_xy) == len(errors):
+            unknown = int(np.count_nonzero(~np.isfinite(errors) & (np.asarray(result.map_xy) >= 0)))
+            text += f"; {unknown} vertices without ground truth (grey in the heat map)" if unknown else ""
         self.info.setText(text)
         self.redraw()
 
@@ -236,7 +240,7 @@ class PairView(QWidget, FramedView):
         src["error"] = self.errors
         p.add_mesh(src, scalars="error", cmap="inferno", clim=(0, ERROR_COLOR_MAX), nan_color=PLAIN_COLOR,
                    # three labels stay apart on a 1280-pixel screen, where five overlapped
-                   scalar_bar_args={"title": "geodesic error / sqrt(area)", "n_labels": 3, "fmt": "%.2f"})
+                   scalar_bar_args={"title": ERROR_BAR_TITLE, "n_labels": 3, "fmt": "%.2f"})
         p.subplot(0, 1)
         p.add_mesh(tgt, color=PLAIN_COLOR)
 

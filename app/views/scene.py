@@ -21,6 +21,8 @@ UPPER_LEFT = 2
 CAPTION_CHAR_WIDTH = 0.55
 #: top of the error colour scale of every heat map (geodesic error / sqrt(area))
 ERROR_COLOR_MAX = 0.15
+#: the heat map's colour bar title: short enough for a half view at 1280 × 720
+ERROR_BAR_TITLE = "error / √area"
 
 
 def transfer_colors(colors: np.ndarray, map_yx: np.ndarray) -> np.ndarray:

@@ -229,9 +229,12 @@ class SequenceView(QWidget, FramedView):
         self.slider.setValue(value)
 
     def frames(self, count: int, t_max: float | None = None):
-        """(t, vertices) of ``count`` evenly spaced frames from 0 to ``t_max``."""
+        """(t, vertices) of ``count`` evenly spaced frames from 0 to ``t_max``, with t = 1 (the target) among them
+        (:func:`corrlib.morph.frame_times`)."""
+        from corrlib.morph import frame_times
+
         t_max = self.t_max.value() if t_max is None else t_max
-        for t in np.linspace(0.0, t_max, count):
+        for t in frame_times(count, t_max):
             yield float(t), self.positions(float(t))
 
     def picture_strip(self, count: int = PICTURE_STRIP_FRAMES) -> np.ndarray:

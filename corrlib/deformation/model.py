@@ -48,6 +48,33 @@ class Frames:
         """(..., 3) float: cube coordinates back in the target's coordinates."""
         return (np.asarray(points, dtype=np.float64) - 0.5) / self.scale + self.centre_y
 
+    def aligned(self, points: np.ndarray) -> np.ndarray:
+        """(n, 3) float: source points pre-aligned, in target coordinates: ``x Lᵀ − centre_x + centre_y``."""
+        return np.asarray(points, dtype=np.float64) @ self.linear.T - self.centre_x + self.centre_y
+
+    def alignment_undone(self, points: np.ndarray, t: float) -> np.ndarray:
+        """(n, 3) float: points in target coordinates moved by the share ``1 − t`` of the pre-alignment's inverse.
+
+        The pre-alignment ``P(x) = s R x − centre_x + centre_y`` (``linear = s R``, a proper rotation times the
+        size factor) is undone by a similarity that goes from ``P⁻¹`` at ``t = 0`` to the identity at
+        ``t = 1``: about ``centre_y``, the rotation ``Rᵀ`` turned by the angle share ``1 − t`` (the geodesic on
+        the rotations), the factor ``s^{-(1 − t)}`` and the remaining shift ``(1 − t) d``, with ``d`` such that
+        ``t = 0`` is ``P⁻¹`` exactly. A flow started at the aligned source then starts at the source as given
+        and ends where it ends; for ``t ≥ 1`` the points are returned as they are (the extrapolation is the
+        flow's, not the alignment's).
+        """
+        from scipy.spatial.transform import Rotation
+
+        points = np.asarray(points, dtype=np.float64)
+        share = 1.0 - min(max(float(t), 0.0), 1.0)
+        if share == 0.0:
+            return points.copy()
+        size = float(np.cbrt(np.linalg.det(self.linear)))
+        rotation = self.linear / size
+        shift = self.centre_x @ rotation / size - self.centre_y  # P⁻¹(y) = c_y + (y − c_y) R / s + shift
+        turn = Rotation.from_rotvec(share * Rotation.from_matrix(rotation.T).as_rotvec()).as_matrix()
+        return self.centre_y + size ** -share * (points - self.centre_y) @ turn.T + share * shift
+
     def as_array(self) -> np.ndarray:
         """(16,) float: linear part (row-major), scale, centre_x, centre_y (how results store it)."""
         return np.concatenate([self.linear.ravel(), [self.scale], self.centre_x, self.centre_y])

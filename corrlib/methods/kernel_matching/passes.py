@@ -87,7 +87,9 @@ def kernel_result(state: KernelState, full_map_xy: np.ndarray, full_map_yx: np.n
                     state.target.adjacency, state.token, samples_x, samples_y)
     # the map's own energy: landmarks are rows of the dense map already (their anchor term is the solver's)
     c = alignment(psi[full_map_xy[full_map_xy >= 0]], phi[full_map_xy >= 0])
-    energy = kernel_energy(c, decay_y, decay_x)
+    # at unit areas: the M-orthonormal eigenfunctions scale as 1/√area, so the energy as computed goes as
+    # 1/(area_X area_Y) and a target given in millimetres would report a millionth of the same map's energy
+    energy = kernel_energy(c, decay_y, decay_x) * state.source.area * state.target.area
     extras = {
         "orientation_agreement": mean_agreement(*state.orientation_blocks(), full_map_xy),
         "turned": turned is not None,
@@ -102,7 +104,8 @@ def kernel_result(state: KernelState, full_map_xy: np.ndarray, full_map_yx: np.n
         "seeds_x": seed_vertices_x, "seeds_matched_y": seed_vertices_y,
     }
     return MatchResult("kernel-matching", full_map_xy, full_map_yx, energy, watch.times, energy_sense="max",
-                       energy_meaning="QAP kernel energy <Π, K_Y Π K_X> at the smallest time (higher is better); "
+                       energy_meaning="QAP kernel energy <Π, K_Y Π K_X> of the shapes at unit area, at the "
+                                      "smallest time (higher is better); "
                                       "energy_trace: the objective after each DC iteration (½ scaled kernel term "
                                       "+ μ descriptor term)",
                        energy_trace=np.array([e["energy"] for e in trace]), extras=extras)

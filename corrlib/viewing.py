@@ -34,6 +34,7 @@ from pathlib import Path
 import numpy as np
 
 from corrlib.errors import FileFormatError, ParameterError
+from corrlib.shapes import PLANAR_TOLERANCE
 
 #: the values of an up-axis setting
 UP_AXES = ("auto", "+x", "-x", "+y", "-y", "+z", "-z")
@@ -41,8 +42,6 @@ UP_AXES = ("auto", "+x", "-x", "+y", "-y", "+z", "-z")
 VIEWS = ("front", "side", "top")
 #: thickness of the bottom slab of the automatic up axis, a fraction of the extent
 SUPPORT_SLAB = 0.03
-#: a shape whose extent along a coordinate axis is at most this fraction of its bounding-box diagonal is flat
-FLAT_EXTENT = 1e-6
 
 
 def axis_vector(name: str) -> np.ndarray:
@@ -76,7 +75,8 @@ def support_shares(vertices: np.ndarray) -> dict[str, float]:
     v = v - v.mean(axis=0)
     extents = np.ptp(v, axis=0)
     flat_axis = int(np.argmin(extents))
-    flat = extents[flat_axis] <= FLAT_EXTENT * max(float(np.linalg.norm(extents)), np.finfo(float).tiny)
+    # flat as a planar sketch is (:func:`corrlib.shapes.plane_coordinates`), in a coordinate plane
+    flat = extents[flat_axis] <= PLANAR_TOLERANCE * max(float(np.linalg.norm(extents)), np.finfo(float).tiny)
     shares = {}
     for name in UP_AXES[1:]:
         up = axis_vector(name)

@@ -362,6 +362,30 @@ def test_frames_round_trip():
     assert np.allclose(again.cube_to_target(again.target_to_cube(y)), y)
 
 
+def test_the_alignment_undone_by_a_share_is_a_similarity_between_its_ends():
+    """``P(x) = s R x − c_x + c_y`` undone by the share 1 − t: the source itself at t = 0, the aligned points at
+    t ≥ 1, and in between a similarity of the source (all distances scaled by ``s^t``) whose rotation is ``R``
+    turned by the share t of its angle (the geodesic between the two ends)."""
+    from scipy.spatial.transform import Rotation
+
+    rotation, size = Rotation.from_rotvec([0.3, -1.2, 0.8]).as_matrix(), 1.7
+    frames = Frames(size * rotation, 3.0, RNG.standard_normal(3), RNG.standard_normal(3))
+    x = RNG.standard_normal((30, 3))
+    aligned = x @ frames.linear.T - frames.centre_x + frames.centre_y
+    assert np.allclose(frames.alignment_undone(aligned, 0.0), x)
+    assert np.allclose(frames.alignment_undone(aligned, 1.0), aligned)
+    assert np.allclose(frames.alignment_undone(aligned, 1.4), aligned)
+    for t in (0.25, 0.5, 0.8):
+        moved = frames.alignment_undone(aligned, t)
+        # a similarity of x: moved = a x Qᵀ + b with a = s^t and Q = R^t
+        centred_x, centred = x - x.mean(0), moved - moved.mean(0)
+        u, singular, vt = np.linalg.svd(centred_x.T @ centred)
+        q = (u @ vt).T
+        a = singular.sum() / np.sum(centred_x ** 2)
+        assert np.allclose(centred, a * centred_x @ q.T) and a == pytest.approx(size ** t)
+        assert np.allclose(q, Rotation.from_rotvec(t * Rotation.from_matrix(rotation).as_rotvec()).as_matrix())
+
+
 # ----------------------------------------------------------------------------- the method on shapes
 
 

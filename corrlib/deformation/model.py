@@ -48,10 +48,6 @@ class Frames:
         """(..., 3) float: cube coordinates back in the target's coordinates."""
         return (np.asarray(points, dtype=np.float64) - 0.5) / self.scale + self.centre_y
 
-    def aligned(self, points: np.ndarray) -> np.ndarray:
-        """(n, 3) float: source points pre-aligned, in target coordinates: ``x Lᵀ − centre_x + centre_y``."""
-        return np.asarray(points, dtype=np.float64) @ self.linear.T - self.centre_x + self.centre_y
-
     def alignment_undone(self, points: np.ndarray, t: float) -> np.ndarray:
         """(n, 3) float: points in target coordinates moved by the share ``1 − t`` of the pre-alignment's inverse.
 

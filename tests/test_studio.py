@@ -405,10 +405,15 @@ def test_a_long_result_line_does_not_widen_the_window(qtbot, tmp_path):
     win = make_window(qtbot, tmp_path / "s.ini")
     win.resize(1280, 720)
     win.show()
-    result = SimpleNamespace(method="kernel-matching", timings={"total": 6.75})
-    win.pair_view.set_result(result, np.full(4344, 0.001), n_unmatched=490)
+    map_xy = np.arange(4344)
+    map_xy[:490] = -1
+    errors = np.full(4344, 0.001)
+    errors[:600] = np.nan  # the unmatched, and 110 matched vertices without ground truth
+    result = SimpleNamespace(method="kernel-matching", timings={"total": 6.75}, map_xy=map_xy)
+    win.pair_view.set_result(result, errors, n_unmatched=490)
     qtbot.wait(200)
-    assert "490 source vertices unmatched" in win.pair_view.info.text()
+    text = win.pair_view.info.text()
+    assert "490 source vertices unmatched" in text and "110 vertices without ground truth" in text
     assert win.minimumSizeHint().width() <= 1280 and win.width() <= 1282, (win.minimumSizeHint(), win.width())
     win.close()
 

@@ -19,7 +19,8 @@ from corrlib.errors import InputError
 
 #: how the studio and the CLI describe each kind of sequence
 FLOW_DESCRIPTION = ("divergence-free flow (volume preserving; from the source as given to its alignment with the "
-                    "target by t = 1; t > 1 extrapolates along the same field)")
+                    "target by t = 1, where it approximates the target's pose; t > 1 extrapolates along the same "
+                    "field)")
 RIGID_DESCRIPTION = ("as-rigid-as-possible interpolation through the map (each face turns and stretches by a share "
                      "of its own deformation; t > 1 extrapolates)")
 LINEAR_DESCRIPTION = ("linear vertex interpolation through the map (shrinks what turns, folds where the map "

@@ -410,8 +410,6 @@ def _morph_result(args, source, target):
 
 
 def cmd_morph(args) -> int:
-    import numpy as np
-
     from corrlib.morph import describe_sequence, export_sequence, frame_positions, frame_times, largest_volume_change
     from corrlib.shapes import TriMesh
 

@@ -212,6 +212,19 @@ def evaluate(result, target, gt_source, gt_target, **options) -> ErrorReport:
 COLLAPSED_AREA = 0.01
 
 
+def image_area_share(map_xy, target) -> float:
+    """The share of ``target``'s area that ``map_xy`` ((n_x,) int, -1 unmatched) reaches: the area of the target
+    vertices some source vertex is sent to, each vertex holding a third of its faces' areas (1 for a map onto
+    every vertex; resolution-free, unlike a count of vertices). NaN without a map."""
+    if map_xy is None:
+        return float("nan")
+    matched = np.asarray(map_xy)
+    matched = np.unique(matched[matched >= 0])
+    vertex_areas = np.bincount(target.faces.ravel(), np.repeat(target.face_areas / 3.0, 3),
+                               minlength=target.n_vertices)
+    return float(vertex_areas[matched].sum() / vertex_areas.sum())
+
+
 def collapse_note(map_xy, source, target, what: str = "the map",
                   advice: str = "the inputs give the method nothing to tell points apart (try another method or "
                                 "descriptor)") -> str | None:
@@ -237,9 +250,7 @@ def collapse_note(map_xy, source, target, what: str = "the map",
     matched = np.unique(matched[matched >= 0])
     if matched.size == 0:
         return f"{what} matches no vertex"
-    vertex_areas = np.bincount(target.faces.ravel(), np.repeat(target.face_areas / 3.0, 3),
-                               minlength=target.n_vertices)
-    share = float(vertex_areas[matched].sum() / vertex_areas.sum())
+    share = image_area_share(map_xy, target)
     if share >= COLLAPSED_AREA:
         return None
     return (f"{what} has collapsed: its {np.count_nonzero(np.asarray(map_xy) >= 0)} matched vertices land on "

@@ -557,7 +557,8 @@ class TriMesh:
                                     "neighbours (the file's face orientation was inconsistent)"))
         else:
             faces = mesh.faces
-        if mesh.is_closed and signed_volume(mesh.vertices, faces) < 0:
+        # a closed surface enclosing nothing (flat, two coincident sides) has a volume of rounding: left as it is
+        if mesh.is_closed and signed_volume(mesh.vertices, faces) < -VOLUME_TOLERANCE * mesh.area ** 1.5:
             faces = faces[:, ::-1]
             findings.append(Finding("warning", "inside-out", "the closed surface was wound inwards (negative "
                                     "enclosed volume); every face was turned so that the normals point out"))

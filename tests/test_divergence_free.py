@@ -360,6 +360,10 @@ def test_frames_round_trip():
     again = Frames.from_array(frames.as_array())
     y = RNG.standard_normal((5, 3))
     assert np.allclose(again.cube_to_target(again.target_to_cube(y)), y)
+    # a stored record the flow cannot have made (a reflection, no scale, NaN) is refused by name
+    for linear, scale in ((np.diag([-1.0, 1, 1]), 0.01), (np.eye(3), 0.0), (np.full((3, 3), np.nan), 0.01)):
+        with pytest.raises(InputError, match="a frame record needs"):
+            Frames.from_array(Frames(linear, scale, np.zeros(3), np.zeros(3)).as_array())
 
 
 def test_the_alignment_undone_by_a_share_is_a_similarity_between_its_ends():

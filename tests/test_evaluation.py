@@ -88,3 +88,17 @@ def test_a_collapsed_map_is_named_and_a_map_onto_a_part_is_not(wolf_pair):
     assert collapse_note(np.full(wolf0.n_vertices, -1), wolf0, wolf1) == "the map matches no vertex"
     circle = Contour2D(np.column_stack([np.cos(np.linspace(0, 6.2, 40)), np.sin(np.linspace(0, 6.2, 40))]))
     assert collapse_note(np.zeros(40, dtype=int), circle, wolf1) is None
+
+
+def test_the_area_a_map_reaches_by_hand():
+    """A regular tetrahedron: every vertex holds a quarter of the area, so a map onto two of its vertices reaches
+    half of it, a map onto all of them the whole, and no map nothing to measure."""
+    from corrlib.evaluation import image_area_share
+    from corrlib.shapes import TriMesh
+
+    corners = np.array([[1.0, 1, 1], [1, -1, -1], [-1, 1, -1], [-1, -1, 1]])
+    tetra = TriMesh(corners, np.array([[0, 1, 2], [0, 3, 1], [0, 2, 3], [1, 3, 2]]), name="tetrahedron")
+    assert image_area_share(np.array([0, 0, 2, -1]), tetra) == pytest.approx(0.5)
+    assert image_area_share(np.array([3, 2, 1, 0]), tetra) == pytest.approx(1.0)
+    assert image_area_share(np.array([-1, -1, -1, -1]), tetra) == 0.0
+    assert np.isnan(image_area_share(None, tetra))

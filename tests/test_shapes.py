@@ -204,6 +204,14 @@ def test_a_closed_mesh_wound_inwards_is_turned_out_and_says_so(tmp_path):
     save_mesh(tmp_path / "cap.off", sphere.vertices[used], cap.reshape(-1, 3)[:, ::-1])
     cap_mesh = load_mesh(tmp_path / "cap.off")
     assert cap_mesh.enclosed_volume() is None and "inside-out" not in [fd.code for fd in cap_mesh.report()]
+    # a closed surface that encloses nothing: a square's two sides, the back a fan round a centre 1e-12 off the
+    # plane on the wrong side, so its volume is -3e-13, rounding next to its area: nothing is turned
+    pillow_points = np.array([[0.0, 0, 0], [1, 0, 0], [1, 1, 0], [0, 1, 0], [0.5, 0.5, 1e-12]])
+    pillow_faces = np.array([[0, 1, 2], [0, 2, 3], [4, 1, 0], [4, 2, 1], [4, 3, 2], [4, 0, 3]])
+    save_mesh(tmp_path / "pillow.off", pillow_points, pillow_faces)
+    pillow = load_mesh(tmp_path / "pillow.off")
+    assert pillow.enclosed_volume() < 0 and np.array_equal(pillow.faces, pillow_faces)
+    assert "inside-out" not in [fd.code for fd in pillow.report()]
 
 
 def square(n=40, side=2.0):

@@ -200,14 +200,16 @@ def test_compare_two_methods(qtbot, window):
     rows = view.table_rows()
     assert [r[0] for r in rows] == ["fmap-zoomout", "descriptor-nn"]
     assert all(float(r[2]) >= 0 for r in rows)  # mean errors from the demo ground truth
-    # the share of the target's vertices each map reaches, from the maps themselves
-    from app.views.compare import map_reach
+    # the share of the target's area each map reaches (trimesh's vertex areas: a third of each face's)
+    import trimesh
 
+    target = window.target
+    vertex_areas = trimesh.Trimesh(target.vertices, target.faces, process=False).area_faces.repeat(3) / 3
+    vertex_areas = np.bincount(target.faces.ravel(), vertex_areas, minlength=target.n_vertices)
     results = {row["method"]: row["result"] for row in view.rows}
     for r in rows:
-        reach = np.unique(results[r[0]].map_xy).size / window.target.n_vertices
+        reach = vertex_areas[np.unique(results[r[0]].map_xy)].sum() / vertex_areas.sum()
         assert float(r[6]) == pytest.approx(reach, abs=1e-3) and 0 < reach <= 1
-    assert map_reach(np.array([0, 0, 2, -1]), 4) == 0.5 and np.isnan(map_reach(None, 4))
     assert len(view.figure.axes[0].lines) == 2
     # a second comparison replaces the grid; the closed one is hidden and kept, never deleted while the studio runs
     import shiboken6

@@ -34,6 +34,7 @@ from PySide6.QtWidgets import (
 )
 
 from app.views.camera import Displayed, FramedView, enable_hover, picked_vertex
+from corrlib.evaluation import image_area_share
 from app.views.scene import (
     ERROR_BAR_TITLE,
     ERROR_COLOR_MAX,
@@ -52,8 +53,8 @@ COLUMNS = (("method", "registered method (its own objective in the tooltip)"), (
            ("mean", "mean geodesic error / sqrt(area) against the ground truth"),
            ("mean sym", "the same, a match to the mirror-image partner also accepted (needs <target>.sym.vts)"),
            ("≤0.05", "fraction of ground-truth points within 0.05"), ("AUC", "area under the cumulative curve"),
-           ("reach", "share of the target's vertices some source vertex is sent to (1 for a bijection; a map "
-                     "that piles onto few vertices leaves parts of the target unreached)"),
+           ("reach", "share of the target's area the map reaches (the vertices some source vertex is sent to; "
+                     "1 for a map onto every vertex, less where it piles onto few and leaves parts unreached)"),
            ("unmatched", "source vertices left unmatched"))
 #: what the method views show
 COLOR_MODES = ("colour transfer", "error heat map")
@@ -217,7 +218,7 @@ class CompareView(QWidget, FramedView):
         r = self.table.rowCount()
         self.table.insertRow(r)
         values = (row["method"], row["runtime"], row["mean"], row["mean_sym"], row["within"], row["auc"],
-                  map_reach(result.map_xy, target.n_vertices), n_unmatched)
+                  image_area_share(result.map_xy, target), n_unmatched)
         for c, v in enumerate(values):
             self.table.setItem(r, c, table_item(v))
         self.table.item(r, 0).setToolTip(objective_tip(result))
@@ -420,15 +421,6 @@ class CompareView(QWidget, FramedView):
     def close_plotters(self) -> None:
         if self.plotter is not None:
             close_plotter(self.plotter)
-
-
-def map_reach(map_xy, n_target: int) -> float:
-    """The share of a target's ``n_target`` vertices that ``map_xy`` ((n_x,) int, -1 unmatched) sends some source
-    vertex to; NaN without a map."""
-    if map_xy is None or n_target <= 0:
-        return float("nan")
-    map_xy = np.asarray(map_xy)
-    return float(np.unique(map_xy[map_xy >= 0]).size / n_target)
 
 
 def grid_shape(n_views: int) -> tuple[int, int]:

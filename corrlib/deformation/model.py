@@ -81,6 +81,9 @@ class Frames:
         a = np.asarray(arr, dtype=np.float64).ravel()
         if a.shape != (16,):
             raise InputError(f"a frame record has 16 numbers, got {a.size}")
+        if not (np.all(np.isfinite(a)) and a[9] > 0 and np.linalg.det(a[:9].reshape(3, 3)) > 0):
+            raise InputError("a frame record needs finite numbers, a positive scale and a linear part that turns "
+                             "and scales without a reflection (positive determinant)")
         return cls(a[:9].reshape(3, 3), float(a[9]), a[10:13], a[13:16])
 
 

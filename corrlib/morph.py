@@ -6,9 +6,11 @@ change); the sequence undoes that alignment by the share ``1 − t`` (``Frames.a
 kind of sequence starts at the source as given and ends at the target's place at t = 1. For any other
 point-to-point map the sequence is the as-rigid-as-possible interpolation of the source towards the map's
 image (:mod:`corrlib.deformation.rigid_interpolation`): each face turns and stretches by a share of its own
-deformation, so a limb that swings keeps its length and the body its volume. Linear interpolation of the
-vertex positions (``interpolation="linear"``) is kept for comparison: it shrinks whatever turns and folds
-where the map does. All kinds extrapolate for t > 1 and keep the source's connectivity.
+deformation, so a limb that swings keeps its length and the body its volume. It ends at the map's image on
+the target's surface (:mod:`corrlib.deformation.surface_image`): every vertex at a point of the surface near
+its partner, so that the last frame has no faces collapsed where the map sends neighbours to one vertex.
+Linear interpolation of the vertex positions (``interpolation="linear"``) is kept for comparison: it ends at
+the target vertices the map gives, shrinks whatever turns and folds where the map does. All kinds extrapolate for t > 1 and keep the source's connectivity.
 """
 
 from __future__ import annotations
@@ -22,7 +24,7 @@ FLOW_DESCRIPTION = ("divergence-free flow (volume preserving; from the source as
                     "target by t = 1, where it approximates the target's pose; t > 1 extrapolates along the same "
                     "field)")
 RIGID_DESCRIPTION = ("as-rigid-as-possible interpolation through the map (each face turns and stretches by a share "
-                     "of its own deformation; t > 1 extrapolates)")
+                     "of its own deformation, to the map's image on the target's surface; t > 1 extrapolates)")
 LINEAR_DESCRIPTION = ("linear vertex interpolation through the map (shrinks what turns, folds where the map "
                       "does)")
 #: ``interpolation`` choices: "auto" is the method's flow where it has one, else "rigid"
@@ -84,9 +86,11 @@ def _through_map(result, source, target, kind: str):
     if kind == "linear":
         return lambda t: (1.0 - t) * source.vertices + t * image
     from corrlib.deformation.rigid_interpolation import rigid_interpolation
+    from corrlib.deformation.surface_image import image_on_surface
 
     # a vertex map onto the target is known to within the target's vertex spacing
-    return rigid_interpolation(source.vertices, source.faces, image,
+    landed = image_on_surface(source, target, result.map_xy, image)
+    return rigid_interpolation(source.vertices, source.faces, landed,
                                resolution=float(np.mean(target.edge_lengths))).positions
 
 

@@ -17,14 +17,13 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from corrlib.descriptors.shape_context import N_ANGLE_BINS, N_DISTANCE_BINS, inner_shape_context, outline_dissimilarity
+from corrlib.descriptors.shape_context import (N_ANGLE_BINS, N_DISTANCE_BINS, OUTLINE_POINTS, outline_context,
+                                               outline_dissimilarity)
 from corrlib.errors import ContourError
 from corrlib.geometry.sections import principal_frame
 from corrlib.methods.contour_views import mirror_image, outline_along, view_directions
 from corrlib.shapes import Contour2D
 
-#: points of the drawing and of every view's outline (the paper's 100 for the MPEG-7 shapes)
-OUTLINE_POINTS = 100
 #: pixels along the longer side of every rendered view (as ``contour-views``)
 VIEW_RESOLUTION = 256
 
@@ -43,17 +42,10 @@ class QueryOutline:
     contexts: tuple
 
 
-def resampled_points(contour: Contour2D) -> np.ndarray:
-    """(n, 2) float: the outline resampled by arc length to :data:`OUTLINE_POINTS` points, counter-clockwise."""
-    return contour.resample(OUTLINE_POINTS).ccw().points
-
-
 def query_outline(contour: Contour2D) -> QueryOutline:
     """The drawing's shape contexts, as drawn and mirrored (:func:`~corrlib.methods.contour_views.mirror_image`;
     a reflection turns the outline clockwise, which :meth:`~corrlib.shapes.Contour2D.ccw` turns back)."""
-    resampled = contour.resample(OUTLINE_POINTS)
-    return QueryOutline(tuple(inner_shape_context(reading.ccw().points)
-                              for reading in (resampled, mirror_image(resampled))))
+    return QueryOutline((outline_context(contour), outline_context(mirror_image(contour))))
 
 
 def view_contexts(mesh, use_cache: bool = True) -> np.ndarray:
@@ -78,7 +70,7 @@ def view_contexts(mesh, use_cache: bool = True) -> np.ndarray:
     for direction in view_directions(axes, "box"):
         try:
             outline, _ = outline_along(mesh, direction, VIEW_RESOLUTION)
-            contexts.append(inner_shape_context(resampled_points(outline)))
+            contexts.append(outline_context(outline))
         except ContourError:
             continue
     contexts = np.array(contexts).reshape(len(contexts), OUTLINE_POINTS, N_DISTANCE_BINS * N_ANGLE_BINS)

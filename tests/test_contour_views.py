@@ -82,22 +82,32 @@ def test_edge_paths_are_shortest_and_refuse_separate_components():
         edge_paths(two, [0], [mesh.n_vertices])
 
 
-def test_the_search_over_every_view_is_the_best_single_view(wolf):
-    params = ContourViewsParams(directions="axes", n_contour=40, n_view=40)
+@pytest.mark.parametrize("view_choice", ["fused", "energy"])
+def test_the_search_over_every_view_is_the_best_single_view(wolf, view_choice):
+    """The branch-and-bound over every view and reading finds the lowest of their separate optima: the torus
+    energy times the view's shape-context dissimilarity to that reading of the drawing (fused), or the torus
+    energy alone."""
+    from corrlib.descriptors.shape_context import inner_shape_context, outline_dissimilarity
+
+    params = ContourViewsParams(directions="axes", n_contour=40, n_view=40, view_choice=view_choice)
     contour = load_contour(DRAWN / "wolf.txt")
     result = solve("contour-views", contour, wolf, **vars(params))
     _, axes = principal_frame(wolf)
     energies = []
     for direction in view_directions(axes, "axes"):
         view = render_view(wolf, direction, params)
+        shape = inner_shape_context(view.outline.contour.resample(100).ccw().points)
         for query in (contour, mirror_image(contour)):
             outline = prepared_outline(query, 40, params.k, params.n_scales, finer="")
             cost = node_costs(outline.features, view.outline.features)
+            if view_choice == "fused":  # both outlines at 100 points, counter-clockwise (the reflection turns one)
+                cost = cost * outline_dissimilarity(inner_shape_context(query.resample(100).ccw().points), shape)
             graph = torus_graph(cost / diagonal_length(outline.points, view.outline.points), outline.points,
                                 view.outline.points)
             energies.append(run(branch_and_bound(graph)).energy)
     assert result.energy == pytest.approx(min(energies), rel=1e-9)
     assert result.search.lower_bound == pytest.approx(result.search.upper_bound)
+    assert (result.extras["view_unlikeness"] is None) == (view_choice == "energy")
 
 
 def _outline_step(outline, projection, mesh, n_points=ContourViewsParams().n_view):
@@ -155,15 +165,32 @@ def test_how_the_outline_is_given_does_not_matter(wolf):
 
 @pytest.mark.slow
 @pytest.mark.parametrize("drawing, mesh, limit", [("wolf", "data/tosca/wolf0", 0.1), ("wolf", "data/tosca/wolf1", 0.1),
-                                                  ("human", "people/human1", 0.1), ("human", "people/human3", 0.1)])
+                                                  ("human", "people/human1", 0.1), ("human", "people/human3", 0.1),
+                                                  ("cat", "data/tosca/cat0", 0.3)])
 def test_drawings_of_meshes_in_their_pose(drawing, mesh, limit):
-    """The drawn outlines' landmarks where contour3d puts them at 0.19-0.53 √area (docs/decisions.md)."""
+    """The drawn outlines' landmarks where contour3d puts them at 0.19-0.53 √area (docs/decisions.md). The drawn
+    cat on cat0 (measured 0.24) was read as the narrow view from the front by the torus energy alone (0.56):
+    its stick legs and tail are not the cat's, and the compact outline's bland features half-matched them."""
     query = DrawnQuery(drawing, DRAWN / f"{drawing}.txt", read_landmarks(DRAWN / f"{drawing}.landmarks"))
-    row = match_drawn_query(query, resource(f"{mesh}.off"), resource(f"{mesh}.landmarks"), {},
-                            redraws=2 if mesh.endswith("wolf0") else 0, method="contour-views")
+    row = match_drawn_query(query, resource(f"{mesh}.off"), resource(f"{mesh}.landmarks"), {}, method="contour-views")
     assert row["status"] == "ok" and row["landmark_error"] < limit
-    if mesh.endswith("wolf0"):  # two redrawings of the wolf (1 % of its size per corner) hold too
-        assert row["redraw_worst"] < 0.25
+
+
+@pytest.mark.slow
+def test_most_redrawings_of_the_wolf_hold():
+    """The drawn wolf redrawn six times (1 % of its size per corner) on wolf0: four of the six within 0.1 √area
+    (measured 0.03-0.08, with either view choice). The other two are read head to tail in a side view (1.06 and
+    1.08): neither the torus energy nor the shape context tells a drawn head from a drawn tail by much, and a
+    redrawing can tip them. A distribution, not one lucky draw."""
+    from corrlib.landmark_bench import redrawn_errors
+
+    wolf0 = load_mesh(resource("data/tosca/wolf0.off"))
+    truth = {}
+    for label, vertex in read_landmarks(resource("data/tosca/wolf0.landmarks"), n_vertices=wolf0.n_vertices):
+        truth.setdefault(label, []).append(vertex)
+    errors = redrawn_errors(load_contour(DRAWN / "wolf.txt"), wolf0, read_landmarks(DRAWN / "wolf.landmarks"), truth,
+                            GeodesicSolver(wolf0), {}, redraws=6, seed=0, method="contour-views")
+    assert sum(error < 0.1 for error in errors) >= 4
 
 
 @pytest.mark.slow

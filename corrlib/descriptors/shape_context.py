@@ -32,6 +32,8 @@ LOG2_DISTANCE_RANGE = (-3.0, 1.0)
 #: cost of leaving one point of either outline unaligned (χ² costs lie in [0, 1]; a point whose histogram
 #: agrees with no point of the other outline costs about this much)
 GAP_COST = 0.25
+#: points an outline is resampled to before its shape context is taken (the paper's 100 for the MPEG-7 shapes)
+OUTLINE_POINTS = 100
 
 
 @njit(cache=True)
@@ -248,3 +250,10 @@ def outline_dissimilarity(context_a: np.ndarray, context_b: np.ndarray, gap: flo
         :func:`inner_shape_context` of two outlines, both counter-clockwise.
     """
     return float(cyclic_alignment_cost(chi2_costs(context_a, context_b), float(gap)))
+
+
+def outline_context(outline, n_points: int = OUTLINE_POINTS) -> np.ndarray:
+    """(n_points, d) float: :func:`inner_shape_context` of an outline (a :class:`~corrlib.shapes.Contour2D`)
+    resampled by arc length to ``n_points``, counter-clockwise (as :func:`outline_dissimilarity` compares
+    them)."""
+    return inner_shape_context(outline.resample(n_points).ccw().points)

@@ -11,9 +11,17 @@ orthographically from the 13 directions of its principal box (:func:`view_direct
 direction gives the mirror image, which the mirrored reading below covers). Every outline is matched to the
 query on their product torus with the 2D-to-2D energy of :mod:`.contour2d` (both filled outlines at unit
 area), per unit length of the torus' diagonal so that views with longer outlines are not handicapped
-(:func:`diagonal_length`), for the query as drawn and for its mirror image (a drawing has no front or back), and **one
-branch-and-bound over all these graphs** gives the global optimum over every view and both readings (or a
-``1 + eps`` approximation). Each matched point of the winning view's outline is taken to the vertex nearest
+(:func:`diagonal_length`), for the query as drawn and for its mirror image (a drawing has no front or back).
+
+Which view: the torus energy compares features of the filled outlines (WKS), which tell *where* two outlines
+correspond but are a weak judge of *which* outline the drawing shows: a compact view (the body seen end-on)
+has bland features that half-match anything, and a drawing's stick legs are not the mesh's. Every torus'
+costs are therefore multiplied by how unlike its reading of the drawing the view's outline is by
+inner-distance shape context (:func:`view_unlikeness`; Ling & Jacobs 2007, built to compare outlines of
+articulated shapes), the product retrieval ranks by (:mod:`corrlib.retrieval`). A constant factor per torus
+leaves each torus' optimal path as it is and decides between the views and readings (``view_choice="energy"``:
+the energy alone). **One branch-and-bound over all
+these graphs** gives the global optimum over every view and both readings (or a ``1 + eps`` approximation). Each matched point of the winning view's outline is taken to the vertex nearest
 the viewer among those that project onto it (:func:`~corrlib.geometry.sections.rim_vertices`), and
 consecutive vertices are joined by shortest edge paths into a closed curve on the mesh.
 
@@ -33,6 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from corrlib.descriptors.shape_context import outline_context, outline_dissimilarity
 from corrlib.errors import ContourError, InputError
 from corrlib.geometry.cyclic_paths import branch_and_bound_union
 from corrlib.geometry.geodesics import edge_paths
@@ -46,6 +55,8 @@ from corrlib.shapes import Contour2D, TriMesh
 
 #: the direction sets of :func:`view_directions`
 DIRECTION_SETS = ("box", "axes")
+#: how the view is chosen (``view_choice``): by the fused score or by the 2D-to-2D energy alone
+VIEW_CHOICES = ("fused", "energy")
 
 
 @dataclass(frozen=True, kw_only=True)
@@ -65,6 +76,10 @@ class ContourViewsParams:
                        help="0: global optimum over every view and both readings; ε > 0: within a factor 1 + ε.")
     max_iterations: int = param(100_000, label="Max iterations", low=1, high=10_000_000,
                                 help="Cap on branch-and-bound iterations (the bounds are reported).")
+    view_choice: str = param("fused", label="View choice", choices=VIEW_CHOICES,
+                             help="fused: the 2D-to-2D energy of every view and reading times how unlike the "
+                                  "drawing its outline is by inner-distance shape context (as retrieval fuses "
+                                  "them); energy: the 2D-to-2D energy alone.")
 
 
 @dataclass
@@ -148,6 +163,16 @@ def diagonal_length(points_a: np.ndarray, points_b: np.ndarray) -> float:
     return float(np.hypot(Contour2D(points_a, validate=False).length, Contour2D(points_b, validate=False).length))
 
 
+def view_unlikeness(drawing: Contour2D, outlines: list[tuple[Contour2D, bool]]) -> np.ndarray:
+    """(p,) float: for every view outline and reading of the drawing (as drawn, or ``mirrored``), the
+    inner-distance shape context dissimilarity of the reading to the outline (lower: more alike; Ling & Jacobs
+    2007), the view dissimilarity retrieval fuses with the energy (:mod:`corrlib.outline_views`)."""
+    readings = [outline_context(reading) for reading in (drawing, mirror_image(drawing))]
+    contexts = {id(outline): outline_context(outline) for outline, _ in outlines}  # once per view
+    return np.array([outline_dissimilarity(readings[int(mirrored)], contexts[id(outline)])
+                     for outline, mirrored in outlines])
+
+
 def mirror_image(contour: Contour2D) -> Contour2D:
     """The contour reflected across its y axis (the same drawing seen from behind the paper)."""
     return Contour2D(contour.points * np.array([-1.0, 1.0]), name=contour.name, validate=False)
@@ -201,9 +226,14 @@ def solve_contour_views(source: Contour2D, target: TriMesh, params: ContourViews
                          f"is too thin to fill for k={params.k} eigenpairs); raise resolution or lower k")
     pairs = [(view, mirrored) for view in views for mirrored in (False, True)]
     with watch("features"):
-        graphs = [torus_graph(node_costs(readings[mirrored].features, view.outline.features)
+        fused = params.view_choice == "fused"
+        factors = (view_unlikeness(source, [(view.outline.contour, mirrored) for view, mirrored in pairs])
+                   if fused else np.ones(len(pairs)))
+    with watch("features"):
+        graphs = [torus_graph(factor * node_costs(readings[mirrored].features, view.outline.features)
                               / diagonal_length(readings[mirrored].points, view.outline.points),
-                              readings[mirrored].points, view.outline.points) for view, mirrored in pairs]
+                              readings[mirrored].points, view.outline.points)
+                  for (view, mirrored), factor in zip(pairs, factors)]
     yield Progress("branch and bound", 0.7, f"{len(graphs)} tori ({len(views)} views, both readings of the query)")
     with watch("search"):
         bb = yield from branch_and_bound_union(graphs, eps=params.eps, token=token,
@@ -221,16 +251,18 @@ def solve_contour_views(source: Contour2D, target: TriMesh, params: ContourViews
     return MatchResult("contour-views", map_xy=matched, map_yx=None, energy=bb.energy, timings=watch.times,
                        path=path, search=SearchCertificate.of(bb, params.eps),
                        extras={"view_direction": [float(x) for x in view.direction], "mirrored": bool(mirrored),
-                               "views": len(views), "views_skipped": len(directions) - len(views)},
+                               "views": len(views), "views_skipped": len(directions) - len(views),
+                               "view_unlikeness": float(factors[bb.graph_index]) if fused else None},
                        energy_meaning=f"2D-to-2D path energy on the product torus of the query and the mesh's "
                                       f"outline seen along ({direction}), per unit length of the torus' diagonal "
-                                      "(unit areas)")
+                                      "(unit areas)" + (", times the outline's shape-context dissimilarity to the "
+                                                        "query" if fused else ""))
 
 
 register(MethodSpec(
     name="contour-views", label="2D-to-3D through rendered views", inputs=("contour", "mesh"),
     params=ContourViewsParams, solve=solve_contour_views, rank=5,
     description="A drawing read as a view: the mesh's outlines from 13 directions matched to the query on "
-                "their product tori (the 2D-to-2D energy), globally optimal over every view and both readings, "
-                "then taken to the rim vertices. For drawings of a mesh in its pose; contour3d for other poses "
+                "their product tori (the 2D-to-2D energy times the outline's shape-context dissimilarity), "
+                "globally optimal over every view and both readings, then taken to the rim vertices. For drawings of a mesh in its pose; contour3d for other poses "
                 "and sections."))

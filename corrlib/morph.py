@@ -10,7 +10,8 @@ deformation, so a limb that swings keeps its length and the body its volume. It 
 the target's surface (:mod:`corrlib.deformation.surface_image`): every vertex at a point of the surface near
 its partner, so that the last frame has no faces collapsed where the map sends neighbours to one vertex.
 Linear interpolation of the vertex positions (``interpolation="linear"``) is kept for comparison: it ends at
-the target vertices the map gives, shrinks whatever turns and folds where the map does. All kinds extrapolate for t > 1 and keep the source's connectivity.
+the target vertices the map gives, shrinks whatever turns and folds where the map does. All kinds extrapolate
+for t > 1 and keep the source's connectivity.
 """
 
 from __future__ import annotations

@@ -1,21 +1,22 @@
 """Where a vertex map sends a mesh, as points of the target's surface rather than its vertices.
 
 A point-to-point map between two meshes sends every source vertex to a target *vertex*. Where the source is
-sampled more finely than the map resolves (a spectral method's maps are not one-to-one: kernel matching sends
-the cats' 5,000 vertices to 3,430 target vertices), neighbouring source vertices land on the same target
-vertex, and the source drawn at the image, ``Y[map_xy]``, has faces of no area (29 % of the cats'). That
-image is the last frame of a sequence through the map (:mod:`corrlib.morph`), the mesh a user exports as the
+sampled more finely than the map resolves (a spectral method's maps are not one-to-one), neighbouring source
+vertices land on the same target vertex, and the source drawn at the image, ``Y[map_xy]``, has faces of no
+area (``docs/decisions.md`` has the figures). That image is the last frame of a sequence through the map (:mod:`corrlib.morph`), the mesh a user exports as the
 target pose.
 
-:func:`image_on_surface` spreads the image over the target's surface by tangential relaxation, as remeshers
-relax their vertices on the surface they remesh (e.g. Botsch & Kobbelt, *A remeshing approach to multiresolution
-modeling*, SGP 2004): every step moves each vertex half way to the mean of its source neighbours' images and
-puts it back at the closest point of the target's surface, among the triangles within
-:data:`CANDIDATE_RINGS` edges of the vertex the map gives it
-(:func:`~corrlib.geometry.lifting.closest_surface_points`). The mean of the neighbours separates vertices
-that share a partner and unfolds most faces the map turned over, the projection keeps every vertex on the surface, and the neighbourhood keeps it within the map's
-resolution of its partner, so that it cannot slide onto another part of the target (a neighbouring leg).
-:data:`RELAXATION_STEPS` steps spread a vertex over about as far as the neighbourhood reaches.
+:func:`image_on_surface` spreads the corners of the faces the map collapses or turns over
+(:func:`collapsed_or_turned`) over the target's surface by tangential relaxation, as remeshers relax their
+vertices on the surface they remesh (e.g. Botsch & Kobbelt, *A remeshing approach to multiresolution
+modeling*, SGP 2004): every step moves each of them half way to the mean of its source neighbours' images and
+puts it back at the closest point of the target's surface, among the triangles within :data:`CANDIDATE_RINGS`
+edges of the vertex the map gives it (:func:`~corrlib.geometry.lifting.closest_surface_points`). The mean of
+the neighbours separates vertices that share a partner and unfolds most faces the map turned over; the
+projection keeps every vertex on the surface; the neighbourhood keeps it within the map's resolution of its
+partner, so that it cannot slide onto another part of the target (a neighbouring leg).
+:data:`RELAXATION_STEPS` steps spread a vertex over about as far as the neighbourhood reaches. Every other
+vertex stays on its partner, so the image of a one-to-one map is left as it is.
 
 Unmatched source vertices (-1 in a partial map) keep the image :func:`corrlib.morph.map_image` gives them,
 and take part in their neighbours' means.

@@ -20,8 +20,10 @@ costs are therefore multiplied by how unlike its reading of the drawing the view
 inner-distance shape context (:func:`view_unlikeness`; Ling & Jacobs 2007, built to compare outlines of
 articulated shapes), the product retrieval ranks by (:mod:`corrlib.retrieval`). A constant factor per torus
 leaves each torus' optimal path as it is and decides between the views and readings (``view_choice="energy"``:
-the energy alone). **One branch-and-bound over all
-these graphs** gives the global optimum over every view and both readings (or a ``1 + eps`` approximation). Each matched point of the winning view's outline is taken to the vertex nearest
+the energy alone).
+
+**One branch-and-bound over all these graphs** gives the global optimum over every view and both readings (or a
+``1 + eps`` approximation). Each matched point of the winning view's outline is taken to the vertex nearest
 the viewer among those that project onto it (:func:`~corrlib.geometry.sections.rim_vertices`), and
 consecutive vertices are joined by shortest edge paths into a closed curve on the mesh.
 
@@ -225,11 +227,10 @@ def solve_contour_views(source: Contour2D, target: TriMesh, params: ContourViews
         raise InputError(f"{target.name}: no view of the mesh has an outline that can be matched (every projection "
                          f"is too thin to fill for k={params.k} eigenpairs); raise resolution or lower k")
     pairs = [(view, mirrored) for view in views for mirrored in (False, True)]
+    fused = params.view_choice == "fused"
     with watch("features"):
-        fused = params.view_choice == "fused"
         factors = (view_unlikeness(source, [(view.outline.contour, mirrored) for view, mirrored in pairs])
                    if fused else np.ones(len(pairs)))
-    with watch("features"):
         graphs = [torus_graph(factor * node_costs(readings[mirrored].features, view.outline.features)
                               / diagonal_length(readings[mirrored].points, view.outline.points),
                               readings[mirrored].points, view.outline.points)
@@ -264,5 +265,5 @@ register(MethodSpec(
     params=ContourViewsParams, solve=solve_contour_views, rank=5,
     description="A drawing read as a view: the mesh's outlines from 13 directions matched to the query on "
                 "their product tori (the 2D-to-2D energy times the outline's shape-context dissimilarity), "
-                "globally optimal over every view and both readings, then taken to the rim vertices. For drawings of a mesh in its pose; contour3d for other poses "
-                "and sections."))
+                "globally optimal over every view and both readings, then taken to the rim vertices. For drawings "
+                "of a mesh in its pose; contour3d for other poses and sections."))

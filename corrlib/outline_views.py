@@ -21,7 +21,7 @@ from corrlib.descriptors.shape_context import (N_ANGLE_BINS, N_DISTANCE_BINS, OU
                                                outline_dissimilarity)
 from corrlib.errors import ContourError
 from corrlib.geometry.sections import principal_frame
-from corrlib.methods.contour_views import mirror_image, outline_along, view_directions
+from corrlib.methods.contour_views import outline_along, reading_contexts, view_directions
 from corrlib.shapes import Contour2D
 
 #: pixels along the longer side of every rendered view (as ``contour-views``)
@@ -45,7 +45,7 @@ class QueryOutline:
 def query_outline(contour: Contour2D) -> QueryOutline:
     """The drawing's shape contexts, as drawn and mirrored (:func:`~corrlib.methods.contour_views.mirror_image`;
     a reflection turns the outline clockwise, which :meth:`~corrlib.shapes.Contour2D.ccw` turns back)."""
-    return QueryOutline((outline_context(contour), outline_context(mirror_image(contour))))
+    return QueryOutline(reading_contexts(contour))
 
 
 def view_contexts(mesh, use_cache: bool = True) -> np.ndarray:

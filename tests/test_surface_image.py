@@ -71,15 +71,27 @@ def test_a_map_that_sends_neighbours_to_one_vertex_lands_without_collapsed_faces
     assert np.allclose(last, landed, atol=1e-6)  # the sequence through the map ends there
 
 
-def test_the_landing_does_not_depend_on_the_source_vertex_order(wolf_pair, snapped):
+def test_the_landing_follows_vertex_order_mirror_images_and_units(wolf_pair, snapped):
+    """The source's vertices shuffled, both shapes mirrored (faces rewound) or both in other units: the same
+    landing, shuffled, mirrored or scaled with them."""
     from corrlib.morph import map_image
 
     wolf0, wolf1 = wolf_pair
+
+    def landing(source, target, map_xy):
+        return image_on_surface(source, target, map_xy, map_image(source, target.vertices, map_xy))
+
+    landed = landing(wolf0, wolf1, snapped)
     order = np.random.default_rng(5).permutation(wolf0.n_vertices)
     shuffled = TriMesh(wolf0.vertices[order], np.argsort(order)[wolf0.faces])
-    landed = image_on_surface(wolf0, wolf1, snapped, map_image(wolf0, wolf1.vertices, snapped))
-    again = image_on_surface(shuffled, wolf1, snapped[order], map_image(shuffled, wolf1.vertices, snapped[order]))
-    assert np.allclose(again, landed[order], atol=1e-9)
+    assert np.allclose(landing(shuffled, wolf1, snapped[order]), landed[order], atol=1e-9)
+    flip = np.array([-1.0, 1.0, 1.0])
+    mirrored = landing(TriMesh(wolf0.vertices * flip, wolf0.faces[:, ::-1]),
+                       TriMesh(wolf1.vertices * flip, wolf1.faces[:, ::-1]), snapped)
+    assert np.allclose(mirrored * flip, landed, atol=1e-9)
+    scaled = landing(TriMesh(wolf0.vertices * 1000.0, wolf0.faces), TriMesh(wolf1.vertices * 1000.0, wolf1.faces),
+                     snapped)
+    assert np.allclose(scaled / 1000.0, landed, atol=1e-9)
 
 
 def test_only_faces_the_map_collapses_or_turns_are_moved(wolf_pair):

@@ -34,7 +34,6 @@ from PySide6.QtWidgets import (
 )
 
 from app.views.camera import Displayed, FramedView, enable_hover, picked_vertex
-from corrlib.evaluation import image_area_share
 from app.views.scene import (
     ERROR_BAR_TITLE,
     ERROR_COLOR_MAX,
@@ -46,6 +45,7 @@ from app.views.scene import (
     polydata,
     transfer_colors,
 )
+from corrlib.evaluation import image_area_share
 
 #: table columns: header and tooltip. The methods' own objectives are not a column: they measure different
 #: things and do not sort against each other; each is in its method's tooltip (:func:`objective_tip`).

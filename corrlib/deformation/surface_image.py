@@ -3,8 +3,8 @@
 A point-to-point map between two meshes sends every source vertex to a target *vertex*. Where the source is
 sampled more finely than the map resolves (a spectral method's maps are not one-to-one), neighbouring source
 vertices land on the same target vertex, and the source drawn at the image, ``Y[map_xy]``, has faces of no
-area (``docs/decisions.md`` has the figures). That image is the last frame of a sequence through the map (:mod:`corrlib.morph`), the mesh a user exports as the
-target pose.
+area (``docs/decisions.md`` has the figures). That image is the last frame of a sequence through the map
+(:mod:`corrlib.morph`), the mesh a user exports as the target pose.
 
 :func:`image_on_surface` spreads the corners of the faces the map collapses or turns over
 (:func:`collapsed_or_turned`) over the target's surface by tangential relaxation, as remeshers relax their
@@ -110,9 +110,7 @@ def image_on_surface(source, target, map_xy: np.ndarray, image: np.ndarray) -> n
     free = np.unique(source.faces[collapsed_or_turned(source.faces, map_xy, target)])
     if free.size == 0:
         return landed
-    edges = source.edges
-    neighbours = sp.coo_matrix((np.ones(2 * len(edges)), (edges.ravel(order="F"), edges[:, ::-1].ravel(order="F"))),
-                               shape=(source.n_vertices,) * 2).tocsr()[free]
+    neighbours = (source.adjacency[free] != 0).astype(np.float64)  # the free vertices' rows of the edge graph
     degree = np.maximum(np.asarray(neighbours.sum(axis=1)).ravel(), 1.0)[:, None]
     neighbourhoods = ring_neighbourhoods(target.adjacency, CANDIDATE_RINGS)
     for _ in range(RELAXATION_STEPS):

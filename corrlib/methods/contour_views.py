@@ -165,11 +165,18 @@ def diagonal_length(points_a: np.ndarray, points_b: np.ndarray) -> float:
     return float(np.hypot(Contour2D(points_a, validate=False).length, Contour2D(points_b, validate=False).length))
 
 
+def reading_contexts(drawing: Contour2D) -> tuple[np.ndarray, np.ndarray]:
+    """The drawing's inner-distance shape contexts (:func:`~corrlib.descriptors.shape_context.outline_context`)
+    as drawn and mirrored (:func:`mirror_image`; the context is taken counter-clockwise, so the reflection's
+    reversal of the outline's direction is turned back)."""
+    return outline_context(drawing), outline_context(mirror_image(drawing))
+
+
 def view_unlikeness(drawing: Contour2D, outlines: list[tuple[Contour2D, bool]]) -> np.ndarray:
     """(p,) float: for every view outline and reading of the drawing (as drawn, or ``mirrored``), the
     inner-distance shape context dissimilarity of the reading to the outline (lower: more alike; Ling & Jacobs
     2007), the view dissimilarity retrieval fuses with the energy (:mod:`corrlib.outline_views`)."""
-    readings = [outline_context(reading) for reading in (drawing, mirror_image(drawing))]
+    readings = reading_contexts(drawing)
     contexts = {id(outline): outline_context(outline) for outline, _ in outlines}  # once per view
     return np.array([outline_dissimilarity(readings[int(mirrored)], contexts[id(outline)])
                      for outline, mirrored in outlines])

@@ -179,10 +179,10 @@ def sequence_options(result, source: TriMesh, target: TriMesh) -> dict[str, tupl
     Built in the worker: the rigid interpolation factorises a Poisson system, too slow for the GUI thread on a
     fine mesh. A further motion that cannot be built (a named :class:`CorrError`) is left out of the choice."""
     from corrlib.methods.divergence_free import SEQUENCE_T_MAX
-    from corrlib.morph import INTERPOLATIONS, describe_sequence, sequence_kind, sequence_positions
+    from corrlib.morph import describe_sequence, sequence_kind, sequence_positions
 
     # "auto" first (what the method itself offers), then the interpolations through the map that it is not
-    asked = INTERPOLATIONS if result.map_xy is not None else ("auto",)
+    asked = ("auto", "rigid", "linear") if result.map_xy is not None else ("auto",)
     kinds = {}
     for interpolation in asked:
         kinds.setdefault(sequence_kind(result, interpolation), interpolation)

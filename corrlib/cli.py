@@ -387,6 +387,10 @@ def _check_morph_options(args) -> None:
         given = "--method" if args.method is not None else "--param"
         raise CorrError(f"--map gives the map to interpolate through, so no method runs: give --map or {given}, "
                         "not both")
+    if args.interpolation == "flow" and (args.map is not None or (args.method or MORPH_METHOD) != MORPH_METHOD):
+        what = "a map" if args.map is not None else f"--method {args.method}"
+        raise CorrError(f"--interpolation flow follows {MORPH_METHOD}'s flow, and {what} has none: use rigid or "
+                        "linear (or auto)")
     if not 2 <= args.frames <= MAX_FRAMES:
         raise CorrError(f"--frames must be between 2 and {MAX_FRAMES}, got {args.frames}")
     if not (np.isfinite(args.t_max) and 0 < args.t_max <= SEQUENCE_T_MAX):
@@ -477,16 +481,13 @@ def cmd_demo(args) -> int:
 
 def cmd_methods(args) -> int:
     from corrlib.methods import all_methods
-    from corrlib.methods.base import param_fields
+    from corrlib.methods.base import param_fields, parameter_line
 
     for spec in all_methods():
         print(f"{spec.name}  ({spec.inputs[0]} -> {spec.inputs[1]}): {spec.label}")
         print(f"    {spec.description}")
         for f in param_fields(spec.params):
-            m = f.metadata
-            rng = f" choices {m['choices']}" if m.get("choices") else (
-                f" [{m.get('low')}, {m.get('high')}]" if m.get("low") is not None else "")
-            print(f"    --param {f.name}={f.default}{rng}: {m.get('help', '')}")
+            print(f"    --param {parameter_line(f)}")
     return 0
 
 
@@ -618,7 +619,8 @@ def _add_morph_parser(sub) -> None:
                    help="interpolate through this map instead of running a method (one 0-based target index per "
                         "source vertex, -1 unmatched; or a result .npz)")
     p.add_argument("--interpolation", default="auto",
-                   help="auto (default): the method's flow if it has one, else rigid; rigid: as rigid as possible "
+                   help="auto (default): the method's flow if it has one, else rigid; flow: the method's flow "
+                        f"({MORPH_METHOD} only); rigid: as rigid as possible "
                         "(every face turns and stretches by a share of its deformation); linear: vertex positions "
                         "(shrinks what turns)")
     p.add_argument("--frames", type=int, default=11,

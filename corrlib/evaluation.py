@@ -77,12 +77,16 @@ def curve_auc(curve, thresholds=DEFAULT_THRESHOLDS) -> float:
 
 
 def _check_indices(name: str, idx, n: int) -> np.ndarray:
-    a = np.asarray(idx)
-    if a.ndim != 1 or not np.issubdtype(a.dtype, np.integer):
-        raise InputError(f"{name} must be a 1-D integer array, got {a.dtype} {a.shape}")
+    """``idx`` as a 1-D int64 array of indices in ``[0, n)``: whole numbers in a float array (a map read with
+    ``np.loadtxt``) are taken, as by :func:`~corrlib.io.vertex_indices` everywhere else."""
+    from corrlib.io import vertex_indices
+
+    a = vertex_indices(idx, name)
+    if a.ndim != 1:
+        raise InputError(f"{name} must be a 1-D array of indices, got shape {a.shape}")
     if a.size and (a.min() < 0 or a.max() >= n):
         raise InputError(f"{name} has indices outside [0, {n - 1}]")
-    return a.astype(np.int64)
+    return a
 
 
 def geodesic_errors(map_xy, target, gt_source, gt_target, *, gt_target_sym=None, normalize: str = "sqrt_area",
@@ -111,6 +115,11 @@ def geodesic_errors(map_xy, target, gt_source, gt_target, *, gt_target_sym=None,
     -------
     ErrorReport
     """
+    from corrlib.shapes import TriMesh
+
+    if not isinstance(target, TriMesh):
+        raise InputError(f"the target must be the mesh the map points into (a TriMesh: the errors are geodesic "
+                         f"distances on it), got {type(target).__name__}")
     n_y = target.n_vertices
     map_xy = _check_indices("map_xy", map_xy, n_y)
     gt_source = _check_indices("gt_source", gt_source, map_xy.shape[0])
@@ -201,9 +210,19 @@ def evaluate(result, target, gt_source, gt_target, **options) -> ErrorReport:
     -------
     ErrorReport
     """
+    import inspect
+
+    known = [name for name, p in inspect.signature(geodesic_errors).parameters.items() if p.kind == p.KEYWORD_ONLY]
+    unknown = sorted(set(options) - set(known))
+    if unknown:
+        raise ParameterError(f"evaluate: unknown option {unknown[0]!r} (known: {', '.join(known)})")
     map_xy = getattr(result, "map_xy", result)
     if map_xy is None:
         raise InputError(f"the result of {getattr(result, 'method', '?')!r} has no point-to-point map to evaluate")
+    map_yx = getattr(result, "map_yx", None)
+    if map_yx is not None and getattr(target, "n_vertices", None) not in (None, len(map_yx)):
+        raise InputError(f"the result's reverse map has {len(map_yx)} entries for a {target.n_vertices}-vertex "
+                         "target: the errors must be measured on the target the result was computed for")
     return geodesic_errors(map_xy, target, gt_source, gt_target, **options)
 
 

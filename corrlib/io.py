@@ -731,7 +731,7 @@ def check_image_size(path, width: int, height: int) -> None:
 
 def load_contour(path, n_points: int | None = None, *, assume_closed: bool = False,
                  threshold: float | None = None, min_points: int = 10) -> Contour2D:
-    """Load a closed 2D contour from a point file, an SVG or a silhouette image.
+    """Load a closed 2D contour from a point file, an SVG, a silhouette image or a flat triangulated sketch.
 
     Parameters
     ----------
@@ -739,8 +739,10 @@ def load_contour(path, n_points: int | None = None, *, assume_closed: bool = Fal
         ``.txt``/``.csv``/``.xy``/``.pts``/``.dat`` (``x y`` per line, comma,
         semicolon or blank separated, ``#`` comments), ``.svg`` (the
         largest closed subpath of any path/polygon/polyline; y flipped to
-        point up), or an image (largest outer silhouette boundary; x right, y up,
-        one unit per pixel).
+        point up), an image (largest outer silhouette boundary; x right, y up,
+        one unit per pixel), or a mesh file of a planar sketch (its longest
+        boundary loop in the sketch's plane, :func:`~corrlib.shapes.sketch_outline`;
+        a mesh that is not flat is refused).
     n_points : int, optional
         Resample uniformly by arc length to this many points.
     assume_closed : bool
@@ -782,6 +784,10 @@ def load_contour(path, n_points: int | None = None, *, assume_closed: bool = Fal
             raise FileFormatError(f"{path}: cannot read image: {exc}") from exc
         mask = silhouette_mask(arr, threshold, name=name)
         contour = Contour2D(contour_from_mask(mask, name=name), name=name, min_points=min_points)
+    elif suffix in MESH_SUFFIXES:  # a flat triangulated sketch (as the 2D-to-3D commands read one)
+        from corrlib.shapes import sketch_outline
+
+        contour = Contour2D(sketch_outline(load_mesh(path))[0].points, name=name, min_points=min_points)
     else:
         raise FileFormatError(f"{path}: unsupported contour format {suffix!r} (use a point file, "
                               f"an SVG or an image: {', '.join(suffixes('contour', readable=True))})")
@@ -849,6 +855,36 @@ def non_integer_entry(values: np.ndarray) -> tuple | None:
     values = np.asarray(values, dtype=np.float64)
     bad = ~np.isfinite(values) | (values != np.round(values)) | (np.abs(values) > _LARGEST_INDEX)
     return np.unravel_index(int(np.argmax(bad)), values.shape) if np.any(bad) else None
+
+
+def checked_map(values, n_x: int, n_y: int, what: str = "the map") -> np.ndarray:
+    """``values`` as a map of an ``n_x``-vertex source onto an ``n_y``-vertex target, (n_x,) int64 (-1: no
+    partner); an :class:`InputError` naming ``what`` unless it holds one whole-number index in range per source
+    vertex and matches some vertex."""
+    mp = vertex_indices(values, what)
+    if mp.shape != (n_x,):
+        raise InputError(f"{what} must hold one target vertex per source vertex, shape ({n_x},); got shape "
+                         f"{mp.shape}")
+    bad = np.flatnonzero((mp < -1) | (mp >= n_y))
+    if bad.size:
+        raise InputError(f"{what} sends source vertex {bad[0]} to {mp[bad[0]]}, outside a {n_y}-vertex target "
+                         f"(0 to {n_y - 1}, or -1 for no partner)")
+    if not np.any(mp >= 0):
+        raise InputError(f"{what} matches no vertex")
+    return mp
+
+
+def vertex_indices(values, what: str) -> np.ndarray:
+    """``values`` as int64 vertex indices; :class:`InputError` naming ``what`` unless every entry is a whole
+    number (a float map, e.g. 0.9, would otherwise be cut to 0 without a word)."""
+    array = np.asarray(values)
+    if array.dtype == bool or not (np.issubdtype(array.dtype, np.integer) or np.issubdtype(array.dtype, np.floating)):
+        raise InputError(f"{what} must hold vertex indices (integers), got {array.dtype} values")
+    where = non_integer_entry(array) if np.issubdtype(array.dtype, np.floating) else None
+    if where is not None:
+        raise InputError(f"{what} must hold integer vertex indices; entry {where[0] if len(where) == 1 else where} "
+                         f"is {float(array[where])!r}")
+    return array.astype(np.int64)
 
 
 def _integers(values: np.ndarray, path: Path, what: str, entry: str = "vertex indices") -> np.ndarray:

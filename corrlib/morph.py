@@ -16,6 +16,8 @@ for t > 1 and keep the source's connectivity.
 
 from __future__ import annotations
 
+from dataclasses import dataclass
+
 import numpy as np
 
 from corrlib.errors import InputError
@@ -28,8 +30,8 @@ RIGID_DESCRIPTION = ("as-rigid-as-possible interpolation through the map (each f
                      "of its own deformation, to the map's image on the target's surface; t > 1 extrapolates)")
 LINEAR_DESCRIPTION = ("linear vertex interpolation through the map (shrinks what turns, folds where the map "
                       "does)")
-#: ``interpolation`` choices: "auto" is the method's flow where it has one, else "rigid"
-INTERPOLATIONS = ("auto", "rigid", "linear")
+#: ``interpolation`` choices: "auto" is the method's flow where it has one, else "rigid"; "flow" asks for the flow
+INTERPOLATIONS = ("auto", "flow", "rigid", "linear")
 
 
 def map_image(source, target_vertices: np.ndarray, map_xy: np.ndarray) -> np.ndarray:
@@ -66,12 +68,41 @@ def has_deformation(result) -> bool:
 
 def sequence_kind(result, interpolation: str = "auto") -> str:
     """``"flow"``, ``"rigid"`` or ``"linear"``: what ``interpolation`` (:data:`INTERPOLATIONS`) means for a
-    result."""
+    result; an :class:`InputError` for "flow" where the result has none."""
     if interpolation not in INTERPOLATIONS:
         raise InputError(f"unknown interpolation {interpolation!r} (use {', '.join(INTERPOLATIONS)})")
     if interpolation == "auto":
         return "flow" if has_deformation(result) else "rigid"
+    if interpolation == "flow" and not has_deformation(result):
+        raise InputError(f"the result of {result.method!r} has no flow (a deformation model: divergence-free "
+                         "fits one); use rigid or linear to interpolate through its map")
     return interpolation
+
+
+@dataclass(frozen=True)
+class GivenMap:
+    """A bare map to move through, in the place of a method's result (what the sequence reads of one)."""
+
+    map_xy: np.ndarray
+    method: str = "a map"
+    deformation: None = None
+
+
+def as_result(result, source, target):
+    """What a sequence moves through: a method's result (anything with ``map_xy``, ``method`` and
+    ``deformation``, e.g. a :class:`~corrlib.methods.base.MatchResult`) as it is, or a bare map ((n_x,) int, -1
+    unmatched, as ``corr morph --map`` reads one) as a :class:`GivenMap`; an :class:`InputError` naming what is
+    wrong with the inputs (not meshes, a map of the wrong length, range or kind)."""
+    from corrlib.io import checked_map
+    from corrlib.shapes import TriMesh
+
+    for role, shape in (("source", source), ("target", target)):
+        if not isinstance(shape, TriMesh):
+            raise InputError(f"a sequence moves a mesh onto a mesh: the {role} must be a TriMesh, got "
+                             f"{type(shape).__name__}")
+    if hasattr(result, "map_xy") and hasattr(result, "deformation"):
+        return result
+    return GivenMap(checked_map(result, source.n_vertices, target.n_vertices))
 
 
 def describe_sequence(result, interpolation: str = "auto") -> str:
@@ -100,11 +131,12 @@ def sequence_positions(result, source, target, t_max: float = 1.5, interpolation
 
     Parameters
     ----------
-    result : MatchResult
+    result : MatchResult or (n_x,) int
+        A method's result, or a map (-1: unmatched).
     source, target : TriMesh
     t_max : float
         Largest time the callable will be asked for (the flow is precomputed up to it).
-    interpolation : {"auto", "rigid", "linear"}
+    interpolation : {"auto", "flow", "rigid", "linear"}
         "auto": the method's flow where it has one, else "rigid".
 
     Returns
@@ -112,6 +144,7 @@ def sequence_positions(result, source, target, t_max: float = 1.5, interpolation
     callable
         ``positions(t) -> (n_x, 3)``; for the flow its RK2 trajectory (exact at its steps, linear in between).
     """
+    result = as_result(result, source, target)
     kind = sequence_kind(result, interpolation)
     if kind == "flow":
         flowed, frames = result.deformation.source_interpolator(source.vertices, t_max), result.deformation.frames
@@ -130,7 +163,24 @@ def frame_times(count: int, t_max: float) -> np.ndarray:
 
 def frame_positions(result, source, target, times, interpolation: str = "auto") -> list[np.ndarray]:
     """Exact positions at ``times`` (the flow integrated to each time, or the interpolation through the map); the
-    times must be finite numbers (every kind extrapolates beyond 1)."""
+    times must be finite numbers (every kind extrapolates beyond 1).
+
+    Parameters
+    ----------
+    result : MatchResult or (n_x,) int
+        A method's result, or a map (-1: unmatched).
+    source, target : TriMesh
+    times : (F,) float
+        E.g. :func:`frame_times`.
+    interpolation : {"auto", "flow", "rigid", "linear"}
+        See :func:`sequence_positions`.
+
+    Returns
+    -------
+    list of (n_x, 3) float
+        One frame per time, on the source's faces (:func:`export_sequence` writes them).
+    """
+    result = as_result(result, source, target)
     try:
         times = np.asarray(times, dtype=np.float64).reshape(-1)
     except (TypeError, ValueError):
@@ -199,6 +249,7 @@ def export_sequence(folder, frames, faces, times, *, fmt: str = "obj", animation
         raise InputError(f"unknown frame format {fmt!r} (use obj, ply or off)")
     if len(frames) != len(times) or len(frames) == 0:
         raise InputError(f"{len(frames)} frames for {len(times)} times")
+    _check_frames(frames, faces)  # before the folder is made: a bad frame leaves nothing behind
     out = Path(folder)
     try:
         out.mkdir(parents=True, exist_ok=True)
@@ -222,6 +273,21 @@ def export_sequence(folder, frames, faces, times, *, fmt: str = "obj", animation
             fh.write(f"{i},{t:.6g},{v:.9g},{said}\n")
     anim = save_glb_animation(out / "animation.glb", frames, faces, times) if animation else None
     return {"frames": paths, "animation": anim, "volumes": table, "volume": volumes}
+
+
+def _check_frames(frames, faces) -> None:
+    """An :class:`InputError` unless ``faces`` are a mesh's triangles on the first frame's vertices
+    (:class:`~corrlib.shapes.TriMesh` checks them) and every frame holds finite positions of the same shape."""
+    from corrlib.shapes import TriMesh
+
+    first = TriMesh(np.asarray(frames[0], dtype=np.float64), faces, name="frame 0")
+    for index, frame in enumerate(frames):
+        positions = np.asarray(frame, dtype=np.float64)
+        if positions.shape != first.vertices.shape:
+            raise InputError(f"frame {index} must hold positions of shape {first.vertices.shape} (the first "
+                             f"frame's), got shape {positions.shape}")
+        if not np.all(np.isfinite(positions)):
+            raise InputError(f"frame {index} holds NaN or infinite positions")
 
 
 def save_glb_animation(path, frames, faces, times):

@@ -37,7 +37,7 @@ import os
 import re
 from collections.abc import Iterable
 from concurrent.futures import FIRST_COMPLETED, wait
-from dataclasses import dataclass
+from dataclasses import dataclass, field
 from pathlib import Path
 
 import numpy as np
@@ -48,7 +48,7 @@ from corrlib.parallel import check_jobs, job_executor
 from corrlib.methods.contour3d import Contour3DParams, PreparedQuery, curve_collapsed, match_prepared, prepare_query
 from corrlib.outline_views import QueryOutline, query_outline, view_dissimilarity
 from corrlib.progress import CancelToken, Progress, run
-from corrlib.shapes import plane_coordinates
+from corrlib.shapes import Contour2D, TriMesh, plane_coordinates
 
 #: how :func:`retrieve` ranks: by the product of the two measures, or by the matching energy alone
 RANKINGS = ("fused", "energy")
@@ -140,10 +140,10 @@ class RetrievalHit:
     path: Path
     energy: float
     error: str = ""
-    path_vertices: np.ndarray | None = None
-    path_contour_index: np.ndarray | None = None
+    path_vertices: np.ndarray | None = field(default=None, repr=False)
+    path_contour_index: np.ndarray | None = field(default=None, repr=False)
     seconds: float = 0.0
-    contour_points: np.ndarray | None = None
+    contour_points: np.ndarray | None = field(default=None, repr=False)
     root: Path | None = None
     view_distance: float = float("nan")
     score: float = float("nan")
@@ -178,15 +178,17 @@ class RetrievalHit:
         return class_of(self.path, self.root)
 
 
-def _match_one(query: PreparedQuery, path: str, params: Contour3DParams,
+def _match_one(query: PreparedQuery, item: str | TriMesh, params: Contour3DParams,
                outline: QueryOutline | None) -> RetrievalHit:
-    """Worker: match the prepared query to one mesh file and, given the query's ``outline``, compare it with the
-    mesh's views (errors become a failed hit)."""
+    """Worker: match the prepared query to one mesh (a file, or a loaded :class:`~corrlib.shapes.TriMesh` named by
+    its ``name``) and, given the query's ``outline``, compare it with the mesh's views (errors become a failed
+    hit)."""
     import time
 
     start = time.perf_counter()
+    path = item.name if isinstance(item, TriMesh) else item
     try:
-        mesh = load_mesh(path)
+        mesh = item if isinstance(item, TriMesh) else load_mesh(item)
         if plane_coordinates(mesh.vertices) is not None:
             return RetrievalHit(Path(path), np.inf, f"{path}: {FLAT_CANDIDATE}", score=np.inf, left_out=True)
         # a mesh that cannot be remeshed is not matched as given: its energy would not compare with the others'
@@ -233,6 +235,22 @@ def fused_scores(energies, view_distances) -> np.ndarray:
     return scores
 
 
+def collection_items(meshes) -> list[str | TriMesh]:
+    """The meshes :func:`retrieve` ranks: file paths as strings, loaded meshes as they are; an
+    :class:`InputError` for an empty collection or an entry of another kind (a contour, a number)."""
+    items = []
+    for index, item in enumerate(meshes):
+        if isinstance(item, TriMesh):
+            items.append(item)
+        elif isinstance(item, (str, os.PathLike)):
+            items.append(str(item))
+        else:
+            raise InputError(f"meshes[{index}] must be a mesh file or a TriMesh, got {type(item).__name__}")
+    if not items:
+        raise InputError("no meshes to rank")
+    return items
+
+
 def mesh_files(folder) -> list[Path]:
     """The mesh files (OFF/OBJ/PLY/STL) of a collection: in ``folder`` and its subfolders (:func:`files_under`)."""
     return files_under(folder, MESH_SUFFIXES, "mesh files")
@@ -240,12 +258,18 @@ def mesh_files(folder) -> list[Path]:
 
 def retrieve(query_contour, meshes: Iterable, params: Contour3DParams | None = None, *, jobs: int | None = None,
              token: CancelToken | None = None, scheduler: str | None = None, root=None, ranking: str = "fused"):
-    """Rank meshes by matching energy to a query contour (solver generator).
+    """Rank meshes by how well a query contour matches them: the matching energy times the view dissimilarity
+    (``ranking="fused"``, the default) or the energy alone.
+
+    A generator: ``corrlib.progress.run(retrieve(query, meshes))`` returns the ranked hits (``run(...,
+    callback=print)`` also shows the progress).
 
     Parameters
     ----------
     query_contour : Contour2D
-    meshes : iterable of paths
+    meshes : folder, or iterable of mesh files or TriMesh
+        A collection folder (its meshes and those of its subfolders, :func:`mesh_files`, named within it), or
+        the meshes themselves: files, or meshes already loaded (named by their ``name``).
     params : Contour3DParams, optional
         Default: :func:`retrieval_params` (the exact optimum: an approximate
         energy may lie up to a factor ``1 + eps`` above it, which reorders
@@ -284,13 +308,16 @@ def retrieve(query_contour, meshes: Iterable, params: Contour3DParams | None = N
     if not isinstance(params, Contour3DParams):
         raise ParameterError(f"params must be contour3d's parameters (Contour3DParams, e.g. retrieval_params()), "
                              f"got {type(params).__name__}")
+    if not isinstance(query_contour, Contour2D):
+        raise InputError(f"the query must be a Contour2D (corrlib.load_contour), got {type(query_contour).__name__}")
     token = token or CancelToken()
     if isinstance(meshes, (str, os.PathLike)):  # one folder, not a sequence of one-letter paths
-        raise InputError(f"meshes must be a list of mesh files, got the single path {str(meshes)!r} (for a folder, "
-                         "pass its meshes, e.g. sorted(Path(folder).glob('*.off')))")
-    paths = [str(p) for p in meshes]
-    if not paths:
-        raise InputError("no meshes to rank")
+        if not Path(meshes).is_dir():
+            raise InputError(f"meshes: {str(meshes)!r} is not a folder; give a collection folder or a list of "
+                             f"meshes{lost_working_folder(Path(meshes))}")
+        root = Path(meshes) if root is None else root
+        meshes = mesh_files(meshes)
+    items = collection_items(meshes)
     check_jobs(jobs)
     jobs = jobs or os.cpu_count() or 1
     yield Progress("query features", 0.0)
@@ -298,14 +325,14 @@ def retrieve(query_contour, meshes: Iterable, params: Contour3DParams | None = N
     outline = query_outline(query_contour) if ranking == "fused" else None
     hits: list[RetrievalHit] = []
     if jobs == 1 and scheduler is None:
-        for path in paths:
+        for item in items:
             token.raise_if_cancelled()
-            hits.append(_match_one(query, path, params, outline))
+            hits.append(_match_one(query, item, params, outline))
             hits[-1].root = root
-            yield Progress("matching", len(hits) / len(paths), hits[-1].measured())
+            yield Progress("matching", len(hits) / len(items), hits[-1].measured())
     else:
-        with job_executor(min(jobs, len(paths)), scheduler) as pool:
-            pending = {pool.submit(_match_one, query, path, params, outline) for path in paths}
+        with job_executor(min(jobs, len(items)), scheduler) as pool:
+            pending = {pool.submit(_match_one, query, item, params, outline) for item in items}
             try:
                 while pending:
                     done, pending = wait(pending, timeout=0.2, return_when=FIRST_COMPLETED)
@@ -313,7 +340,7 @@ def retrieve(query_contour, meshes: Iterable, params: Contour3DParams | None = N
                     for fut in done:
                         hits.append(fut.result())
                         hits[-1].root = root
-                        yield Progress("matching", len(hits) / len(paths), hits[-1].measured())
+                        yield Progress("matching", len(hits) / len(items), hits[-1].measured())
             finally:
                 for fut in pending:
                     fut.cancel()

@@ -18,7 +18,7 @@ from corrlib.io import load_mesh
 from corrlib.methods import solve
 from corrlib.methods.contour3d import feature_distances, mean_feature_distance, node_costs
 from corrlib.progress import CancelToken, run
-from corrlib.retrieval import average_precision, class_of, mean_average_precision, retrieve
+from corrlib.retrieval import average_precision, class_of, mean_average_precision, retrieval_params, retrieve
 from corrlib.shapes import Contour2D, TriMesh
 
 
@@ -702,6 +702,33 @@ def test_retrieval_reports_broken_meshes(tmp_path):
     hits = run(retrieve(Contour2D(np.column_stack([np.cos(t), np.sin(t)])),
                         [tmp_path / "broken3.off", TOSCA / "wolf0.off"], jobs=1))
     assert hits[0].path.name == "wolf0.off" and np.isinf(hits[1].energy) and "broken3.off" in hits[1].error
+
+
+def test_retrieval_takes_a_folder_files_or_loaded_meshes_alike(tmp_path):
+    """A script's collection can be a folder (its meshes and subfolders, named within it), a list of files or
+    meshes already loaded (named by their ``name``): the same scores in the same order. A loaded mesh was taken
+    for a file name and failed as "file not found" at the end of the ranking."""
+    import shutil
+
+    (tmp_path / "wolves").mkdir()
+    for name in ("wolf0.off", "wolf1.off"):
+        shutil.copy(TOSCA / name, tmp_path / "wolves" / name)
+    shutil.copy(TOSCA / "cat0.off", tmp_path / "cat0.off")
+    files = [tmp_path / "cat0.off", tmp_path / "wolves" / "wolf0.off", tmp_path / "wolves" / "wolf1.off"]
+    t = np.linspace(0, 2 * np.pi, 60, endpoint=False)
+    query = Contour2D(np.column_stack([np.cos(t), 0.4 * np.sin(t)]))
+    params = retrieval_params(n_contour=40)
+    by_folder = run(retrieve(query, tmp_path, params, jobs=1, ranking="energy"))
+    by_files = run(retrieve(query, files, params, jobs=1, ranking="energy"))
+    loaded = run(retrieve(query, [load_mesh(f) for f in files], params, jobs=1, ranking="energy"))
+    assert [hit.name for hit in by_folder] == [f"wolves/{h.path.name}" if "wolf" in h.path.name else h.path.name
+                                               for h in by_files]
+    assert [hit.label for hit in by_folder if "wolf" in hit.name] == ["wolves", "wolves"]
+    assert all(hit.error == "" for hit in loaded)
+    for hits in (by_folder, loaded):
+        assert [h.path.name for h in hits] == [h.path.name for h in by_files]
+        assert [h.energy for h in hits] == pytest.approx([h.energy for h in by_files], rel=1e-9)
+    assert "path_vertices" not in repr(loaded[0])  # a hit prints in a line, not its arrays
 
 
 def test_retrieval_does_not_rank_flat_sketches(tmp_path):

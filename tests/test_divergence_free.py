@@ -448,6 +448,9 @@ def test_result_reloads_into_the_same_deformation(warped_wolf, warped_result, tm
     assert float(deformation.source_steps.times[-1]) == pytest.approx(3.0)
     assert np.array_equal(loaded.map_xy, warped_result.map_xy) and loaded.energy == warped_result.energy
     assert np.array_equal(loaded.energy_trace, warped_result.energy_trace)
+    assert loaded == warped_result  # every field, the deformation by its stored arrays
+    loaded.deformation.coeffs = loaded.deformation.coeffs + 1e-3
+    assert loaded != warped_result
 
 
 @pytest.mark.parametrize("jacobian_every", [1, 2])

@@ -487,8 +487,15 @@ def test_bad_arguments_of_the_python_api_are_named(tmp_path, wolf_pair):
     with pytest.raises(CorrError, match="times must be finite, got nan"):
         frame_positions(result, wolf0, wolf1, [0.5, float("nan")])
     circle = Contour2D(np.column_stack([np.cos(np.linspace(0, 6.2, 40)), np.sin(np.linspace(0, 6.2, 40))]))
-    with pytest.raises(CorrError, match="got the single path"):
+    with pytest.raises(CorrError, match="no mesh files .* in it or its subfolders"):  # a folder is a collection
         run(retrieve(circle, str(tmp_path), jobs=1))
+    with pytest.raises(CorrError, match="'.*missing' is not a folder"):
+        run(retrieve(circle, str(tmp_path / "missing"), jobs=1))
+    for collection, kind in (([wolf0, circle], "Contour2D"), ([3], "int")):
+        with pytest.raises(CorrError, match=f"meshes\\[.\\] must be a mesh file or a TriMesh, got {kind}"):
+            run(retrieve(circle, collection, jobs=1))
+    with pytest.raises(CorrError, match="the query must be a Contour2D .*, got TriMesh"):
+        run(retrieve(wolf0, [wolf1], jobs=1))
 
 
 def test_an_outline_too_thin_to_fill_is_named(tmp_path, capsys):

@@ -170,6 +170,31 @@ def test_typed_result_parts_survive_save_and_load(tmp_path):
     assert loaded.search.gap == pytest.approx(0.1)
     assert loaded.extras["band_size"] == 0.25 and np.array_equal(loaded.extras["path_map_xy"], np.arange(7))
     assert loaded.deformation is None
+    assert loaded == result and loaded.path == path  # the save's promise: an equal result
+
+
+def test_results_compare_by_value():
+    """``==`` on results and contour paths compares every field by value (arrays entry by entry, NaN equal to
+    NaN, a tuple equal to the list JSON gives back); a dataclass's generated ``==`` raised on the arrays."""
+    from corrlib.methods.base import ContourPath, MatchResult, same_values
+
+    def made(**changes):
+        fields = dict(method="m", map_xy=np.array([2, 0, 1]), energy=float("nan"), timings={"total": 0.5},
+                      energy_trace=np.array([1.0, np.nan]), extras={"sizes": (3, 4), "rows": np.arange(3)},
+                      path=ContourPath(np.zeros((3, 2)), np.array([0, 1]), np.array([0, 1]), np.array([0, 1])))
+        fields.update(changes)
+        return MatchResult(**fields)
+
+    assert made() == made(extras={"sizes": [3, 4], "rows": np.arange(3)})
+    assert made() != made(map_xy=np.array([2, 1, 0]))
+    assert made() != made(map_xy=np.array([2, 0, 1, 0]))
+    assert made() != made(extras={"sizes": (3, 4)})
+    assert made() != made(path=None)
+    assert made() != made(energy_trace=np.array([1.0, 2.0]))
+    assert made().__eq__("a result") is NotImplemented
+    assert same_values({"a": np.ones(2)}, {"a": np.ones(2)}) and not same_values(np.ones(2), np.ones((2, 1)))
+    with pytest.raises(TypeError, match="unhashable"):
+        hash(made().path)
 
 
 def test_scaled_progress_maps_fractions_and_returns_the_result():

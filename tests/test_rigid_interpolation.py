@@ -277,8 +277,47 @@ def test_cli_morph_through_a_map(tmp_path, capsys):
     assert main(argv[:-2] + ["--interpolation", "linear", "-o", str(tmp_path / "linear")]) == 0
     assert "linear vertex interpolation" in capsys.readouterr().out
     assert main(argv[:-2] + ["--interpolation", "cubic", "-o", str(tmp_path / "never")]) == 2
-    assert "--interpolation must be one of auto, rigid, linear, got 'cubic'" in capsys.readouterr().err
+    assert "--interpolation must be one of auto, flow, rigid, linear, got 'cubic'" in capsys.readouterr().err
     assert not (tmp_path / "never").exists()  # refused before any work
+    assert main(argv[:-2] + ["--interpolation", "flow", "-o", str(tmp_path / "never")]) == 2
+    assert ("--interpolation flow follows divergence-free's flow, and --method descriptor-nn has none"
+            in capsys.readouterr().err)
+    assert not (tmp_path / "never").exists()
+
+
+def test_a_sequence_from_python_through_a_bare_map(tmp_path):
+    """The library's sequence functions take a map as ``corr morph --map`` does (a result of its own): the wolves'
+    identity goes from wolf0 to wolf1 exactly; the frames are written only where every one is a mesh, and a
+    map of the wrong length, not whole numbers, a contour for a mesh or the flow of a map are named."""
+    from _data import TOSCA
+    from corrlib.errors import InputError
+    from corrlib.io import load_contour, load_mesh
+    from corrlib.morph import export_sequence, frame_positions, sequence_positions
+    from corrlib.resources import resource
+
+    wolf0, wolf1 = load_mesh(TOSCA / "wolf0.off"), load_mesh(TOSCA / "wolf1.off")
+    identity = np.arange(wolf0.n_vertices)
+    first, last = frame_positions(identity.astype(float), wolf0, wolf1, [0.0, 1.0])  # a map read by np.loadtxt
+    assert np.allclose(first, wolf0.vertices, atol=1e-9) and np.allclose(last, wolf1.vertices, atol=1e-9)
+    assert np.allclose(sequence_positions(identity, wolf0, wolf1, interpolation="linear")(0.5),
+                       (wolf0.vertices + wolf1.vertices) / 2)
+    drawn = load_contour(resource("data/silhouettes/drawn/wolf.txt"))
+    for args, message in [((identity[:9], wolf0, wolf1), r"the map must hold one target vertex per source vertex, "
+                                                          r"shape \(4344,\); got shape \(9,\)"),
+                          ((identity + 0.5, wolf0, wolf1), "the map must hold integer vertex indices; entry 0 is 0.5"),
+                          ((identity, drawn, wolf1), "the source must be a TriMesh, got Contour2D")]:
+        with pytest.raises(InputError, match=message):
+            frame_positions(*args, [0.0])
+    with pytest.raises(InputError, match="has no flow .* use rigid or linear"):
+        frame_positions(identity, wolf0, wolf1, [0.0], interpolation="flow")
+    for frames, faces, message in [([first, last[:9]], wolf0.faces, r"frame 1 must hold positions of shape"),
+                                   ([first, last * np.nan], wolf0.faces, "frame 1 holds NaN or infinite positions"),
+                                   ([first, last], wolf0.faces + wolf0.n_vertices, "face")]:
+        with pytest.raises(InputError, match=message):
+            export_sequence(tmp_path / "frames", frames, faces, [0.0, 1.0])
+        assert not (tmp_path / "frames").exists()  # refused before the folder is made
+    written = export_sequence(tmp_path / "frames", [first, last], wolf0.faces, [0.0, 1.0], fmt="off")
+    assert np.allclose(load_mesh(written["frames"][1]).vertices, wolf1.vertices, atol=1e-6)
 
 
 def test_cli_morph_through_a_given_map(tmp_path, capsys):

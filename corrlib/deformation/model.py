@@ -154,7 +154,9 @@ class Deformation:
 
         t = 0 is the source after the pre-alignment (rotated, brought to the
         target's size and placed on it), t = 1 the deformed source, t > 1
-        extrapolates.
+        extrapolates. For a sequence that starts at the source as given (the
+        alignment undone by the share ``1 − t``), use
+        :func:`corrlib.morph.frame_positions`.
         """
         u = self.frames.source_to_cube(points)
         return self.frames.cube_to_target(trajectory(self.basis, u, self.coeffs, t, self.n_steps, keep=False))

@@ -23,6 +23,7 @@ from typing import Any
 import numpy as np
 
 from corrlib.errors import InputError, ParameterError
+from corrlib.io import checked_map, vertex_indices
 
 
 def param(default, *, label: str, help: str, low: float | None = None, high: float | None = None,
@@ -53,6 +54,29 @@ def param(default, *, label: str, help: str, low: float | None = None, high: flo
 def param_fields(params_cls) -> list[dataclasses.Field]:
     """The fields of a parameter dataclass, in declaration order."""
     return list(dataclasses.fields(params_cls))
+
+
+def parameter_line(f: dataclasses.Field) -> str:
+    """``name=default [low, high]: help`` (or ``choices (…)``) of one parameter field, as ``corr methods`` and
+    the parameter classes' docstrings list it."""
+    m = f.metadata
+    allowed = f" choices {m['choices']}" if m.get("choices") else (
+        f" [{m.get('low')}, {m.get('high')}]" if m.get("low") is not None else "")
+    return f"{f.name}={f.default}{allowed}: {m.get('help', '')}"
+
+
+#: where :func:`documented_params` starts the list it appends to a parameter class's docstring
+PARAMETERS_HEADING = "Parameters (name=default [range]: meaning)"
+
+
+def documented_params(params_cls) -> type:
+    """``params_cls`` with the meaning of every field appended to its docstring (once), so that ``help()`` on a
+    method's parameters shows what the studio's tooltips and ``corr methods`` show."""
+    doc = params_cls.__doc__ or ""
+    if PARAMETERS_HEADING not in doc:
+        lines = [f"    {parameter_line(f)}" for f in param_fields(params_cls)]
+        params_cls.__doc__ = f"{doc.rstrip()}\n\n{PARAMETERS_HEADING}\n\n" + "\n".join(lines) + "\n"
+    return params_cls
 
 
 def validate_params(params) -> None:
@@ -158,17 +182,8 @@ class InitialMatch:
         """The matched ``(source, target)`` vertex pairs, checked against the vertex counts: integer indices in
         range (-1 in a map: no partner), one target per source vertex."""
         if self.map_xy is not None:
-            mp = vertex_indices(self.map_xy, "the initial map")
-            if mp.shape != (n_x,):
-                raise InputError(f"the initial map must hold one target vertex per source vertex, shape ({n_x},); "
-                                 f"got shape {mp.shape}")
-            bad = np.flatnonzero((mp < -1) | (mp >= n_y))
-            if bad.size:
-                raise InputError(f"the initial map sends source vertex {bad[0]} to {mp[bad[0]]}, outside a "
-                                 f"{n_y}-vertex target (0 to {n_y - 1}, or -1 for no partner)")
+            mp = checked_map(self.map_xy, n_x, n_y, "the initial map")
             keep = np.flatnonzero(mp >= 0)
-            if keep.size == 0:
-                raise InputError("the initial map matches no vertex")
             return keep, mp[keep]
         lx, ly = vertex_indices(self.landmarks_x, "landmarks_x"), vertex_indices(self.landmarks_y, "landmarks_y")
         if lx.ndim != 1 or lx.size == 0 or lx.shape != ly.shape:
@@ -189,22 +204,31 @@ class InitialMatch:
         return pairs[:, 0], pairs[:, 1]
 
 
-def vertex_indices(values, what: str) -> np.ndarray:
-    """``values`` as int64 vertex indices; :class:`InputError` naming ``what`` unless every entry is a whole
-    number (a float map, e.g. 0.9, would otherwise be cut to 0 without a word)."""
-    from corrlib.io import non_integer_entry
+def same_values(a, b) -> bool:
+    """Whether two values of a result hold the same data: arrays by shape and entries (NaN equal to NaN, as a
+    saved and reloaded result has them), mappings key by key, lists and tuples item by item (JSON gives tuples
+    back as lists), dataclasses field by field, anything else by ``==``. A result's fields are arrays, so the
+    dataclasses' generated ``==`` (which asks an array for one truth value) cannot compare them."""
+    if isinstance(a, np.ndarray) or isinstance(b, np.ndarray):
+        a, b = np.asarray(a), np.asarray(b)
+        if a.shape != b.shape:
+            return False
+        numeric = a.dtype.kind in "fc" and b.dtype.kind in "fc"
+        return bool(np.array_equal(a, b, equal_nan=numeric)) if a.dtype != object else all(
+            same_values(x, y) for x, y in zip(a.ravel(), b.ravel()))
+    if isinstance(a, dict) and isinstance(b, dict):
+        return a.keys() == b.keys() and all(same_values(a[key], b[key]) for key in a)
+    if isinstance(a, (list, tuple)) and isinstance(b, (list, tuple)):
+        return len(a) == len(b) and all(same_values(x, y) for x, y in zip(a, b))
+    if dataclasses.is_dataclass(a) and not isinstance(a, type):
+        return type(a) is type(b) and all(same_values(getattr(a, f.name), getattr(b, f.name))
+                                          for f in dataclasses.fields(a))
+    if isinstance(a, float) and isinstance(b, float) and math.isnan(a) and math.isnan(b):
+        return True
+    return bool(a == b)
 
-    array = np.asarray(values)
-    if array.dtype == bool or not (np.issubdtype(array.dtype, np.integer) or np.issubdtype(array.dtype, np.floating)):
-        raise InputError(f"{what} must hold vertex indices (integers), got {array.dtype} values")
-    where = non_integer_entry(array) if np.issubdtype(array.dtype, np.floating) else None
-    if where is not None:
-        raise InputError(f"{what} must hold integer vertex indices; entry {where[0] if len(where) == 1 else where} "
-                         f"is {float(array[where])!r}")
-    return array.astype(np.int64)
 
-
-@dataclass(frozen=True)
+@dataclass(frozen=True, eq=False)
 class ContourPath:
     """A closed path on the product graph of a contour and a shape (thesis §7.3, Eq. 7.6).
 
@@ -235,6 +259,11 @@ class ContourPath:
     layers: np.ndarray
     target_points: np.ndarray | None = None
     product_functions: dict[str, np.ndarray] = field(default_factory=dict)
+
+    def __eq__(self, other) -> bool:
+        return same_values(self, other) if isinstance(other, ContourPath) else NotImplemented
+
+    __hash__ = None  # holds arrays: compared by value, not hashed
 
 
 @dataclass(frozen=True)
@@ -302,7 +331,7 @@ _PATH_ARRAYS = {"contour_points": "contour_points", "vertices": "path_vertices",
 _DEFORMATION_ARRAYS = ("coefficients", "frames", "trajectory_times", "trajectory")
 
 
-@dataclass
+@dataclass(eq=False)
 class MatchResult:
     """The outcome of a correspondence method.
 
@@ -311,13 +340,16 @@ class MatchResult:
     method : str
         Registry name of the method.
     map_xy : (n_x,) int or None
-        Target vertex for every source vertex (-1 where unmatched).
+        Target vertex for every source vertex (-1 where unmatched). For a contour source, one per point of the
+        contour as resampled for the match (``path.contour_points``), not per point of the drawing.
     map_yx : (n_y,) int or None
         Source vertex for every target vertex (-1 where unmatched).
     energy : float or None
         The method's objective at the solution.
     timings : dict of str -> float
-        Seconds per stage.
+        Seconds per stage, and ``"total"`` (the wall time of the whole solve). Stages that ran side by side
+        (kernel matching's ``"other start"``) overlap the rest, so the stages can add up to more than the
+        total: compare methods by ``"total"``.
     params : dict
         The parameters used.
     energy_sense : {"min", "max"}
@@ -350,6 +382,22 @@ class MatchResult:
     search: SearchCertificate | None = None
     deformation: Any = None
     extras: dict[str, Any] = field(default_factory=dict)
+
+    def __eq__(self, other) -> bool:
+        """Equal results hold the same values in every field (:func:`same_values`; a deformation by the arrays
+        and steps :meth:`save` stores), so that a result reloaded by :meth:`load` equals the one saved."""
+        if not isinstance(other, MatchResult):
+            return NotImplemented
+        plain = [f.name for f in dataclasses.fields(self) if f.name != "deformation"]
+        if not all(same_values(getattr(self, name), getattr(other, name)) for name in plain):
+            return False
+        if (self.deformation is None) != (other.deformation is None):
+            return False
+        return self.deformation is None or (
+            self.deformation.n_steps == other.deformation.n_steps
+            and same_values(_deformation_arrays(self.deformation), _deformation_arrays(other.deformation)))
+
+    __hash__ = None  # mutable and holds arrays
 
     def save(self, stem) -> tuple[Path, Path]:
         """Write ``stem.npz`` (maps, typed arrays and array extras) and ``stem.json`` (everything else).

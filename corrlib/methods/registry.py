@@ -23,7 +23,7 @@ from typing import Any, Protocol
 
 
 from corrlib.errors import InputError, ParameterError
-from corrlib.methods.base import InitialMatch, MatchResult, make_params, validate_params
+from corrlib.methods.base import InitialMatch, MatchResult, documented_params, make_params, validate_params
 from corrlib.progress import CancelToken, Progress, run
 from corrlib.shapes import Contour2D, TriMesh
 
@@ -82,6 +82,9 @@ class MethodSpec:
     #: the solver accepts ``initial=`` (a starting map or landmarks) and can refine another method's map
     refines: bool = False
 
+    def __repr__(self) -> str:
+        return f"MethodSpec({self.name!r}, {self.inputs[0]} -> {self.inputs[1]}, params={self.params.__name__})"
+
 
 _REGISTRY: dict[str, MethodSpec] = {}
 
@@ -90,6 +93,7 @@ def register(spec: MethodSpec) -> MethodSpec:
     """Add a method to the registry (a name can be registered once)."""
     if spec.name in _REGISTRY and _REGISTRY[spec.name] is not spec:
         raise ParameterError(f"method {spec.name!r} is already registered")
+    documented_params(spec.params)
     _REGISTRY[spec.name] = spec
     return spec
 
@@ -174,7 +178,9 @@ def solve(method: str | MethodSpec, source, target, params=None, *, callback=Non
     method : str or MethodSpec
     source, target : TriMesh or Contour2D
     params : parameter dataclass instance, optional
-        Defaults of the method, updated by ``overrides``.
+        The method's parameters (``make_params(spec.params, name=value)``; ``help(spec.params)`` lists them and
+        what they mean). Without it, the method's defaults changed by the keyword ``overrides``
+        (``solve("kernel-matching", x, y, n_eigs=300)``); giving both is refused, so that no value is dropped.
     callback : callable, optional
         Receives every :class:`Progress`.
     token : CancelToken, optional

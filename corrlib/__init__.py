@@ -13,9 +13,8 @@ light (no NumPy or SciPy): shapes and files (``TriMesh``, ``Contour2D``,
 ``MatchResult``, ``InitialMatch``, ``evaluate``), retrieval (``retrieve``, a
 generator: ``run(retrieve(...))`` returns the ranked hits; ``mesh_files``)
 and sequences between two poses (``frame_times``, ``frame_positions``,
-``export_sequence``);
-``corrlib.methods.all_methods()`` lists the registered methods; every submodule (``corrlib.methods``,
-``corrlib.retrieval``, ``corrlib.morph`` …) loads on first use.
+``export_sequence``). Every submodule is reached the same way
+(``corrlib.methods.all_methods()`` lists the registered methods).
 
 Map convention used throughout: ``map_xy[i]`` is the index on shape Y of the
 partner of vertex ``i`` of shape X. Laplacians are positive semi-definite in

@@ -256,7 +256,7 @@ def mesh_files(folder) -> list[Path]:
     return files_under(folder, MESH_SUFFIXES, "mesh files")
 
 
-def retrieve(query_contour, meshes: Iterable, params: Contour3DParams | None = None, *, jobs: int | None = None,
+def retrieve(query_contour, meshes: Iterable | str | os.PathLike, params: Contour3DParams | None = None, *, jobs: int | None = None,
              token: CancelToken | None = None, scheduler: str | None = None, root=None, ranking: str = "fused"):
     """Rank meshes by how well a query contour matches them: the matching energy times the view dissimilarity
     (``ranking="fused"``, the default) or the energy alone.

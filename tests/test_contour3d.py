@@ -717,7 +717,7 @@ def test_retrieval_takes_a_folder_files_or_loaded_meshes_alike(tmp_path):
     files = [tmp_path / "cat0.off", tmp_path / "wolves" / "wolf0.off", tmp_path / "wolves" / "wolf1.off"]
     t = np.linspace(0, 2 * np.pi, 60, endpoint=False)
     query = Contour2D(np.column_stack([np.cos(t), 0.4 * np.sin(t)]))
-    params = retrieval_params(n_contour=40)
+    params = retrieval_params(n_contour=40, mesh_vertices=2000)
     by_folder = run(retrieve(query, tmp_path, params, jobs=1, ranking="energy"))
     by_files = run(retrieve(query, files, params, jobs=1, ranking="energy"))
     loaded = run(retrieve(query, [load_mesh(f) for f in files], params, jobs=1, ranking="energy"))

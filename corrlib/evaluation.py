@@ -219,10 +219,13 @@ def evaluate(result, target, gt_source, gt_target, **options) -> ErrorReport:
     map_xy = getattr(result, "map_xy", result)
     if map_xy is None:
         raise InputError(f"the result of {getattr(result, 'method', '?')!r} has no point-to-point map to evaluate")
+    matched = (getattr(result, "inputs", None) or {}).get("target", {})
     map_yx = getattr(result, "map_yx", None)
-    if map_yx is not None and getattr(target, "n_vertices", None) not in (None, len(map_yx)):
-        raise InputError(f"the result's reverse map has {len(map_yx)} entries for a {target.n_vertices}-vertex "
-                         "target: the errors must be measured on the target the result was computed for")
+    expected = matched.get("vertices", None if map_yx is None else len(map_yx))
+    if expected is not None and getattr(target, "n_vertices", None) not in (None, expected):
+        said = f"{matched['name']!r}, {expected} vertices" if matched.get("name") else f"{expected} vertices"
+        raise InputError(f"the result maps onto another target ({said}) than {getattr(target, 'name', 'this')!r} "
+                         f"({target.n_vertices} vertices): measure its errors on the target it was computed for")
     return geodesic_errors(map_xy, target, gt_source, gt_target, **options)
 
 

@@ -72,6 +72,41 @@ def test_evaluation_errors(wolf_pair):
         geodesic_errors(ident, wolf1, ident, ident, normalize="bbox")
 
 
+def test_evaluate_names_its_options_a_contour_and_another_target(wolf_pair, tmp_path):
+    """``evaluate`` through a result: a misspelt option is named with the known ones; a contour is no target;
+    the result records what it matched (kept by save and load) and is refused on a target of another size (a
+    map of the wolves read on cat1 gave a mean error without a word); a float map of whole numbers is taken."""
+    from _data import TOSCA
+
+    from corrlib.evaluation import evaluate
+    from corrlib.io import load_mesh
+    from corrlib.methods import solve
+    from corrlib.methods.base import MatchResult
+    from corrlib.shapes import Contour2D
+
+    wolf0, wolf1 = wolf_pair
+    rows = np.arange(wolf0.n_vertices)
+    result = solve("descriptor-nn", wolf0, wolf1)
+    assert result.inputs["target"] == {"name": "wolf1.off", "kind": "mesh", "vertices": wolf1.n_vertices,
+                                       "faces": wolf1.faces.shape[0], "content_hash": wolf1.content_hash}
+    result.save(tmp_path / "r")
+    loaded = MatchResult.load(tmp_path / "r")
+    assert loaded.inputs == result.inputs
+    means = [evaluate(given, wolf1, rows, rows).summary()["mean"] for given in (loaded, result)]
+    assert means[0] == means[1]
+    with pytest.raises(ParameterError, match="unknown option 'normalise' .*known: gt_target_sym, normalize"):
+        evaluate(result, wolf1, rows, rows, normalise="diameter")
+    circle = Contour2D(np.column_stack([np.cos(np.linspace(0, 6, 30)), np.sin(np.linspace(0, 6, 30))]))
+    with pytest.raises(InputError, match="the target must be the mesh the map points into .* got Contour2D"):
+        evaluate(result.map_xy, circle, rows, rows)
+    cat1 = load_mesh(TOSCA / "cat1.off")
+    for given in (loaded, MatchResult("m", result.map_xy, result.map_yx)):  # by the record, or by the reverse map
+        with pytest.raises(InputError, match=f"maps onto another target .*{wolf1.n_vertices} vertices.* than "
+                                             f"'cat1.off' \\({cat1.n_vertices} vertices\\)"):
+            evaluate(given, cat1, rows, rows)
+    assert evaluate(rows.astype(float), wolf1, rows, rows).summary()["mean"] == 0.0  # the wolves share vertices
+
+
 def test_a_collapsed_map_is_named_and_a_map_onto_a_part_is_not(wolf_pair):
     """Every vertex sent to one target vertex (a functional map of rank one, as from a sphere's nearly
     constant descriptors) is warned of; the identity, a map onto a fifth of the target, and a contour's map

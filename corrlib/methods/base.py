@@ -367,6 +367,10 @@ class MatchResult:
     extras : dict
         Method-specific diagnostics (iteration counts, traces, intermediate
         arrays) for printing and inspection; no code path depends on them.
+    inputs : dict
+        What was matched (``solve`` fills it in, :meth:`save` keeps it): ``{"source": ..., "target": ...}``,
+        each the shape's ``name``, ``kind`` ("mesh" or "contour"), its ``vertices`` and ``faces`` or its
+        ``points``, and a mesh's ``content_hash``; empty for a result made by hand.
     """
 
     method: str
@@ -382,6 +386,7 @@ class MatchResult:
     search: SearchCertificate | None = None
     deformation: Any = None
     extras: dict[str, Any] = field(default_factory=dict)
+    inputs: dict[str, dict] = field(default_factory=dict)
 
     def __eq__(self, other) -> bool:
         """Equal results hold the same values in every field (:func:`same_values`; a deformation by the arrays
@@ -409,7 +414,7 @@ class MatchResult:
         arrays: dict[str, np.ndarray] = {}
         meta: dict[str, Any] = {"method": self.method, "energy": self.energy, "timings": self.timings,
                                 "params": self.params, "energy_sense": self.energy_sense,
-                                "energy_meaning": self.energy_meaning}
+                                "energy_meaning": self.energy_meaning, "inputs": self.inputs}
         for name in ("map_xy", "map_yx", "energy_trace"):
             if getattr(self, name) is not None:
                 arrays[name] = getattr(self, name)
@@ -463,6 +468,7 @@ class MatchResult:
             result.deformation = Deformation.from_arrays(
                 arrays["coefficients"], arrays["frames"], int(meta.get("deformation_steps", 20)),
                 arrays.get("trajectory_times"), arrays.get("trajectory"))
+        result.inputs = dict(meta.get("inputs", {}))
         result.extras = dict(meta.get("extras", {}))
         result.extras.update({k.split(".", 1)[1]: v for k, v in arrays.items() if k.startswith("extras.")})
         return result

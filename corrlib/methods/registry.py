@@ -125,6 +125,15 @@ def methods_for(source, target) -> list[MethodSpec]:
     return [s for s in all_methods() if s.inputs == kinds]
 
 
+def input_record(shape) -> dict:
+    """What :attr:`MatchResult.inputs` keeps of a matched shape: its name, kind, size and (a mesh) content
+    hash, so that a saved result says which shapes it maps and a map is not read on another shape."""
+    if kind_of(shape) == "mesh":
+        return {"name": shape.name, "kind": "mesh", "vertices": int(shape.n_vertices),
+                "faces": int(shape.faces.shape[0]), "content_hash": shape.content_hash}
+    return {"name": shape.name, "kind": "contour", "points": int(shape.n_points)}
+
+
 def check_inputs(spec: MethodSpec, source, target) -> None:
     """:class:`InputError` unless the method takes this pair of inputs (a mesh or a contour on each side)."""
     kinds = (kind_of(source), kind_of(target))
@@ -166,6 +175,7 @@ def solve_iter(method: str | MethodSpec, source, target, params=None, token: Can
     result.timings.setdefault("total", time.perf_counter() - start)
     result.params = asdict(params)
     result.method = spec.name
+    result.inputs = {"source": input_record(source), "target": input_record(target)}
     return result
 
 

@@ -387,10 +387,13 @@ def _check_morph_options(args) -> None:
         given = "--method" if args.method is not None else "--param"
         raise CorrError(f"--map gives the map to interpolate through, so no method runs: give --map or {given}, "
                         "not both")
-    if args.interpolation == "flow" and (args.map is not None or (args.method or MORPH_METHOD) != MORPH_METHOD):
-        what = "a map" if args.map is not None else f"--method {args.method}"
-        raise CorrError(f"--interpolation flow follows {MORPH_METHOD}'s flow, and {what} has none: use rigid or "
-                        "linear (or auto)")
+    if args.interpolation == "flow":
+        from corrlib.methods import get_method
+
+        if args.map is not None or not get_method(args.method or MORPH_METHOD).deforms:
+            what = "a map" if args.map is not None else f"--method {args.method}"
+            raise CorrError(f"--interpolation flow follows a method's flow (a deformation, as {MORPH_METHOD} fits), "
+                            f"and {what} has none: use rigid or linear (or auto)")
     if not 2 <= args.frames <= MAX_FRAMES:
         raise CorrError(f"--frames must be between 2 and {MAX_FRAMES}, got {args.frames}")
     if not (np.isfinite(args.t_max) and 0 < args.t_max <= SEQUENCE_T_MAX):
@@ -399,18 +402,18 @@ def _check_morph_options(args) -> None:
 
 
 def _morph_result(args, source, target):
-    """The match a morph moves through: the method's (``--method``, divergence-free by default), or a
-    :class:`~corrlib.methods.base.MatchResult` holding the map of ``--map``."""
+    """The match a morph moves through: the method's (``--method``, divergence-free by default), or the map of
+    ``--map`` as a :class:`~corrlib.morph.GivenMap`."""
     from corrlib.methods import get_method, solve
-    from corrlib.methods.base import MatchResult
 
     if args.map is None:
         spec = get_method(args.method or MORPH_METHOD)
         return solve(spec, source, target, callback=progress_printer(args.quiet), **parse_overrides(args.param))
     from corrlib.io import load_map
+    from corrlib.morph import GivenMap
 
     map_xy = load_map(args.map, n_target=target.n_vertices, n_source=source.n_vertices, allow_unmatched=True)
-    return MatchResult(f"the map {Path(args.map).name}", map_xy, None)
+    return GivenMap(map_xy, method=f"the map {Path(args.map).name}")
 
 
 def cmd_morph(args) -> int:
@@ -620,7 +623,7 @@ def _add_morph_parser(sub) -> None:
                         "source vertex, -1 unmatched; or a result .npz)")
     p.add_argument("--interpolation", default="auto",
                    help="auto (default): the method's flow if it has one, else rigid; flow: the method's flow "
-                        f"({MORPH_METHOD} only); rigid: as rigid as possible "
+                        f"(e.g. {MORPH_METHOD}'s); rigid: as rigid as possible "
                         "(every face turns and stretches by a share of its deformation); linear: vertex positions "
                         "(shrinks what turns)")
     p.add_argument("--frames", type=int, default=11,

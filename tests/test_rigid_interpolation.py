@@ -280,9 +280,12 @@ def test_cli_morph_through_a_map(tmp_path, capsys):
     assert "--interpolation must be one of auto, flow, rigid, linear, got 'cubic'" in capsys.readouterr().err
     assert not (tmp_path / "never").exists()  # refused before any work
     assert main(argv[:-2] + ["--interpolation", "flow", "-o", str(tmp_path / "never")]) == 2
-    assert ("--interpolation flow follows divergence-free's flow, and --method descriptor-nn has none"
-            in capsys.readouterr().err)
+    assert ("--interpolation flow follows a method's flow (a deformation, as divergence-free fits), and --method "
+            "descriptor-nn has none" in capsys.readouterr().err)
     assert not (tmp_path / "never").exists()
+    from corrlib.methods import all_methods
+    # the registry says which methods fit a flow (the check above asks it): divergence-free alone
+    assert [spec.name for spec in all_methods() if spec.deforms] == ["divergence-free"]
 
 
 def test_a_sequence_from_python_through_a_bare_map(tmp_path):

@@ -745,7 +745,7 @@ def solve_divergence_free(source, target, params: DivergenceFreeParams, token, *
 
 register(MethodSpec(
     name="divergence-free", label="Divergence-free deformation", inputs=("mesh", "mesh"),
-    params=DivergenceFreeParams, solve=solve_divergence_free, rank=15, refines=True,
+    params=DivergenceFreeParams, solve=solve_divergence_free, rank=15, refines=True, deforms=True,
     description="Volume-preserving deformation of the source into the target by the flow of a divergence-free "
                 "field (closed-form curl basis on the unit cube), fitted jointly with soft correspondences by EM; "
                 "the flow gives interpolation and extrapolation sequences at any resolution.",

@@ -81,6 +81,8 @@ class MethodSpec:
     rank: int = 0
     #: the solver accepts ``initial=`` (a starting map or landmarks) and can refine another method's map
     refines: bool = False
+    #: the result carries a deformation model (a flow, ``MatchResult.deformation``) that sequences follow
+    deforms: bool = False
 
     def __repr__(self) -> str:
         return f"MethodSpec({self.name!r}, {self.inputs[0]} -> {self.inputs[1]}, params={self.params.__name__})"

@@ -645,7 +645,7 @@ def _add_tool_parsers(sub) -> None:
 
     command(sub, "methods", "list the registered methods and their parameters", func=cmd_methods)
 
-    p = command(sub, "perf", "performance benchmarks (prints figures)", func=cmd_perf)
+    p = command(sub, "perf", "benchmark figures, and the machine's speed", func=cmd_perf)
     p.add_argument("suite", nargs="?", default="foundation", help="benchmark suite (default: foundation)")
     p.add_argument("--repeat", type=int, default=3, help="repetitions; the best time is reported")
     p.add_argument("--quick", action="store_true", help="a short smoke run with fewer cases")

@@ -474,8 +474,35 @@ SUITES = {"foundation": suite_foundation, "contour3d": suite_contour3d, "kernel"
           "divfree": suite_divfree, "product": suite_product, "bench": suite_bench, "morph": suite_morph}
 
 
+def reference_workload_seconds(repeat: int = 3) -> float:
+    """Best wall time of a fixed single-threaded workload: ten products of (800, 800) float64 matrices (the
+    arithmetic of the spectra and kernel scores) and a sort of two million floats (memory-bound, like the
+    assignments and searches).
+
+    The machines these benchmarks run on differ from hour to hour by 20 % and more, more than many changes
+    measured with them. Printed beside a suite's figures, it lets figures of different days be compared:
+    a figure is to be read against this time.
+    """
+    from threadpoolctl import threadpool_limits
+
+    rng = np.random.default_rng(0)
+    a, values = rng.standard_normal((800, 800)), rng.standard_normal(2_000_000)
+
+    def workload():
+        product = a
+        for _ in range(10):
+            product = (product @ a) / 800.0
+        return np.sort(values)[0] + product[0, 0]
+
+    with threadpool_limits(1):
+        return _best_time(workload, repeat)[0]
+
+
 def run_suite(name: str, repeat: int = 3, quick: bool = False) -> None:
-    """Run a named benchmark suite (``quick``: a smoke run with fewer cases)."""
+    """Run a named benchmark suite (``quick``: a smoke run with fewer cases), after the machine's
+    :func:`reference_workload_seconds`."""
     if name not in SUITES:
         raise ParameterError(f"unknown benchmark suite {name!r} (available: {', '.join(SUITES)})")
+    _line("machine: reference workload, one thread (read the figures below against it)",
+          reference_workload_seconds(1 if quick else 3))
     SUITES[name](repeat, quick)

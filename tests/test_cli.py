@@ -94,6 +94,9 @@ def test_perf_quick_runs(capsys):
     assert main(["perf", "foundation", "--quick", "--repeat", "1"]) == 0
     out = capsys.readouterr().out
     assert "200 eigenpairs, method=slicing" in out and "SHOT" in out and "geodesic error" in out
+    # every suite first times the machine, so that figures of different days can be read against each other
+    reference = next(line for line in out.splitlines() if line.startswith("machine: reference workload"))
+    assert float(reference.split()[-2]) > 0
     assert main(["perf", "morph", "--quick", "--repeat", "1"]) == 0
     out = capsys.readouterr().out
     assert "as-rigid-as-possible interpolation wolf0 -> wolf1, 4344 vertices: preparation" in out

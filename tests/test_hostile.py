@@ -271,8 +271,9 @@ def test_interrupted_morph_leaves_nothing(tmp_path, sig, status):
     out = tmp_path / "m"
     # as a user's Ctrl-C would find it: a test run started in the background (no job control) ignores SIGINT, and
     # its children inherit that
+    # the linear motion: its frames are ready at once, so the writing (what is interrupted) starts sooner
     proc = subprocess.Popen([sys.executable, "-m", "corrlib.cli", "morph", WOLF0, WOLF1, *FAST, "--frames", "2000",
-                             "-o", out], stderr=subprocess.PIPE, text=True,
+                             "--interpolation", "linear", "-o", out], stderr=subprocess.PIPE, text=True,
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
     deadline = time.time() + 120
     while not any(p.name.startswith(".partial-") for p in (out.iterdir() if out.exists() else [])):

@@ -479,9 +479,9 @@ def reference_workload_seconds(repeat: int = 3) -> float:
     arithmetic of the spectra and kernel scores) and a sort of two million floats (memory-bound, like the
     assignments and searches).
 
-    The machines these benchmarks run on differ from hour to hour by 20 % and more, more than many changes
-    measured with them. Printed beside a suite's figures, it lets figures of different days be compared:
-    a figure is to be read against this time.
+    A shared machine's speed changes from hour to hour, often by more than the change a benchmark is run to
+    measure (docs/decisions.md). Printed before a suite's figures, it lets figures of different hours be
+    compared: each is to be read against the workload's time of its own run.
     """
     from threadpoolctl import threadpool_limits
 

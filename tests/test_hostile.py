@@ -269,9 +269,9 @@ def test_interrupted_morph_leaves_nothing(tmp_path, sig, status):
     terminal or the ssh session closed) left the spectrum worker, a pool's processes and their temporary
     files behind; it is now a termination like SIGTERM."""
     out = tmp_path / "m"
-    # as a user's Ctrl-C would find it: a test run started in the background (no job control) ignores SIGINT, and
+    # the linear motion, whose frames are ready at once: the writing, which is what is interrupted, starts sooner.
+    # As a user's Ctrl-C would find it: a test run started in the background (no job control) ignores SIGINT, and
     # its children inherit that
-    # the linear motion: its frames are ready at once, so the writing (what is interrupted) starts sooner
     proc = subprocess.Popen([sys.executable, "-m", "corrlib.cli", "morph", WOLF0, WOLF1, *FAST, "--frames", "2000",
                              "--interpolation", "linear", "-o", out], stderr=subprocess.PIPE, text=True,
                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))

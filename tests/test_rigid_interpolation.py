@@ -267,6 +267,7 @@ def test_cli_morph_through_a_map(tmp_path, capsys):
     from _data import TOSCA
     from corrlib.cli import main
     from corrlib.io import load_mesh
+    from corrlib.methods import all_methods
 
     out = tmp_path / "frames"
     argv = ["morph", str(TOSCA / "wolf0.off"), str(TOSCA / "wolf1.off"), "--method", "descriptor-nn", "--frames", "3",
@@ -283,7 +284,6 @@ def test_cli_morph_through_a_map(tmp_path, capsys):
     assert ("--interpolation flow follows a method's flow (a deformation, as divergence-free fits), and --method "
             "descriptor-nn has none" in capsys.readouterr().err)
     assert not (tmp_path / "never").exists()
-    from corrlib.methods import all_methods
     # the registry says which methods fit a flow (the check above asks it): divergence-free alone
     assert [spec.name for spec in all_methods() if spec.deforms] == ["divergence-free"]
 

@@ -129,7 +129,7 @@ def methods_for(source, target) -> list[MethodSpec]:
 
 def input_record(shape) -> dict:
     """What :attr:`MatchResult.inputs` keeps of a matched shape: its name, kind, size and (a mesh) content
-    hash, so that a saved result says which shapes it maps and a map is not read on another shape."""
+    hash, so that a saved result says which shapes it maps (``evaluate`` refuses a target of another size)."""
     if kind_of(shape) == "mesh":
         return {"name": shape.name, "kind": "mesh", "vertices": int(shape.n_vertices),
                 "faces": int(shape.faces.shape[0]), "content_hash": shape.content_hash}

@@ -697,12 +697,28 @@ class TriMesh:
         h.update(np.ascontiguousarray(self.faces, dtype="<i8").tobytes())
         return h.hexdigest()
 
+    @cached_property
+    def shape_print(self) -> np.ndarray:
+        """(SHAPE_PRINT_LENGTH,) float: distances between fixed pairs of vertices (spread over the index range)
+        per √area. Unchanged by moving, turning or scaling the mesh, changed by another pose or another mesh of
+        as many vertices, so that a saved map can tell the target it was computed for from another one of the
+        same size without the file's exact bytes (:attr:`content_hash` differs for the same mesh in mm)."""
+        ends = np.linspace(0, self.n_vertices - 1, SHAPE_PRINT_LENGTH + 1).round().astype(np.int64)
+        steps = self.vertices[ends[1:]] - self.vertices[ends[:-1]]
+        return _readonly(np.linalg.norm(steps, axis=1) / np.sqrt(self.area))
+
     def enclosed_volume(self) -> float | None:
         """Signed enclosed volume by the divergence theorem; ``None`` if the mesh is not closed."""
         if not self.is_closed:
             return None
         return signed_volume(self.vertices, self.faces)
 
+
+#: length of :attr:`TriMesh.shape_print`
+SHAPE_PRINT_LENGTH = 32
+#: two shape prints further apart than this (largest difference, in units of √area) are of different shapes:
+#: far above a file's rounding of its coordinates, far below any change of pose
+SHAPE_PRINT_TOLERANCE = 1e-3
 
 #: an enclosed volume below this fraction of ``area^{3/2}`` is rounding, not volume (a flat closed mesh)
 VOLUME_TOLERANCE = 1e-9

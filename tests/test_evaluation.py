@@ -75,20 +75,23 @@ def test_evaluation_errors(wolf_pair):
 def test_evaluate_names_its_options_a_contour_and_another_target(wolf_pair, tmp_path):
     """``evaluate`` through a result: a misspelt option is named with the known ones; a contour is no target;
     the result records what it matched (kept by save and load) and is refused on a target of another size (a
-    map of the wolves read on cat1 gave a mean error without a word); a float map of whole numbers is taken."""
+    map of the wolves read on cat1 gave a mean error without a word) or on another shape of the same size (the
+    source given as the target), but taken on its target moved, turned and scaled; a float map of whole numbers
+    is taken."""
     from _data import TOSCA
 
     from corrlib.evaluation import evaluate
     from corrlib.io import load_mesh
     from corrlib.methods import solve
     from corrlib.methods.base import MatchResult
-    from corrlib.shapes import Contour2D
+    from corrlib.shapes import Contour2D, TriMesh
 
     wolf0, wolf1 = wolf_pair
     rows = np.arange(wolf0.n_vertices)
     result = solve("descriptor-nn", wolf0, wolf1)
     assert result.inputs["target"] == {"name": "wolf1.off", "kind": "mesh", "vertices": wolf1.n_vertices,
-                                       "faces": wolf1.faces.shape[0], "content_hash": wolf1.content_hash}
+                                       "faces": wolf1.faces.shape[0], "content_hash": wolf1.content_hash,
+                                       "shape_print": list(wolf1.shape_print)}
     result.save(tmp_path / "r")
     loaded = MatchResult.load(tmp_path / "r")
     assert loaded.inputs == result.inputs
@@ -104,6 +107,11 @@ def test_evaluate_names_its_options_a_contour_and_another_target(wolf_pair, tmp_
         with pytest.raises(InputError, match=f"maps onto another target .*{wolf1.n_vertices} vertices.* than "
                                              f"'cat1.off' \\({cat1.n_vertices} vertices\\)"):
             evaluate(given, cat1, rows, rows)
+    with pytest.raises(InputError, match="than 'wolf0.off' \\(4344 vertices, another shape of as many vertices"):
+        evaluate(loaded, wolf0, rows, rows)  # the wolves share their vertex count and faces, not their pose
+    turn = np.linalg.qr(np.random.default_rng(0).normal(size=(3, 3)))[0]
+    in_mm = TriMesh(np.round(wolf1.vertices @ turn.T * 1000 + 5, 3), wolf1.faces, name="wolf1_mm.off")
+    assert evaluate(loaded, in_mm, rows, rows).summary()["mean"] == pytest.approx(means[0], rel=1e-6)
     assert evaluate(rows.astype(float), wolf1, rows, rows).summary()["mean"] == 0.0  # the wolves share vertices
 
 

@@ -370,7 +370,7 @@ class MatchResult:
     inputs : dict
         What was matched (``solve`` fills it in, :meth:`save` keeps it): ``{"source": ..., "target": ...}``,
         each the shape's ``name``, ``kind`` ("mesh" or "contour"), its ``vertices`` and ``faces`` or its
-        ``points``, and a mesh's ``content_hash``; empty for a result made by hand.
+        ``points``, and a mesh's ``content_hash`` and ``shape_print``; empty for a result made by hand.
     """
 
     method: str

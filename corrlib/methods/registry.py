@@ -129,10 +129,12 @@ def methods_for(source, target) -> list[MethodSpec]:
 
 def input_record(shape) -> dict:
     """What :attr:`MatchResult.inputs` keeps of a matched shape: its name, kind, size and (a mesh) content
-    hash, so that a saved result says which shapes it maps (``evaluate`` refuses a target of another size)."""
+    hash and shape print, so that a saved result says which shapes it maps (``evaluate`` refuses a target of
+    another size or, by the print, another shape of the same size)."""
     if kind_of(shape) == "mesh":
         return {"name": shape.name, "kind": "mesh", "vertices": int(shape.n_vertices),
-                "faces": int(shape.faces.shape[0]), "content_hash": shape.content_hash}
+                "faces": int(shape.faces.shape[0]), "content_hash": shape.content_hash,
+                "shape_print": [float(d) for d in shape.shape_print]}
     return {"name": shape.name, "kind": "contour", "points": int(shape.n_points)}
 
 

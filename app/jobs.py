@@ -259,12 +259,13 @@ def map_job(path, source: TriMesh, target: TriMesh, gt=None, *, view_data: bool 
     image of every target vertex (:func:`corrlib.neighbours.reverse_map`). Returns a :class:`MethodOutcome`."""
 
     def factory(token):
-        from corrlib.io import load_map
+        from corrlib.io import check_map_record, load_map
         from corrlib.methods.base import MatchResult
         from corrlib.neighbours import reverse_map
 
         yield Progress("reading the map", -1.0, str(path))
         map_xy = load_map(path, n_target=target.n_vertices, n_source=source.n_vertices, allow_unmatched=True)
+        check_map_record(path, source, target)
         result = MatchResult(f"the map {Path(path).name}", map_xy, reverse_map(map_xy, target.vertices))
         outcome = yield from _outcome(result, source, target, gt, view_data)
         outcome.map_file = str(path)

@@ -112,7 +112,8 @@ def cmd_eval(args) -> int:
     import numpy as np
 
     from corrlib.evaluation import cumulative_curve, matched_errors
-    from corrlib.io import check_output_file, check_outputs_apart, load_map, load_mesh, load_vts
+    from corrlib.io import (check_map_record, check_output_file, check_outputs_apart, load_map, load_mesh,
+                            load_vts)
 
     outputs = [(option, value) for option, value in (("--errors", args.errors), ("--plot", args.plot)) if value]
     for option, value in outputs:
@@ -122,6 +123,7 @@ def cmd_eval(args) -> int:
                                   ("--gt-target-sym", args.gt_target_sym)])
     target = load_mesh(args.target)
     map_xy = load_map(args.map, n_target=target.n_vertices, allow_unmatched=True)
+    check_map_record(args.map, target=target)
     gt_source = load_vts(args.gt_source)
     if gt_source.max() >= map_xy.shape[0]:
         raise FileFormatError(f"{args.map}: the map has {map_xy.shape[0]} entries, but the ground truth "
@@ -209,7 +211,7 @@ def _init_choices(spec) -> tuple:
 
 def _initial_match(value: str, source, target, spec=None):
     """``--init``: a map file (one target index per source vertex) or a landmarks file (two columns)."""
-    from corrlib.io import load_map, load_pairs, read_text
+    from corrlib.io import check_map_record, load_map, load_pairs, read_text
     from corrlib.methods.base import InitialMatch
 
     path = Path(value)
@@ -233,6 +235,7 @@ def _initial_match(value: str, source, target, spec=None):
                     raise FileFormatError(f"{path}: {exc}") from None
             return initial
     map_xy = load_map(path, n_target=target.n_vertices, n_source=source.n_vertices)
+    check_map_record(path, source, target)
     from corrlib.evaluation import collapse_note
 
     note = collapse_note(map_xy, source, target, what=f"the initial map {path.name}",
@@ -409,10 +412,11 @@ def _morph_result(args, source, target):
     if args.map is None:
         spec = get_method(args.method or MORPH_METHOD)
         return solve(spec, source, target, callback=progress_printer(args.quiet), **parse_overrides(args.param))
-    from corrlib.io import load_map
+    from corrlib.io import check_map_record, load_map
     from corrlib.morph import GivenMap
 
     map_xy = load_map(args.map, n_target=target.n_vertices, n_source=source.n_vertices, allow_unmatched=True)
+    check_map_record(args.map, source, target)
     return GivenMap(map_xy, method=f"the map {Path(args.map).name}")
 
 

@@ -20,6 +20,7 @@ import numpy as np
 
 from corrlib.errors import InputError, ParameterError
 from corrlib.geometry.geodesics import GeodesicSolver, geodesic_diameter
+from corrlib.shapes import TriMesh, fits_record
 
 DEFAULT_THRESHOLDS = np.linspace(0.0, 0.25, 101)
 
@@ -223,7 +224,7 @@ def evaluate(result, target, gt_source, gt_target, **options) -> ErrorReport:
     map_yx = getattr(result, "map_yx", None)
     expected = matched.get("vertices", None if map_yx is None else len(map_yx))
     other_size = expected is not None and getattr(target, "n_vertices", None) not in (None, expected)
-    if other_size or not _same_shape(matched, target):
+    if other_size or (isinstance(target, TriMesh) and not fits_record(target, matched)):
         said = f"{matched['name']!r}, {expected} vertices" if matched.get("name") else f"{expected} vertices"
         why = "" if other_size else (", another shape of as many vertices; the same mesh moved, turned or scaled "
                                      "would be taken")
@@ -231,21 +232,6 @@ def evaluate(result, target, gt_source, gt_target, **options) -> ErrorReport:
                          f"({target.n_vertices} vertices{why}): measure its errors on the target it was computed "
                          f"for")
     return geodesic_errors(map_xy, target, gt_source, gt_target, **options)
-
-
-def _same_shape(record: dict, target) -> bool:
-    """Whether ``target`` is the mesh a result's ``record`` (:func:`~corrlib.methods.registry.input_record`)
-    describes, up to moving, turning and scaling: the same bytes, or as many faces and the same shape print
-    (:attr:`~corrlib.shapes.TriMesh.shape_print`). True when the record keeps no print (a result made by hand
-    or saved by an older version) or the target is no mesh."""
-    from corrlib.shapes import SHAPE_PRINT_TOLERANCE
-
-    kept = record.get("shape_print")
-    if kept is None or not hasattr(target, "shape_print") or record.get("content_hash") == target.content_hash:
-        return True
-    if record.get("faces") != target.n_faces or len(kept) != len(target.shape_print):
-        return False
-    return bool(np.max(np.abs(np.asarray(kept) - target.shape_print)) <= SHAPE_PRINT_TOLERANCE)
 
 
 #: a map of one surface onto another whose image holds less than this fraction of the target's area has

@@ -61,7 +61,7 @@ from corrlib.outputs import (  # noqa: F401  (the safe writers, re-exported)
     remove_created_empty_folders,
     staged_output,
 )
-from corrlib.shapes import Contour2D, TriMesh, inspect_contour
+from corrlib.shapes import Contour2D, TriMesh, fits_record, inspect_contour
 
 
 # ----------------------------------------------------------------------------- outputs (corrlib.outputs)
@@ -1109,6 +1109,29 @@ def save_result(stem, arrays: dict[str, np.ndarray], meta: dict | None = None) -
     return npz, js
 
 
+def check_map_record(path, source: TriMesh | None = None, target: TriMesh | None = None) -> None:
+    """:class:`FileFormatError` if the result ``corr match`` wrote beside a map file (``STEM.json`` beside
+    ``STEM.npz`` or ``STEM.map_xy.txt``) records another source or target than these meshes
+    (:func:`~corrlib.shapes.fits_record`): a map read on other meshes of its size would give numbers without a
+    word. A map without such a record, or with an unreadable one, is not checked."""
+    path = Path(path)
+    stem = next((path.name[:-len(s)] for s in (".map_xy.txt", ".npz") if path.name.lower().endswith(s)), None)
+    record_file = path.with_name(f"{stem}.json")
+    if stem is None or not record_file.is_file():
+        return
+    try:
+        inputs = json.loads(record_file.read_text(encoding="utf-8")).get("inputs") or {}
+    except (OSError, ValueError, AttributeError):
+        return
+    for role, mesh in (("source", source), ("target", target)):
+        record = inputs.get(role) if isinstance(inputs, dict) else None
+        if mesh is None or not isinstance(record, dict) or record.get("kind") != "mesh" or fits_record(mesh, record):
+            continue
+        raise FileFormatError(f"{path}: the map was computed for the {role} {record.get('name')!r} "
+                              f"({record.get('vertices')} vertices, says {record_file.name}), not for {mesh.name!r} "
+                              f"({mesh.n_vertices} vertices): give it the meshes it was computed for")
+
+
 def load_result(stem) -> tuple[dict[str, np.ndarray], dict]:
     """Load what :func:`save_result` wrote: ``(arrays, meta)``."""
     stem = Path(stem)
@@ -1136,5 +1159,5 @@ __all__ = [
     "CorrError", "Format", "FORMATS", "KIND_LABELS", "suffixes", "dialog_filter", "shape_kind", "load_shape",
     "atomic_write", "read_mesh_arrays", "load_mesh", "save_mesh", "load_contour", "save_contour",
     "contour_from_mask", "silhouette_mask", "parse_svg_path", "load_vts", "load_map", "save_map",
-    "save_result", "load_result", "environment",
+    "save_result", "load_result", "check_map_record", "environment",
 ]

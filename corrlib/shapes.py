@@ -720,6 +720,26 @@ SHAPE_PRINT_LENGTH = 32
 #: far above a file's rounding of its coordinates, far below any change of pose
 SHAPE_PRINT_TOLERANCE = 1e-3
 
+
+
+def fits_record(mesh: TriMesh, record: dict) -> bool:
+    """Whether ``mesh`` is the mesh a result's input record (:func:`corrlib.methods.registry.input_record`)
+    describes, up to moving, turning and scaling: as many vertices, and the same bytes or as many faces and
+    the same :attr:`TriMesh.shape_print`. What the record lacks (a result made by hand or saved by an older
+    version) is not checked."""
+    if record.get("vertices") is not None and record["vertices"] != mesh.n_vertices:
+        return False
+    if record.get("shape_print") is None or record.get("content_hash") == mesh.content_hash:
+        return True
+    try:
+        kept = np.asarray(record["shape_print"], dtype=np.float64)
+    except (TypeError, ValueError):  # an edited record: nothing to compare
+        return True
+    if record.get("faces") != mesh.n_faces or kept.shape != mesh.shape_print.shape:
+        return False
+    return bool(np.max(np.abs(kept - mesh.shape_print)) <= SHAPE_PRINT_TOLERANCE)
+
+
 #: an enclosed volume below this fraction of ``area^{3/2}`` is rounding, not volume (a flat closed mesh)
 VOLUME_TOLERANCE = 1e-9
 

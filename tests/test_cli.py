@@ -73,6 +73,28 @@ def test_match_writes_outputs(tmp_path, capsys):
     assert np.array_equal(np.loadtxt(tmp_path / "pic.map_xy.txt", dtype=int), mp)
 
 
+def test_a_saved_map_is_refused_on_other_meshes_of_its_size(tmp_path, capsys):
+    """A result's map read on meshes it was not computed for (the wolves share their vertex count and faces, so
+    every size check passed): eval, morph --map and match --init name the file and the mesh it was computed for,
+    exit with status 2 and write nothing; the same meshes, or the map alone without its record, are taken."""
+    wolf0, wolf1 = str(TOSCA / "wolf0.off"), str(TOSCA / "wolf1.off")
+    assert main(["match", wolf0, wolf1, "--method", "descriptor-nn", "-o", str(tmp_path / "r"), "-q"]) == 0
+    truth = ["--gt-source", str(TOSCA / "wolf0.vts"), "--gt-target", str(TOSCA / "wolf0.vts")]
+    for argv in (["eval", str(tmp_path / "r.npz"), "--target", wolf0, "--plot", str(tmp_path / "e.png"), *truth],
+                 ["morph", wolf1, wolf0, "--map", str(tmp_path / "r.map_xy.txt"), "-o", str(tmp_path / "m")],
+                 ["match", wolf1, wolf0, "--method", "product-manifold", "--init", str(tmp_path / "r.npz"),
+                  "-o", str(tmp_path / "p"), "-q"]):
+        capsys.readouterr()
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err
+        assert "the map was computed for the " in err and "'wolf1.off'" in err and "'wolf0.off'" in err, err
+    assert sorted(p.name for p in tmp_path.iterdir()) == ["r.json", "r.map_xy.txt", "r.map_yx.txt", "r.npz"]
+    assert main(["eval", str(tmp_path / "r.npz"), "--target", wolf1, *truth[:2], "--gt-target",
+                 str(TOSCA / "wolf1.vts")]) == 0
+    (tmp_path / "r.json").unlink()  # without the record only the sizes are checked
+    assert main(["eval", str(tmp_path / "r.npz"), "--target", wolf0, *truth]) == 0
+
+
 def test_methods_listing(capsys):
     assert main(["methods"]) == 0
     out = capsys.readouterr().out

@@ -409,3 +409,26 @@ def test_enclosed_outline_of_a_drawing_without_area():
         enclosed_outline(line, resolution=8)
     with pytest.raises(ContourError, match="sketch: contour points are complex"):
         enclosed_outline(np.array([[0, 0], [1, 0], [1j, 1]]), name="sketch")
+
+
+def test_a_map_s_record_is_read_only_where_it_is_a_result_s(tmp_path):
+    """``check_map_record`` reads the ``.json`` that ``corr match`` writes beside its maps: a record of other
+    meshes is named; a record that cannot be read, holds no inputs or an edited shape print, or a map file of
+    another name, leaves the map to the size checks (these files are not the user's to keep valid)."""
+    from corrlib.io import check_map_record, load_mesh
+    from corrlib.methods import solve
+
+    wolf0, wolf1 = load_mesh(TOSCA / "wolf0.off"), load_mesh(TOSCA / "wolf1.off")
+    solve("descriptor-nn", wolf0, wolf1).save(tmp_path / "r")
+    check_map_record(tmp_path / "r.npz", wolf0, wolf1)
+    with pytest.raises(FileFormatError, match=r"r.npz: the map was computed for the target 'wolf1.off' \(4344 "
+                                              r"vertices, says r.json\), not for 'wolf0.off'"):
+        check_map_record(tmp_path / "r.npz", target=wolf0)
+    record = json.loads((tmp_path / "r.json").read_text())
+    record["inputs"]["target"]["shape_print"] = "edited"
+    (tmp_path / "r.json").write_text(json.dumps(record))
+    check_map_record(tmp_path / "r.map_xy.txt", target=wolf0)
+    for text in ("{not json", "[1, 2]", '{"method": "m"}'):
+        (tmp_path / "r.json").write_text(text)
+        check_map_record(tmp_path / "r.npz", wolf1, wolf0)
+    check_map_record(tmp_path / "other.txt", wolf1, wolf0)

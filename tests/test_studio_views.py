@@ -751,7 +751,8 @@ def test_the_sequence_description_does_not_widen_the_window(qtbot, window):
 
 def test_a_map_from_a_file_is_shown_like_a_result(qtbot, window, tmp_path):
     """File ▸ Open a map of this pair…: another tool's map is coloured, scored against the ground truth and
-    interpolated as a method's result is; a map that does not fit is said, naming the file."""
+    interpolated as a method's result is; a map that does not fit, or a saved result of another pair, is said,
+    naming the file."""
     from corrlib.io import save_map
 
     messages = []
@@ -773,6 +774,13 @@ def test_a_map_from_a_file_is_shown_like_a_result(qtbot, window, tmp_path):
     window.load_map(str(short))
     qtbot.waitUntil(lambda: any("short.txt" in m for m in messages), timeout=30_000)
     assert "map has 10 entries but the source has" in messages[-1]
+    from corrlib.methods import solve
+
+    # a result of the reversed pair: its size fits, its record says it is not this pair's map
+    solve("descriptor-nn", window.target, window.source).save(tmp_path / "reversed")
+    window.load_map(str(tmp_path / "reversed.npz"))
+    qtbot.waitUntil(lambda: any("reversed.npz" in m for m in messages), timeout=30_000)
+    assert f"computed for the source {window.target.name!r}" in messages[-1]
     assert window.last_result.method == "the map identity.txt"  # the shown result stays
 
 

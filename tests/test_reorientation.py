@@ -227,14 +227,15 @@ def test_turned_limbs_are_reported():
 
 def test_too_few_eigenpairs_for_a_reflection_leave_the_map_alone(wolf_pair, monkeypatch):
     """The reflection needs 60 eigenpairs; with fewer, a reversed map is reported, not turned, and no error
-    is raised (the wolves' start reversed as in the cats' test)."""
+    is raised (the wolves' descriptor start, alone, reversed as in the cats' test: with both starts the
+    functional map's, which keeps orientation, would be kept)."""
     import corrlib.methods.kernel_matching.seed_stage as km_seed_stage
 
     wolf0, wolf1 = wolf_pair
     with_orientation = km_seed_stage.with_orientation
     monkeypatch.setattr(km_seed_stage, "with_orientation",
                         lambda dx, dy, ox, oy, w: with_orientation(dx, dy, ox, -100.0 * oy, w))
-    result = solve("kernel-matching", wolf0, wolf1, n_eigs=30, n_seeds=300, n_times=3)
+    result = solve("kernel-matching", wolf0, wolf1, n_eigs=30, n_seeds=300, n_times=3, init="descriptors")
     assert result.extras["orientation_agreement"] < 0  # reversed (measured -3.1), yet not turned
     assert not result.extras["turned"] and result.extras["turned_parts"] == 0
     assert np.all(result.map_xy >= 0)

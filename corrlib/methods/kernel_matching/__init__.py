@@ -102,7 +102,10 @@ Design choices, in brief (the measurements behind them are in
   higher orientation agreement (:func:`~.passes.orientation_agreement`) and a lower
   geodesic distortion. Each alone is blind somewhere (the energy to a
   reflection of a symmetric shape, the agreement to a small flipped part,
-  the distortion to the detail of a non-isometric pair).
+  the distortion to the detail of a non-isometric pair). The one exception
+  (:func:`~.starts.kept_start`): where the descriptor start's map reverses
+  orientation on most of the shape (negative agreement) and the functional
+  map's does not, the latter is kept, since only the agreement sees a mirror image.
 * ``smooth_k``: a last pointwise step, one ZoomOut step (Melzi et al.
   2019): the map is projected onto the first eigenfunctions and every vertex
   takes its nearest partner in them (no longer bijective, which suits

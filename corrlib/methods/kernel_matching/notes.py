@@ -65,7 +65,7 @@ def turn_note(extras: dict) -> str | None:
 
 def start_note(extras: dict) -> str | None:
     """What the user is told about the start of a map: for ``init="best"``, that the functional map's start
-    was kept (``extras["init"] == "fmap"``, with the measures that kept it) or failed
+    was kept (``extras["init"] == "fmap"``, with the measures that kept it, :func:`~.starts.kept_start`) or failed
     (``extras["other_start_error"]``); for a refined map, that its own start lost to the descriptor assignment
     (``extras["start"] == "descriptors"``, :func:`~.seed_stage.choose_start`); else None (the descriptor start kept, as
     usual)."""
@@ -74,6 +74,12 @@ def start_note(extras: dict) -> str | None:
                 "start's alone")
     if extras and extras.get("init") == "fmap" and extras.get("start_measures"):
         kept, other = extras["start_measures"]["fmap"], extras["start_measures"]["descriptors"]
+        if other["agreement"] < 0 <= kept["agreement"]:
+            return ("of the two starts the functional map's was kept: the descriptor start's map reversed "
+                    f"orientation on most of the shape (orientation agreement {other['agreement']:.2f} against "
+                    f"{kept['agreement']:.2f}), which neither its kernel energy ({other['energy'] / kept['energy']:.4f}× "
+                    f"the functional map's) nor its geodesic distortion ({other['distortion']:.4f} against "
+                    f"{kept['distortion']:.4f} √area) can see")
         return ("of the two starts the functional map's was kept, its map being better by every measure: kernel "
                 f"energy {kept['energy'] / other['energy']:.4f}× the descriptor start's, orientation agreement "
                 f"{kept['agreement']:.2f} against {other['agreement']:.2f}, geodesic distortion "

@@ -38,7 +38,8 @@ class KernelMatchingParams:
                       help="Both starts (\"best\"): a linear assignment on descriptors and the functional-maps "
                            "baseline's map, each solved to the end (side by side on two cores); the functional "
                            "map's start is kept only where its final map is better by kernel energy, "
-                           "orientation agreement and geodesic distortion alike. Or one of the two alone "
+                           "orientation agreement and geodesic distortion alike, or keeps the orientation that "
+                           "the other's reverses. Or one of the two alone "
                            "(\"descriptors\", \"fmap\"). A given map or landmarks can be passed to the solver "
                            "instead.")
     descriptor: str = param("shot", label="Descriptor", choices=DESCRIPTOR_KINDS,

@@ -35,6 +35,18 @@ def dominates(a: dict, b: dict) -> bool:
     return a["energy"] > b["energy"] and a["agreement"] > b["agreement"] and a["distortion"] < b["distortion"]
 
 
+def kept_start(measures: dict) -> str:
+    """The start whose map :func:`best_of_both_starts` keeps, by their :func:`start_measures`: the functional
+    map's where the descriptor start's map reverses orientation on most of the shape and its own does not
+    (agreements of opposite signs: the kernel energy and the distortion cannot see a mirror image, and the
+    method warns of a negative agreement, :func:`~.notes.reversal_note`), or where it :func:`dominates`; else
+    the descriptor start's."""
+    fmap, descriptors = measures["fmap"], measures["descriptors"]
+    if descriptors["agreement"] < 0 <= fmap["agreement"] or dominates(fmap, descriptors):
+        return "fmap"
+    return "descriptors"
+
+
 def both_starts(first: KernelState, second: KernelState):
     """Kernel matching from two prepared states (:func:`~.pairing.side_by_side`, each :func:`~.passes.solved`).
     A generator; returns ``{init: MatchResult}``, where the second start's value is its
@@ -49,8 +61,8 @@ def both_starts(first: KernelState, second: KernelState):
 def best_of_both_starts(source, target, params: KernelMatchingParams, token):
     """``init="best"``: kernel matching from the descriptor start and from the functional-maps baseline's
     map; the latter is kept only where its map is better by all three measures of :func:`start_measures`
-    (higher kernel energy, higher orientation agreement, lower geodesic distortion), else the descriptor
-    start's.
+    (higher kernel energy, higher orientation agreement, lower geodesic distortion), or where it keeps the
+    orientation that the descriptor start's map reverses (:func:`kept_start`), else the descriptor start's.
 
     Why both: the descriptor start (SHOT and the orientation-aware descriptors, point by point) can commit
     part of a non-isometric pair, or of a noisy one, to the wrong limb, where the functional map (a
@@ -83,7 +95,7 @@ def best_of_both_starts(source, target, params: KernelMatchingParams, token):
     else:
         with state.watch("orientation"):
             measures = start_measures(source, target, results, state.pair_distances())
-        kept = "fmap" if dominates(measures["fmap"], measures["descriptors"]) else "descriptors"
+        kept = kept_start(measures)
         other = "fmap" if kept == "descriptors" else "descriptors"
         result = results[kept]
         result.extras.update({"init": kept, "start_measures": measures})

@@ -75,10 +75,11 @@ def start_note(extras: dict) -> str | None:
     if extras and extras.get("init") == "fmap" and extras.get("start_measures"):
         kept, other = extras["start_measures"]["fmap"], extras["start_measures"]["descriptors"]
         if other["agreement"] < 0 <= kept["agreement"]:
+            energy_ratio = other["energy"] / kept["energy"]
             return ("of the two starts the functional map's was kept: the descriptor start's map reversed "
                     f"orientation on most of the shape (orientation agreement {other['agreement']:.2f} against "
-                    f"{kept['agreement']:.2f}), which neither its kernel energy ({other['energy'] / kept['energy']:.4f}× "
-                    f"the functional map's) nor its geodesic distortion ({other['distortion']:.4f} against "
+                    f"{kept['agreement']:.2f}), which neither its kernel energy ({energy_ratio:.4f}× the functional "
+                    f"map's) nor its geodesic distortion ({other['distortion']:.4f} against "
                     f"{kept['distortion']:.4f} √area) can see")
         return ("of the two starts the functional map's was kept, its map being better by every measure: kernel "
                 f"energy {kept['energy'] / other['energy']:.4f}× the descriptor start's, orientation agreement "

@@ -1047,7 +1047,7 @@ class MainWindow(QMainWindow):
     def export_frames(self, suffix: str = ".obj", folder: str | None = None) -> list[Path]:
         """Write :data:`N_EXPORT_FRAMES` frames from t = 0 to t max with the source's connectivity,
         ``animation.glb`` (glTF morph-target animation) and ``volumes.csv`` (asks before overwriting)."""
-        from corrlib.morph import export_sequence, largest_volume_change
+        from corrlib.morph import export_sequence, largest_volume_change, last_frame_note
 
         if self.sequence_view.positions is None:
             self.show_error("no sequence to export (run a method on two meshes)")
@@ -1055,7 +1055,7 @@ class MainWindow(QMainWindow):
         folder = folder or QFileDialog.getExistingDirectory(self, "Folder for the frames")
         if not folder:
             return []
-        frames = list(self.sequence_view.frames(N_EXPORT_FRAMES))
+        times, frames = map(list, zip(*self.sequence_view.frames(N_EXPORT_FRAMES)))
         existing = [p for p in Path(folder).glob("frame_*") if p.suffix == suffix] + \
             [p for p in (Path(folder) / "animation.glb",) if p.exists()]
         if existing and self.interactive and QMessageBox.question(
@@ -1063,16 +1063,17 @@ class MainWindow(QMainWindow):
                 != QMessageBox.Yes:
             return []
         try:
-            moving = self.sequence_view.source  # the mesh the sequence deforms
-            written = export_sequence(folder, [v for _t, v in frames], moving.faces, [t for t, _v in frames],
-                                      fmt=suffix.lstrip("."), closed=moving.is_closed)
+            mesh, motion = self.sequence_view.source, self.sequence_view.motion.currentData()  # what moves, how
+            written = export_sequence(folder, frames, mesh.faces, times, fmt=suffix.lstrip("."), closed=mesh.is_closed)
         except (CorrError, OSError) as exc:
             self.show_error(str(exc))
             return []
-        change = largest_volume_change(written["volume"], moving.area)
+        change = largest_volume_change(written["volume"], mesh.area)
         note = (f"largest volume change {change:.2e}" if change is not None
                 else "volume does not apply (open mesh, or a closed one that encloses none)")
-        self.job_panel.write(f"wrote {len(frames)} frames, animation.glb and volumes.csv to {folder} ({note})")
+        folds = last_frame_note(self.last_result, mesh, self.target, times, frames, motion)
+        self.job_panel.write(f"wrote {len(frames)} frames, animation.glb and volumes.csv to {folder} ({note}"
+                             f"{'' if folds is None else '; ' + folds})")
         return written["frames"]
 
     def export_strip(self) -> None:

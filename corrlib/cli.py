@@ -421,7 +421,8 @@ def _morph_result(args, source, target):
 
 
 def cmd_morph(args) -> int:
-    from corrlib.morph import describe_sequence, export_sequence, frame_positions, frame_times, largest_volume_change
+    from corrlib.morph import (describe_sequence, export_sequence, frame_positions, frame_times,
+                               largest_volume_change, last_frame_note)
     from corrlib.shapes import TriMesh
 
     _check_morph_options(args)
@@ -456,7 +457,11 @@ def cmd_morph(args) -> int:
         print(f"enclosed volume: {source.name} encloses none (a flat closed mesh), so no relative change")
     else:
         print("enclosed volume: not applicable (the source mesh is not closed)")
+    folds = last_frame_note(result, source, target, times, frames, args.interpolation)
+    if folds:
+        print(folds)
     return 0
+
 
 
 def cmd_demo(args) -> int:

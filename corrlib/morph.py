@@ -203,6 +203,47 @@ def frame_volumes(frames, faces, closed: bool) -> list[float | None]:
     return [signed_volume(f, faces) if closed else None for f in frames]
 
 
+def folded_share(frame: np.ndarray, faces: np.ndarray, target, map_xy: np.ndarray) -> float:
+    """The share of the faces ((f, 3) int) of a sequence's frame at t = 1 through a map, ``frame`` (n_x, 3),
+    that face against the target's surface where they lie or have no area: their normal against the sum of
+    their corners' partners' vertex normals (``map_xy``), or, where they lie on a face of the target, that
+    face's winding (faces with an unmatched corner are not counted). A
+    map that crosses itself or sends neighbours to one vertex folds the last frame there; the surface image
+    unfolds what it can (:mod:`corrlib.deformation.surface_image`), a flow never folds."""
+    from corrlib.deformation.surface_image import is_target_face
+
+    partners = np.asarray(map_xy)[faces]
+    complete = np.all(partners >= 0, axis=1)
+    if not complete.any():
+        return 0.0
+    partners = partners[complete]
+    corners = np.asarray(frame)[faces[complete]]
+    normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
+    facing = np.einsum("ij,ij->i", normals, target.vertex_normals[partners].sum(axis=1))
+    # a face lying on a face of the target faces the way the surface does, or against it if wound the other way
+    on_face = np.all(corners == target.vertices[partners], axis=(1, 2))
+    along, against = on_face & is_target_face(partners, target), on_face & is_target_face(partners[:, ::-1], target)
+    return float(np.mean(np.where(along | against, against, facing <= 0.0)))
+
+
+def last_frame_note(result, source, target, times, frames, interpolation: str = "auto") -> str | None:
+    """What the CLI and the studio say of a sequence's frame at t = 1 (taken from ``frames`` at ``times``, or
+    computed): the share of its faces turned over against the target's surface (:func:`folded_share`). None
+    for a flow, which never folds, or a result without a map onto a mesh."""
+    from corrlib.shapes import TriMesh
+
+    map_xy = getattr(result, "map_xy", None)
+    if map_xy is None or not isinstance(target, TriMesh) or sequence_kind(result, interpolation) == "flow":
+        return None
+    last = next((frame for t, frame in zip(times, frames) if t == 1.0), None)
+    if last is None:
+        last = frame_positions(result, source, target, [1.0], interpolation)[0]
+    share = folded_share(last, source.faces, target, map_xy)
+    advice = ("" if share == 0 else " where the map crosses itself or sends neighbours to one vertex (a flow, "
+              "--method divergence-free, does not fold)")
+    return f"last frame (t = 1, on {target.name}'s surface): {100 * share:.1f} % of the faces turned over{advice}"
+
+
 def largest_volume_change(volumes: list[float | None], area: float) -> float | None:
     """The largest ``|V(t) / V(0) − 1|`` over frames' enclosed volumes (:func:`frame_volumes`), or None where a
     relative change does not apply (an open mesh, or a closed one that encloses nothing;

@@ -1,6 +1,8 @@
 """As-rigid-as-possible interpolation (corrlib.deformation.rigid_interpolation) and the sequences of corrlib.morph:
 analytic motions, the identities it is built on, exact ends, and maps that snap to another mesh."""
 
+import re
+
 import numpy as np
 import pytest
 import trimesh
@@ -273,7 +275,11 @@ def test_cli_morph_through_a_map(tmp_path, capsys):
     argv = ["morph", str(TOSCA / "wolf0.off"), str(TOSCA / "wolf1.off"), "--method", "descriptor-nn", "--frames", "3",
             "-o", str(out)]
     assert main(argv) == 0
-    assert "as-rigid-as-possible" in capsys.readouterr().out
+    said = capsys.readouterr().out
+    assert "as-rigid-as-possible" in said
+    folds = re.search(r"last frame \(t = 1, on wolf1.off's surface\): ([\d.]+) % of the faces turned over where the "
+                      r"map crosses itself", said)  # descriptor-nn's map is far from one-to-one
+    assert folds and float(folds.group(1)) > 0, said
     assert load_mesh(out / "frame_000.obj").n_vertices == load_mesh(TOSCA / "wolf0.off").n_vertices
     assert main(argv[:-2] + ["--interpolation", "linear", "-o", str(tmp_path / "linear")]) == 0
     assert "linear vertex interpolation" in capsys.readouterr().out
@@ -286,6 +292,27 @@ def test_cli_morph_through_a_map(tmp_path, capsys):
     assert not (tmp_path / "never").exists()
     # the registry says which methods fit a flow (the check above asks it): divergence-free alone
     assert [spec.name for spec in all_methods() if spec.deforms] == ["divergence-free"]
+
+
+def test_the_folded_share_of_a_last_frame(wolf_pair):
+    """``folded_share`` on the wolves (one connectivity): the identity's last frame, wolf1 itself, folds nowhere;
+    wolf1 with every face turned over folds everywhere, and so does every vertex sent to one point (no area);
+    a hundred turned faces are counted, and left out once a corner of each is unmatched; a map with none
+    matched has nothing to fold."""
+    from corrlib.morph import folded_share
+
+    wolf0, wolf1 = wolf_pair
+    identity = np.arange(wolf0.n_vertices)
+    assert folded_share(wolf1.vertices, wolf0.faces, wolf1, identity) == 0.0
+    assert folded_share(wolf1.vertices, wolf0.faces[:, ::-1], wolf1, identity) == 1.0
+    assert folded_share(np.zeros_like(wolf1.vertices), wolf0.faces, wolf1, identity) == 1.0
+    turned = wolf0.faces.copy()
+    turned[:100] = turned[:100, ::-1]  # a hundred faces turned over
+    assert folded_share(wolf1.vertices, turned, wolf1, identity) == pytest.approx(100 / wolf0.n_faces)
+    partial = identity.copy()
+    partial[np.unique(turned[:100])] = -1  # their corners unmatched: not counted
+    assert folded_share(wolf1.vertices, turned, wolf1, partial) == 0.0
+    assert folded_share(wolf1.vertices, wolf0.faces, wolf1, np.full_like(identity, -1)) == 0.0
 
 
 def test_a_sequence_from_python_through_a_bare_map(tmp_path):
@@ -337,6 +364,7 @@ def test_cli_morph_through_a_given_map(tmp_path, capsys):
     assert main(argv + ["-o", str(out)]) == 0
     said = capsys.readouterr().out
     assert "as-rigid-as-possible" in said and "largest relative change" in said
+    assert "last frame (t = 1, on wolf1.off's surface): 0.0 % of the faces turned over\n" in said
     assert np.allclose(load_mesh(out / "frame_002.off").vertices, wolf1.vertices, atol=1e-4)
     assert not list(out.glob("result*"))  # the map is the user's file: nothing to write back
     for extra, message in [(["--method", "kernel-matching"], "give --map or --method, not both"),

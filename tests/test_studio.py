@@ -567,6 +567,12 @@ def test_lines_function_texture_and_sequence_exports(qtbot, window, tmp_path, mo
     assert np.allclose(seq.mesh.points, seq.display.points(linear[0]))
     last = load_mesh(window.export_frames(".ply", folder=str(tmp_path / "linear"))[-1])
     assert np.allclose(last.vertices, linear[1], atol=1e-4) and not np.allclose(last.vertices, expected, atol=1e-3)
+    from corrlib.morph import folded_share
+
+    at_one = frame_positions(result, window.source, window.target, [1.0], interpolation="linear")[0]
+    share = folded_share(at_one, window.source.faces, window.target, result.map_xy)
+    assert f"; last frame (t = 1, on wolf1.off's surface): {100 * share:.1f} % of the faces turned over" in \
+        window.job_panel.log.toPlainText()
     monkeypatch.setattr(window, "_save_path", lambda *a: str(tmp_path / "strip.png"))
     window.export_strip()
     strip = np.asarray(Image.open(tmp_path / "strip.png"))
@@ -731,6 +737,7 @@ def test_divergence_free_sequence_uses_the_flow(qtbot, window, tmp_path):
     _faces, frames, _times = load_glb_frames(tmp_path / "animation.glb")
     assert len(frames) == 12
     assert "volume change" in window.job_panel.log.toPlainText()
+    assert "turned over" not in window.job_panel.log.toPlainText()  # a flow does not fold
 
 
 def test_a_new_shape_forgets_the_last_motion_and_a_bad_export_path_is_said(qtbot, window, tmp_path):

@@ -84,10 +84,18 @@ def collapsed_or_turned(faces: np.ndarray, map_xy: np.ndarray, target) -> np.nda
     corners = target.vertices[p]
     normals = np.cross(corners[:, 1] - corners[:, 0], corners[:, 2] - corners[:, 0])
     turned = np.einsum("ij,ij->i", normals, target.vertex_normals[p].sum(axis=1)) < 0.0
+    turned &= ~is_target_face(p, target)
+    return complete & (collapsed | turned)
+
+
+def is_target_face(corners: np.ndarray, target) -> np.ndarray:
+    """(f,) bool: whether each row of ``corners`` ((f, 3) int, target vertices) is a face of the target as the
+    target orients it (in any rotation of its corners). Such an image faces the way the surface does, which
+    the sum of its corners' vertex normals can contradict where the surface bends sharply."""
     n = np.int64(target.n_vertices)
     own = np.concatenate([np.roll(target.faces, shift, axis=1) for shift in range(3)]).astype(np.int64)
-    turned &= ~np.isin((p[:, 0] * n + p[:, 1]) * n + p[:, 2], (own[:, 0] * n + own[:, 1]) * n + own[:, 2])
-    return complete & (collapsed | turned)
+    c = np.asarray(corners, dtype=np.int64)
+    return np.isin((c[:, 0] * n + c[:, 1]) * n + c[:, 2], (own[:, 0] * n + own[:, 1]) * n + own[:, 2])
 
 
 def image_on_surface(source, target, map_xy: np.ndarray, image: np.ndarray) -> np.ndarray:

@@ -213,8 +213,9 @@ class MethodOutcome:
     n_unmatched : int
         Source vertices the map leaves unmatched (-1).
     note : str
-        Why the errors are missing although ground truth was given, or how they were measured where not as
-        `corr bench` measures them (else empty).
+        What the log says of the outcome (else empty): why the errors are missing although ground truth was
+        given, or how they were measured where not as `corr bench` measures them, and how much the default
+        motion's last frame folds (:func:`motion_note`).
     map_file : str or None
         The file of a map read by :func:`map_job` (None: a method's result).
     sequences : dict or None
@@ -293,7 +294,19 @@ def _outcome(result, source, target, gt, view_data: bool):
         outcome.function = source_function(source)
         yield Progress("sequence", -1.0, "positions between the poses")
         outcome.sequences = sequence_options(result, source, target)
+        folds = motion_note(result, source, target, outcome.sequences)
+        outcome.note = "; ".join(filter(None, [outcome.note, folds]))
     return outcome
+
+
+def motion_note(result, source: TriMesh, target: TriMesh, sequences: dict) -> str | None:
+    """What the log says of the default motion (the first of ``sequences``, :func:`sequence_options`): for a
+    motion through the map, the share of faces its last frame turns over (:func:`corrlib.morph.last_frame_note`);
+    None for a flow, which never folds."""
+    from corrlib.morph import last_frame_note
+
+    kind, (positions, _description) = next(iter(sequences.items()))
+    return last_frame_note(result, source, target, [1.0], [positions(1.0)], kind)
 
 
 def contour_reading(result) -> str:

@@ -240,7 +240,7 @@ def last_frame_note(result, source, target, times, frames, interpolation: str = 
         last = frame_positions(result, source, target, [1.0], interpolation)[0]
     share = folded_share(last, source.faces, target, map_xy)
     advice = ("" if share == 0 else " where the map crosses itself or sends neighbours to one vertex (a flow, "
-              "--method divergence-free, does not fold)")
+              "as the divergence-free method fits, does not fold)")
     return f"last frame (t = 1, on {target.name}'s surface): {100 * share:.1f} % of the faces turned over{advice}"
 
 

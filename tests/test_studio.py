@@ -536,6 +536,12 @@ def test_lines_function_texture_and_sequence_exports(qtbot, window, tmp_path, mo
 
     load_demo(qtbot, window)
     result = run_and_wait(qtbot, window, "descriptor-nn")
+    from corrlib.morph import folded_share, frame_positions
+
+    at_one = frame_positions(result, window.source, window.target, [1.0])[0]  # the default motion's last frame
+    share = folded_share(at_one, window.source.faces, window.target, result.map_xy)
+    assert share > 0 and (f"descriptor-nn: last frame (t = 1, on wolf1.off's surface): {100 * share:.1f} % of the "
+                          "faces turned over where the map crosses itself") in window.job_panel.log.toPlainText()
     view = window.pair_view
     view.mode.setCurrentText("lines")
     assert view.lines is not None and view.lines.n_cells == len(view.picked) == 12
@@ -552,8 +558,6 @@ def test_lines_function_texture_and_sequence_exports(qtbot, window, tmp_path, mo
     paths = window.export_frames(".ply", folder=str(tmp_path))
     assert len(paths) == 12  # 11 evenly spaced to t max 1.5, and t = 1 (the target)
     last = load_mesh(paths[-1])
-    from corrlib.morph import frame_positions
-
     t_max = window.sequence_view.t_max.value()
     expected = frame_positions(result, window.source, window.target, [t_max])[0]  # extrapolated beyond the target
     assert np.allclose(last.vertices, expected, atol=1e-4)
@@ -567,8 +571,6 @@ def test_lines_function_texture_and_sequence_exports(qtbot, window, tmp_path, mo
     assert np.allclose(seq.mesh.points, seq.display.points(linear[0]))
     last = load_mesh(window.export_frames(".ply", folder=str(tmp_path / "linear"))[-1])
     assert np.allclose(last.vertices, linear[1], atol=1e-4) and not np.allclose(last.vertices, expected, atol=1e-3)
-    from corrlib.morph import folded_share
-
     at_one = frame_positions(result, window.source, window.target, [1.0], interpolation="linear")[0]
     share = folded_share(at_one, window.source.faces, window.target, result.map_xy)
     assert f"; last frame (t = 1, on wolf1.off's surface): {100 * share:.1f} % of the faces turned over" in \

@@ -1116,9 +1116,9 @@ def check_map_record(path, source: TriMesh | None = None, target: TriMesh | None
     word. A map without such a record, or with an unreadable one, is not checked."""
     path = Path(path)
     stem = next((path.name[:-len(s)] for s in (".map_xy.txt", ".npz") if path.name.lower().endswith(s)), None)
-    if stem is None or not path.with_name(f"{stem}.json").is_file():
+    record_file = None if stem is None else path.with_name(f"{stem}.json")
+    if record_file is None or not record_file.is_file():
         return
-    record_file = path.with_name(f"{stem}.json")
     try:
         inputs = json.loads(record_file.read_text(encoding="utf-8")).get("inputs") or {}
     except (OSError, ValueError, AttributeError):

@@ -235,7 +235,7 @@ def last_frame_note(result, source, target, times, frames, interpolation: str = 
     map_xy = getattr(result, "map_xy", None)
     if map_xy is None or not isinstance(target, TriMesh) or sequence_kind(result, interpolation) == "flow":
         return None
-    last = next((frame for t, frame in zip(times, frames) if t == 1.0), None)
+    last = next((frame for t, frame in zip(times, frames) if abs(t - 1.0) <= 1e-9), None)  # as frame_times adds it
     if last is None:
         last = frame_positions(result, source, target, [1.0], interpolation)[0]
     share = folded_share(last, source.faces, target, map_xy)

@@ -721,7 +721,6 @@ SHAPE_PRINT_LENGTH = 32
 SHAPE_PRINT_TOLERANCE = 1e-3
 
 
-
 def fits_record(mesh: TriMesh, record: dict) -> bool:
     """Whether ``mesh`` is the mesh a result's input record (:func:`corrlib.methods.registry.input_record`)
     describes, up to moving, turning and scaling: as many vertices, and the same bytes or as many faces and

@@ -73,8 +73,10 @@ def start_note(extras: dict) -> str | None:
         return (f"the functional map's start failed ({extras['other_start_error']}), so the map is the descriptor "
                 "start's alone")
     if extras and extras.get("init") == "fmap" and extras.get("start_measures"):
+        from corrlib.methods.kernel_matching.starts import reverses_where_other_keeps
+
         kept, other = extras["start_measures"]["fmap"], extras["start_measures"]["descriptors"]
-        if other["agreement"] < 0 <= kept["agreement"]:
+        if reverses_where_other_keeps(other, kept):
             energy_ratio = other["energy"] / kept["energy"]
             return ("of the two starts the functional map's was kept: the descriptor start's map reversed "
                     f"orientation on most of the shape (orientation agreement {other['agreement']:.2f} against "

@@ -35,6 +35,12 @@ def dominates(a: dict, b: dict) -> bool:
     return a["energy"] > b["energy"] and a["agreement"] > b["agreement"] and a["distortion"] < b["distortion"]
 
 
+def reverses_where_other_keeps(a: dict, b: dict) -> bool:
+    """Whether the map measured by ``a`` reverses orientation on most of the shape (negative agreement, what
+    :func:`~.notes.reversal_note` warns of) and the one measured by ``b`` does not (:func:`start_measures`)."""
+    return a["agreement"] < 0 <= b["agreement"]
+
+
 def kept_start(measures: dict) -> str:
     """The start whose map :func:`best_of_both_starts` keeps, by their :func:`start_measures`: the functional
     map's where the descriptor start's map reverses orientation on most of the shape and its own does not
@@ -42,7 +48,7 @@ def kept_start(measures: dict) -> str:
     method warns of a negative agreement, :func:`~.notes.reversal_note`), or where it :func:`dominates`; else
     the descriptor start's."""
     fmap, descriptors = measures["fmap"], measures["descriptors"]
-    if descriptors["agreement"] < 0 <= fmap["agreement"] or dominates(fmap, descriptors):
+    if reverses_where_other_keeps(descriptors, fmap) or dominates(fmap, descriptors):
         return "fmap"
     return "descriptors"
 

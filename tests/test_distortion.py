@@ -121,3 +121,21 @@ def test_inconsistent_parts_of_an_unmatched_map_is_none():
 
     mesh = capsule_surface()
     assert inconsistent_parts(mesh, mesh, -np.ones(mesh.n_vertices, dtype=np.int64)) is None
+
+
+def test_sample_distortions_are_the_rows_whose_mean_is_the_distortion():
+    """Each sample's mean distortion against the others; their mean is D(m), and the images' rows hold the
+    distances between them."""
+    from corrlib.geometry.distortion import PairDistances
+
+    source, target = blob(seed=0), blob(seed=1)
+    map_xy = np.random.default_rng(4).integers(0, target.n_vertices, source.n_vertices)
+    distances = PairDistances(source, target)
+    matched, values = distances.sample_distortions(map_xy)
+    assert matched.size == GEODESIC_SAMPLES and values.shape == (GEODESIC_SAMPLES,)
+    assert values.mean() == pytest.approx(geodesic_distortions(source, target, (map_xy,), distances)[0], rel=1e-12)
+    images = map_xy[distances.sample]
+    rows = distances.from_images(images)
+    assert rows.shape == (GEODESIC_SAMPLES, target.n_vertices)
+    expected = edge_graph_distances(target, images[:3])[:, images] / np.sqrt(target.area)
+    assert np.allclose(distances.between_images(images)[:3], expected, rtol=1e-10)

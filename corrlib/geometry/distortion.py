@@ -30,9 +30,9 @@ class PairDistances:
     """The edge-path distances that the distortion of maps of one pair compares, each computed once.
 
     The source's :data:`GEODESIC_SAMPLES` outermost farthest points (:attr:`sample`), their distances to every
-    source vertex (:attr:`from_sample`), and for each set of images on the target the distances between them
-    (:meth:`between_images`, kept for the images asked for again: the judges of one match ask about the same
-    maps). All per square root of the shape's area.
+    source vertex (:attr:`from_sample`), and for each set of images on the target their distances to every
+    target vertex (:meth:`from_images`) and between them (:meth:`between_images`). All per square root of the
+    shape's area.
     """
 
     def __init__(self, source, target):
@@ -44,7 +44,8 @@ class PairDistances:
         self._solver_x = GeodesicSolver(source)
         self._solver_y = self._solver_x if target is source else GeodesicSolver(target)
         self._from_sample = None
-        self._between = {}
+        self._rows = {}  # target vertex -> its distances to every target vertex
+        self._parts = {}  # map bytes -> inconsistent_parts of that map
 
     @property
     def from_sample(self) -> np.ndarray:
@@ -53,13 +54,26 @@ class PairDistances:
             self._from_sample = self._solver_x.distances(self.sample, method="graph") / np.sqrt(self.source.area)
         return self._from_sample
 
+    def from_images(self, images: np.ndarray) -> np.ndarray:
+        """(k, n_Y) float: distances from the target vertices ``images`` (k,) int to every target vertex. Each
+        vertex's row is computed once: the judges of one match ask about the same maps, and about maps made of
+        their parts."""
+        images = np.asarray(images)
+        missing = np.array(sorted(set(images.tolist()) - self._rows.keys()), dtype=np.int64)
+        if missing.size:
+            rows = self._solver_y.distances(missing, method="graph") / np.sqrt(self.target.area)
+            self._rows.update(zip(missing.tolist(), rows))
+        return np.array([self._rows[vertex] for vertex in images.tolist()]).reshape(images.size, -1)
+
     def between_images(self, images: np.ndarray) -> np.ndarray:
         """(k, k) float: distances between the target vertices ``images`` (k,) int."""
-        key = images.tobytes()
-        if key not in self._between:
-            self._between[key] = self._solver_y.distances(images, method="graph")[:, images] / \
-                np.sqrt(self.target.area)
-        return self._between[key]
+        return self.from_images(images)[:, images]
+
+    def sample_distortions(self, map_xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The samples a map matches, (k,) int positions in :attr:`sample`, and each one's mean distortion
+        against the others, (k,) float (the rows of :meth:`pair_distortions`, whose mean is :math:`D(m)`)."""
+        matched, pair_distortion = self.pair_distortions(map_xy)
+        return matched, pair_distortion.mean(axis=1) if matched.size >= 2 else np.zeros(matched.size)
 
     def pair_distortions(self, map_xy: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """The samples a map matches, (k,) int positions in :attr:`sample`, and the distortion of every pair of
@@ -162,6 +176,14 @@ def inconsistent_parts(source, target, map_xy: np.ndarray,
         None where fewer than four samples are matched or a distance is infinite (a disconnected shape).
     """
     distances = PairDistances(source, target) if distances is None else distances
+    key = np.asarray(map_xy).tobytes()
+    if key not in distances._parts:  # the judges of one match split the same map
+        distances._parts[key] = _split(source, target, map_xy, distances)
+    return distances._parts[key]
+
+
+def _split(source, target, map_xy: np.ndarray, distances: PairDistances) -> MapParts | None:
+    """:func:`inconsistent_parts`, computed."""
     matched, pair_distortion = distances.pair_distortions(map_xy)
     if matched.size < 4 or not (np.all(np.isfinite(pair_distortion)) and np.all(np.isfinite(distances.from_sample))):
         return None

@@ -45,6 +45,11 @@ The stages, each a function of a submodule, sharing one :class:`~.state.KernelSt
    matched again with the other as landmarks; the run nearer an isometry
    replaces it.
 
+With ``init="best"`` (the default) stages 2–8 run from two starts side by side and a judge keeps one map
+(:mod:`.starts`); before stage 9, where the kept map is right on one part and the other start's map on the
+rest, their combination is optimised once more and replaces the kept map if it is nearer an isometry
+(:func:`~.starts.combined_map`).
+
 Design choices, in brief (the measurements behind them are in
 ``docs/decisions.md``, "Kernel matching: measured design choices"):
 

@@ -56,6 +56,13 @@ def turn_note(extras: dict) -> str | None:
                     f"{extras['disagreement_ratio']:.1f}× as much as within them); {extras['replaced_part']} source "
                     f"vertices were matched again with the rest of the map as landmarks (geodesic distortion "
                     f"{distortions[0]:.4f} → {min(distortions[1:]):.4f} √area)")
+    combined = extras.get("combined_starts") or {}
+    if combined.get("kept"):
+        distortions = combined["distortions"]
+        said.append(f"the two starts' maps were each right on a part of the shape: {combined['taken']} source "
+                    f"vertices took the other start's partners, and the map optimised from that combination "
+                    f"replaced the kept one (geodesic distortion {distortions[0]:.4f} → {distortions[3]:.4f} "
+                    f"√area)")
     if not said:
         return None
     again = "; the turned map was then optimised once more" if "first_pass" in extras and (

@@ -463,7 +463,6 @@ def cmd_morph(args) -> int:
     return 0
 
 
-
 def cmd_demo(args) -> int:
     import numpy as np
 
